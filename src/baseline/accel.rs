@@ -1,0 +1,107 @@
+//! The one intersection interface of the conventional tracers, implemented by Embree
+//! (`--accel embree`) and by obvhs' CWBVH (`--accel bvh`): single rays and packets of
+//! K = 8, closest hit and occlusion, over two-level instancing (see `scene` docs).
+
+use crate::core::stats::Counters;
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+use glam::Vec3;
+
+/// Packet width used across the tracers (DESIGN.md: `K` rays per packet).
+pub const K: usize = 8;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub org: Vec3,
+    /// Need not be unit length; `t` is measured in multiples of it.
+    pub dir: Vec3,
+    pub tnear: f32,
+    pub tfar: f32,
+}
+
+impl Ray {
+    pub fn new(org: Vec3, dir: Vec3) -> Self {
+        Ray { org, dir, tnear: 0.0, tfar: f32::INFINITY }
+    }
+    pub fn segment(org: Vec3, dir: Vec3, tnear: f32, tfar: f32) -> Self {
+        Ray { org, dir, tnear, tfar }
+    }
+    /// Rays with NaN/inf origins or directions, zero directions, or an empty interval never
+    /// hit (both back-ends treat them as misses instead of passing them to the kernels).
+    #[inline]
+    pub fn is_valid(&self) -> bool {
+        self.org.is_finite()
+            && self.dir.is_finite()
+            && self.dir != Vec3::ZERO
+            && !self.tnear.is_nan()
+            && !self.tfar.is_nan()
+            && self.tnear <= self.tfar
+    }
+}
+
+/// A closest hit: distance, barycentrics (u for v1, v for v2, as in Embree), triangle index
+/// in its mesh, and leaf-instance index (see [`crate::scene::Scene::leaf_instances`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    pub t: f32,
+    pub u: f32,
+    pub v: f32,
+    pub prim: u32,
+    pub inst: u32,
+}
+
+/// Which back-end to use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AccelKind {
+    Embree,
+    Bvh,
+    Octree,
+}
+
+impl AccelKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            AccelKind::Embree => "embree",
+            AccelKind::Bvh => "bvh",
+            AccelKind::Octree => "octree",
+        }
+    }
+}
+
+pub trait Accel: Sync + Send {
+    fn name(&self) -> &'static str;
+    /// Closest hit along `ray` within [tnear, tfar].
+    fn intersect1(&self, ray: &Ray, c: &mut Counters) -> Option<Hit>;
+    /// Whether anything lies within [tnear, tfar].
+    fn occluded1(&self, ray: &Ray, c: &mut Counters) -> bool;
+    /// K rays at once; lanes whose bit in `valid` is clear are left untouched.
+    fn intersect8(&self, rays: &[Ray; K], valid: u8, out: &mut [Option<Hit>; K], c: &mut Counters) {
+        for i in 0..K {
+            if valid & (1 << i) != 0 {
+                out[i] = self.intersect1(&rays[i], c);
+            }
+        }
+    }
+    fn occluded8(&self, rays: &[Ray; K], valid: u8, out: &mut [bool; K], c: &mut Counters) {
+        for i in 0..K {
+            if valid & (1 << i) != 0 {
+                out[i] = self.occluded1(&rays[i], c);
+            }
+        }
+    }
+    /// Bytes held by the acceleration structure (not counting the scene's meshes).
+    fn memory_bytes(&self) -> usize;
+}
+
+/// Builds the requested back-end for a validated scene.
+pub fn build(kind: AccelKind, scene: &Scene) -> Result<Box<dyn Accel>> {
+    match kind {
+        AccelKind::Bvh => Ok(Box::new(super::bvh::BvhAccel::build(scene)?)),
+        #[cfg(feature = "embree")]
+        AccelKind::Embree => Ok(Box::new(super::embree::EmbreeAccel::build(scene)?)),
+        #[cfg(not(feature = "embree"))]
+        AccelKind::Embree => Err(Error::Usage("this build has no Embree (cargo feature 'embree' is off); use --accel bvh".into())),
+        AccelKind::Octree => Err(Error::Usage("--accel octree needs the multires octree (not built yet); use --accel bvh or embree".into())),
+    }
+}

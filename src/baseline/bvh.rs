@@ -1,0 +1,184 @@
+//! The pure-Rust back-end (`--accel bvh`): obvhs' compressed wide BVH8 (CWBVH, Ylitie et al.
+//! 2017) over each unique mesh (BLAS) and over the leaf instances (TLAS). Node traversal is
+//! obvhs' own `traverse!` with its SSE node test; the triangle test is the watertight test of
+//! [`super::tri`], so `verify` can compare it with Embree's robust mode.
+//!
+//! Layout: each BLAS keeps its triangles' vertices re-ordered into the BVH's primitive order
+//! (`verts[3·i..3·i+3]`), so a leaf reads one contiguous run; `prim_ids` maps back to the
+//! mesh's triangle index for shading.
+//!
+//! Packets: obvhs has no packet traversal; [`Accel::intersect8`] here is the default loop of
+//! single rays over the CWBVH (the coherent-packet path is Embree's `rtcIntersect8`).
+
+use super::accel::{Accel, Hit, Ray};
+use super::tri::{intersect_watertight, RayShear};
+use crate::core::stats::{Counter, Counters};
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+use glam::{Affine3A, UVec2, Vec3, Vec3A};
+use obvhs::{aabb::Aabb, cwbvh::CwBvh, BvhBuildParams};
+use rayon::prelude::*;
+use std::time::Duration;
+
+struct Blas {
+    bvh: CwBvh,
+    /// Triangle vertices in BVH primitive order.
+    verts: Vec<Vec3>,
+    /// Mesh triangle index of each BVH primitive.
+    prim_ids: Vec<u32>,
+}
+
+struct TlasInst {
+    inv: Affine3A,
+    blas: u32,
+}
+
+pub struct BvhAccel {
+    tlas: CwBvh,
+    /// Leaf instances in TLAS primitive order; `inst_ids` maps back to the scene's order.
+    insts: Vec<TlasInst>,
+    inst_ids: Vec<u32>,
+    blas: Vec<Blas>,
+}
+
+/// Build quality for the BLAS (obvhs' preset: PLOC + reinsertion, up to 3 triangles a leaf).
+fn params() -> BvhBuildParams {
+    BvhBuildParams::medium_build()
+}
+
+fn build_blas(mesh: &crate::scene::Mesh) -> Blas {
+    let aabbs: Vec<Aabb> = (0..mesh.tri_count())
+        .map(|t| {
+            let [a, b, c] = mesh.tri_verts(t);
+            let lo = a.min(b).min(c);
+            let hi = a.max(b).max(c);
+            Aabb::new(Vec3A::from(lo), Vec3A::from(hi))
+        })
+        .collect();
+    let bvh = obvhs::cwbvh::builder::build_cwbvh(&aabbs, params(), &mut Duration::default());
+    let mut verts = Vec::with_capacity(bvh.primitive_indices.len() * 3);
+    for &p in &bvh.primitive_indices {
+        verts.extend_from_slice(&mesh.tri_verts(p as usize));
+    }
+    let prim_ids = bvh.primitive_indices.clone();
+    Blas { bvh, verts, prim_ids }
+}
+
+impl BvhAccel {
+    pub fn build(scene: &Scene) -> Result<Self> {
+        let leaves = scene.leaf_instances()?;
+        if leaves.is_empty() {
+            return Err(Error::Scene("nothing to build a BVH over".into()));
+        }
+        let blas: Vec<Blas> = scene.meshes.par_iter().map(build_blas).collect();
+        let aabbs: Vec<Aabb> = leaves
+            .iter()
+            .map(|l| {
+                let b = &blas[l.mesh as usize].bvh.total_aabb;
+                let mut out = Aabb::empty();
+                for i in 0..8 {
+                    let c = Vec3A::new(
+                        if i & 1 == 0 { b.min.x } else { b.max.x },
+                        if i & 2 == 0 { b.min.y } else { b.max.y },
+                        if i & 4 == 0 { b.min.z } else { b.max.z },
+                    );
+                    out.extend(l.xform.transform_point3a(c));
+                }
+                out
+            })
+            .collect();
+        let tlas = obvhs::cwbvh::builder::build_cwbvh(&aabbs, params(), &mut Duration::default());
+        let inst_ids = tlas.primitive_indices.clone();
+        let insts = inst_ids.iter().map(|&i| TlasInst { inv: leaves[i as usize].inv, blas: leaves[i as usize].mesh }).collect();
+        Ok(BvhAccel { tlas, insts, inst_ids, blas })
+    }
+
+    /// Closest hit (`ANY = false`) or any hit (`ANY = true`).
+    #[inline(always)]
+    fn trace<const ANY: bool>(&self, ray: &Ray, c: &mut Counters) -> Option<Hit> {
+        if !ray.is_valid() {
+            return None;
+        }
+        let mut tfar = ray.tfar;
+        let mut best: Option<Hit> = None;
+        let tnear = ray.tnear.max(0.0).min(tfar);
+        let world = obvhs::ray::Ray::new(Vec3A::from(ray.org), Vec3A::from(ray.dir), tnear, tfar);
+        let mut tl_ray = world;
+        let mut state = self.tlas.new_traversal(world.direction);
+        let mut node;
+        let (mut n_nodes, mut n_inst, mut n_tris) = (0u64, 0u64, 0u64);
+        'tlas: {
+            obvhs::traverse!(
+                self.tlas,
+                node,
+                state,
+                {
+                    n_nodes += 1;
+                    node.intersect_ray(&tl_ray, state.oct_inv4)
+                },
+                {
+                    n_inst += 1;
+                    let ti = state.primitive_id as usize;
+                    let inst = &self.insts[ti];
+                    let blas = &self.blas[inst.blas as usize];
+                    let lo = inst.inv.transform_point3(ray.org);
+                    let ld = inst.inv.transform_vector3(ray.dir);
+                    let mut bl_ray = obvhs::ray::Ray::new(Vec3A::from(lo), Vec3A::from(ld), tnear, tfar);
+                    let shear = RayShear::new(lo, ld);
+                    let mut bstate = blas.bvh.new_traversal(bl_ray.direction);
+                    let mut bnode;
+                    'blas: {
+                        obvhs::traverse!(
+                            blas.bvh,
+                            bnode,
+                            bstate,
+                            {
+                                n_nodes += 1;
+                                bnode.intersect_ray(&bl_ray, bstate.oct_inv4)
+                            },
+                            {
+                                n_tris += 1;
+                                let p = bstate.primitive_id as usize;
+                                let v = &blas.verts[3 * p..3 * p + 3];
+                                if let Some((t, u, vv)) = intersect_watertight(&shear, v[0], v[1], v[2], tnear, tfar) {
+                                    tfar = t;
+                                    bl_ray.tmax = t;
+                                    best = Some(Hit { t, u, v: vv, prim: blas.prim_ids[p], inst: self.inst_ids[ti] });
+                                    if ANY {
+                                        break 'blas;
+                                    }
+                                }
+                            }
+                        );
+                    }
+                    if ANY && best.is_some() {
+                        break 'tlas;
+                    }
+                    tl_ray.tmax = tfar;
+                }
+            );
+        }
+        c.add(Counter::node_tests, n_nodes);
+        c.add(Counter::instance_tests, n_inst);
+        c.add(Counter::triangle_tests, n_tris);
+        best
+    }
+}
+
+impl Accel for BvhAccel {
+    fn name(&self) -> &'static str {
+        "bvh"
+    }
+    fn intersect1(&self, ray: &Ray, c: &mut Counters) -> Option<Hit> {
+        self.trace::<false>(ray, c)
+    }
+    fn occluded1(&self, ray: &Ray, c: &mut Counters) -> bool {
+        self.trace::<true>(ray, c).is_some()
+    }
+    fn memory_bytes(&self) -> usize {
+        let node = std::mem::size_of::<obvhs::cwbvh::node::CwBvhNode>();
+        let tl = self.tlas.nodes.len() * node + self.insts.len() * (std::mem::size_of::<TlasInst>() + 8);
+        let bl: usize = self.blas.iter().map(|b| b.bvh.nodes.len() * node + b.verts.len() * 12 + b.prim_ids.len() * 8).sum();
+        tl + bl
+    }
+}

@@ -1,0 +1,8 @@
+//! Conventional tracers (the baselines the papers compare against): the intersection
+//! back-ends (Embree, obvhs CWBVH), shading, and the Whitted and adaptive distributed
+//! integrators of Wand & Straßer §6.
+pub mod accel;
+pub mod bvh;
+#[cfg(feature = "embree")]
+pub mod embree;
+pub mod tri;

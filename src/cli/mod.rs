@@ -1,0 +1,156 @@
+//! The command line of DESIGN.md (a contract). One file per subcommand; `main.rs` is thin.
+//! Every error is printed as one line; bad input or usage exits 2, a failed check exits 1.
+
+pub mod compare;
+pub mod render;
+pub mod scenes;
+pub mod verify;
+
+use crate::baseline::accel::AccelKind;
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+#[derive(Parser, Debug)]
+#[command(name = "lodtrace", version, about = "Multi-resolution ray tracing research tool: render, verify against Embree, compare, bench")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub cmd: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Render a scene with one method.
+    Render(RenderArgs),
+    /// Cross-check an intersector against Embree on camera and random rays (exit 1 on disagreement).
+    Verify(verify::VerifyArgs),
+    /// Compare two images: RMSE, PSNR, mean FLIP, SSIM.
+    Compare(compare::CompareArgs),
+    /// Run several methods on the same scenes and print a side-by-side table.
+    Bench(crate::experiment::bench::BenchArgs),
+    /// List the built-in scenes.
+    Scenes,
+    /// The main job: render the built-in scenes with every method, write images, tables, plots and an index page.
+    Demo(crate::experiment::demo::DemoArgs),
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    Whitted,
+    Distributed,
+    Multires,
+    Cone,
+    Lod,
+    Surfel,
+}
+
+impl Method {
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Whitted => "whitted",
+            Method::Distributed => "distributed",
+            Method::Multires => "multires",
+            Method::Cone => "cone",
+            Method::Lod => "lod",
+            Method::Surfel => "surfel",
+        }
+    }
+}
+
+/// Camera overrides, shared by the commands that render.
+#[derive(Args, Debug, Clone, Default)]
+pub struct CameraArgs {
+    #[arg(long, value_parser = parse_vec3)]
+    pub eye: Option<glam::Vec3>,
+    #[arg(long, value_parser = parse_vec3)]
+    pub look: Option<glam::Vec3>,
+    #[arg(long, value_parser = parse_vec3)]
+    pub up: Option<glam::Vec3>,
+    /// Vertical field of view in degrees.
+    #[arg(long)]
+    pub fovy: Option<f32>,
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct RenderArgs {
+    /// Built-in scene name, .obj/.off mesh, or .toml scene file.
+    pub scene: String,
+    #[arg(long, value_enum, default_value = "whitted")]
+    pub method: Method,
+    #[arg(long, value_enum, default_value = "embree")]
+    pub accel: AccelKind,
+    #[arg(long, default_value_t = 640)]
+    pub width: u32,
+    #[arg(long, default_value_t = 480)]
+    pub height: u32,
+    /// Samples per pixel (whitted: jittered when > 1; distributed: the maximum per pixel).
+    #[arg(long, default_value_t = 1)]
+    pub spp: u32,
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// AOV output, `depth=FILE.exr` or `normal=FILE.exr` (repeatable).
+    #[arg(long, value_parser = parse_aov)]
+    pub aov: Vec<(String, PathBuf)>,
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
+    #[command(flatten)]
+    pub camera: CameraArgs,
+    /// Worker threads (0 = all cores).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u32,
+    /// Packet width for primary rays: 1 (single rays) or 8.
+    #[arg(long, default_value_t = 8)]
+    pub packet: u32,
+    /// Distributed: samples per pixel of the first (fixed, jittered) pass.
+    #[arg(long, default_value_t = 2)]
+    pub first_pass_spp: u32,
+    /// Distributed: luminance variance (over 5×5 pixels) above which a pixel gets the second pass.
+    #[arg(long, default_value_t = 0.001)]
+    pub variance_threshold: f32,
+    /// Recursion depth limit for reflection/refraction (default: the scene's).
+    #[arg(long)]
+    pub max_depth: Option<u32>,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+pub fn parse_vec3(s: &str) -> Result<glam::Vec3, String> {
+    let v: Vec<f32> = s.split(',').map(|x| x.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(|e| format!("'{s}': {e}"))?;
+    if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
+        return Err(format!("'{s}': expected three finite numbers x,y,z"));
+    }
+    Ok(glam::Vec3::new(v[0], v[1], v[2]))
+}
+
+fn parse_aov(s: &str) -> Result<(String, PathBuf), String> {
+    let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}': expected depth=FILE.exr or normal=FILE.exr"))?;
+    if k != "depth" && k != "normal" {
+        return Err(format!("unknown AOV '{k}' (depth or normal)"));
+    }
+    if v.is_empty() {
+        return Err(format!("AOV '{k}' needs a file name"));
+    }
+    Ok((k.to_string(), PathBuf::from(v)))
+}
+
+/// Runs a parsed command; returns the process exit code.
+pub fn run(cli: Cli) -> i32 {
+    let r = match cli.cmd {
+        Command::Render(a) => render::run(&a).map(|_| 0),
+        Command::Verify(a) => verify::run(&a),
+        Command::Compare(a) => compare::run(&a),
+        Command::Bench(a) => crate::experiment::bench::run(&a).map(|_| 0),
+        Command::Scenes => scenes::run().map(|_| 0),
+        Command::Demo(a) => crate::experiment::demo::run(&a).map(|_| 0),
+    };
+    match r {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("lodtrace: error: {e}");
+            2
+        }
+    }
+}

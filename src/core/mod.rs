@@ -1,0 +1,23 @@
+//! Shared machinery: random numbers, counters, small math helpers.
+pub mod rng;
+pub mod stats;
+
+use glam::Vec3;
+
+/// An orthonormal frame (t, b, n) around a unit normal (Duff et al. 2017, branchless ONB).
+#[inline]
+pub fn onb(n: Vec3) -> (Vec3, Vec3) {
+    let sign = 1.0f32.copysign(n.z);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    (
+        Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
+        Vec3::new(b, sign + n.y * n.y * a, -n.y),
+    )
+}
+
+/// Luminance of a linear Rec.709 colour.
+#[inline]
+pub fn luminance(c: Vec3) -> f32 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}

@@ -1,0 +1,3 @@
+//! Side-by-side experiments: bench tables, JSON, plots, the demo report.
+pub mod bench;
+pub mod demo;

@@ -1,0 +1,138 @@
+//! The pinhole camera of DESIGN.md (a contract: the Embree checks depend on it), plus a thin
+//! lens (aperture radius, focal distance) for depth of field.
+
+use crate::error::{Error, Result};
+use glam::Vec3;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Camera {
+    pub eye: Vec3,
+    pub look: Vec3,
+    pub up: Vec3,
+    /// Vertical field of view in degrees.
+    pub fovy: f32,
+    /// Lens radius (0 = pinhole).
+    pub aperture: f32,
+    /// Distance along the view direction to the plane in focus.
+    pub focal_dist: f32,
+}
+
+impl Default for Camera {
+    fn default() -> Self {
+        Camera { eye: Vec3::new(0.0, 0.0, 5.0), look: Vec3::ZERO, up: Vec3::Y, fovy: 45.0, aperture: 0.0, focal_dist: 5.0 }
+    }
+}
+
+/// The camera resolved for one image size: basis and scale factors.
+#[derive(Clone, Copy, Debug)]
+pub struct CameraFrame {
+    pub eye: Vec3,
+    pub f: Vec3,
+    pub r: Vec3,
+    pub u: Vec3,
+    pub s: f32,
+    pub aspect: f32,
+    pub width: u32,
+    pub height: u32,
+    pub aperture: f32,
+    pub focal_dist: f32,
+}
+
+impl Camera {
+    pub fn validate(&self) -> Result<()> {
+        let f = self.look - self.eye;
+        let ok = self.eye.is_finite()
+            && self.look.is_finite()
+            && self.up.is_finite()
+            && f.length_squared() > 0.0
+            && f.cross(self.up).length_squared() > 1e-20
+            && self.fovy.is_finite()
+            && self.fovy > 0.0
+            && self.fovy < 180.0
+            && self.aperture.is_finite()
+            && self.aperture >= 0.0
+            && self.focal_dist.is_finite()
+            && self.focal_dist > 0.0;
+        if ok {
+            Ok(())
+        } else {
+            Err(Error::Usage("camera: eye and look must differ, up must not be parallel to the view, 0 < fovy < 180".into()))
+        }
+    }
+
+    pub fn frame(&self, width: u32, height: u32) -> CameraFrame {
+        let f = (self.look - self.eye).normalize();
+        let r = f.cross(self.up).normalize();
+        let u = r.cross(f);
+        CameraFrame {
+            eye: self.eye,
+            f,
+            r,
+            u,
+            s: (self.fovy.to_radians() * 0.5).tan(),
+            aspect: width as f32 / height as f32,
+            width,
+            height,
+            aperture: self.aperture,
+            focal_dist: self.focal_dist,
+        }
+    }
+}
+
+impl CameraFrame {
+    /// Unit direction through image position (px, py) in pixels (pixel centre of (i, j) is
+    /// (i+0.5, j+0.5)); row 0 at the top.
+    #[inline]
+    pub fn dir_at(&self, px: f32, py: f32) -> Vec3 {
+        let x = (2.0 * px / self.width as f32 - 1.0) * self.aspect * self.s;
+        let y = (1.0 - 2.0 * py / self.height as f32) * self.s;
+        (self.f + x * self.r + y * self.u).normalize()
+    }
+    /// The DESIGN.md primary ray through the centre of pixel (i, j).
+    #[inline]
+    pub fn pixel_center_dir(&self, i: u32, j: u32) -> Vec3 {
+        self.dir_at(i as f32 + 0.5, j as f32 + 0.5)
+    }
+    /// A thin-lens ray: `dir` is the pinhole direction, (lu, lv) a lens sample in [0,1)².
+    /// Returns (origin, unit direction). The focal plane is at distance `focal_dist` along f.
+    pub fn lens_ray(&self, dir: Vec3, lu: f32, lv: f32) -> (Vec3, Vec3) {
+        if self.aperture <= 0.0 {
+            return (self.eye, dir);
+        }
+        let t_focus = self.focal_dist / dir.dot(self.f);
+        let p_focus = self.eye + dir * t_focus;
+        let (dx, dy) = crate::core::rng::concentric_disk(lu, lv);
+        let o = self.eye + self.r * (dx * self.aperture) + self.u * (dy * self.aperture);
+        (o, (p_focus - o).normalize())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    #[test]
+    fn centre_pixel_looks_forward() {
+        let c = Camera { eye: Vec3::ZERO, look: Vec3::new(0.0, 0.0, -1.0), up: Vec3::Y, fovy: 90.0, ..Default::default() };
+        let fr = c.frame(3, 3);
+        assert!((fr.pixel_center_dir(1, 1) - Vec3::new(0.0, 0.0, -1.0)).length() < 1e-6);
+        // Row 0 is the top: its y is positive.
+        assert!(fr.pixel_center_dir(1, 0).y > 0.0);
+        // Column 0 is the left: x negative.
+        assert!(fr.pixel_center_dir(0, 1).x < 0.0);
+        // fovy 90: top edge at y = tan(45°) = 1 (at pixel edge 0).
+        let d = fr.dir_at(1.5, 0.0);
+        assert!((d.y / -d.z - 1.0).abs() < 1e-5);
+    }
+    #[test]
+    fn lens_rays_converge_on_focal_plane() {
+        let c = Camera { eye: Vec3::ZERO, look: Vec3::new(0.0, 0.0, -1.0), up: Vec3::Y, fovy: 60.0, aperture: 0.2, focal_dist: 4.0 };
+        let fr = c.frame(32, 32);
+        let d = fr.pixel_center_dir(5, 20);
+        let target = d * (4.0 / d.dot(fr.f));
+        for (u, v) in [(0.1, 0.9), (0.5, 0.5), (0.8, 0.3)] {
+            let (o, dd) = fr.lens_ray(d, u, v);
+            let t = (target - o).dot(dd);
+            assert!((o + dd * t - target).length() < 1e-4);
+        }
+    }
+}

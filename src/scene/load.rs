@@ -1,0 +1,205 @@
+//! Loading scenes: built-in names, bare meshes (.obj with MTL via tobj, .off), and TOML
+//! scene files. A bare mesh is framed automatically, grey diffuse, with a default light.
+
+use super::{Camera, Light, Material, Mesh, Scene, Target};
+use crate::error::{Error, Result};
+use glam::{Affine3A, Vec3};
+use std::path::Path;
+
+/// Resolves SCENE as DESIGN.md describes: a built-in name, or a file by extension.
+pub fn load_scene(spec: &str) -> Result<Scene> {
+    let p = Path::new(spec);
+    let ext = p.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+    let mut scene = match ext.as_deref() {
+        Some("obj") | Some("off") => {
+            let mesh = load_mesh(p, 0)?;
+            bare_mesh_scene(mesh)?
+        }
+        Some("toml") => super::tomlscene::load(p)?,
+        _ => super::builtin::get(spec)?,
+    };
+    scene.validate()?;
+    Ok(scene)
+}
+
+/// Loads a mesh file; triangles get material `mat` (OBJ files with MTL materials get their own,
+/// see [`load_obj`]).
+pub fn load_mesh(path: &Path, mat: u32) -> Result<Mesh> {
+    let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("off") => load_off(path, mat),
+        Some("obj") => load_obj(path, mat).map(|(m, _)| m),
+        _ => Err(Error::parse(path, "unsupported mesh format (expected .obj or .off)")),
+    }
+}
+
+fn read_to_string(path: &Path) -> Result<String> {
+    std::fs::read_to_string(path).map_err(|e| Error::io(path, e))
+}
+
+/// Object File Format: `OFF`, counts `nv nf ne`, vertices, then faces `n i0 i1 ...`
+/// (polygons are fan-triangulated). Comments (`#`) are ignored.
+pub fn load_off(path: &Path, mat: u32) -> Result<Mesh> {
+    let text = read_to_string(path)?;
+    let mut tokens = text.lines().map(|l| l.split('#').next().unwrap_or("")).flat_map(|l| l.split_whitespace());
+    let head = tokens.next().ok_or_else(|| Error::parse(path, "empty file"))?;
+    let mut first_count = None;
+    if !head.ends_with("OFF") {
+        // Some files omit the header.
+        first_count = Some(head);
+    }
+    let mut next_num = |what: &str| -> Result<&str> { tokens.next().ok_or_else(|| Error::parse(path, format!("truncated: expected {what}"))) };
+    let parse_usize = |s: &str, what: &str| -> Result<usize> { s.parse::<usize>().map_err(|_| Error::parse(path, format!("bad {what} '{s}'"))) };
+    let nv = match first_count {
+        Some(s) => parse_usize(s, "vertex count")?,
+        None => parse_usize(next_num("vertex count")?, "vertex count")?,
+    };
+    let nf = parse_usize(next_num("face count")?, "face count")?;
+    let _ne = next_num("edge count")?;
+    if nv > 100_000_000 || nf > 200_000_000 {
+        return Err(Error::parse(path, "absurd vertex or face count"));
+    }
+    let mut mesh = Mesh::new(path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default());
+    for _ in 0..nv {
+        let mut v = [0f32; 3];
+        for c in &mut v {
+            let s = next_num("vertex coordinate")?;
+            *c = s.parse::<f32>().map_err(|_| Error::parse(path, format!("bad coordinate '{s}'")))?;
+        }
+        mesh.push_vertex(Vec3::from(v));
+    }
+    for f in 0..nf {
+        let n = parse_usize(next_num("face size")?, "face size")?;
+        if !(3..=1000).contains(&n) {
+            return Err(Error::parse(path, format!("face {f} has {n} vertices")));
+        }
+        let mut idx = Vec::with_capacity(n);
+        for _ in 0..n {
+            let i = parse_usize(next_num("face index")?, "face index")?;
+            if i >= nv {
+                return Err(Error::parse(path, format!("face {f} index {i} out of range (vertices: {nv})")));
+            }
+            idx.push(i as u32);
+        }
+        for k in 1..n - 1 {
+            mesh.push_tri(idx[0], idx[k], idx[k + 1], mat);
+        }
+        // Optional per-face colour values follow on the same line in some files; they were
+        // consumed as tokens only if present, so skip to the next face by count: OFF colours are
+        // rare in our assets, and a mis-parse is caught by the index range checks above.
+    }
+    finish_mesh(path, mesh)
+}
+
+fn finish_mesh(path: &Path, mut mesh: Mesh) -> Result<Mesh> {
+    if mesh.tris.is_empty() {
+        return Err(Error::parse(path, "no faces"));
+    }
+    let bad = mesh.remove_degenerate();
+    if bad > 0 {
+        eprintln!("lodtrace: warning: {}: skipped {bad} degenerate or non-finite triangles", path.display());
+    }
+    if mesh.tris.is_empty() {
+        return Err(Error::parse(path, "every triangle is degenerate or non-finite"));
+    }
+    if !mesh.has_normals() || !(0..mesh.vertex_count() as u32).all(|i| mesh.normal(i).is_finite()) {
+        mesh.compute_normals();
+    }
+    Ok(mesh)
+}
+
+/// OBJ via tobj (triangulated, single index). Returns the mesh and the MTL materials it uses;
+/// triangle materials are `mat` + the MTL material index (or `mat` when there is no MTL).
+pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
+    if !path.is_file() {
+        return Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "no such file")));
+    }
+    let opts = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
+    let (models, mtls) = tobj::load_obj(path, &opts).map_err(|e| Error::parse(path, e.to_string()))?;
+    let mtls = mtls.unwrap_or_default();
+    let mut mesh = Mesh::new(path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default());
+    let mut normals_ok = true;
+    for m in &models {
+        let mm = &m.mesh;
+        if mm.positions.len() % 3 != 0 || mm.indices.len() % 3 != 0 {
+            return Err(Error::parse(path, "malformed geometry"));
+        }
+        let base = mesh.vertex_count() as u32;
+        let nv = (mm.positions.len() / 3) as u32;
+        for v in mm.positions.chunks_exact(3) {
+            mesh.push_vertex(Vec3::new(v[0], v[1], v[2]));
+        }
+        if mm.normals.len() == mm.positions.len() && normals_ok {
+            for n in mm.normals.chunks_exact(3) {
+                let n = Vec3::new(n[0], n[1], n[2]).normalize_or_zero();
+                mesh.nx.push(n.x);
+                mesh.ny.push(n.y);
+                mesh.nz.push(n.z);
+            }
+        } else {
+            normals_ok = false;
+        }
+        let tm = mat + mm.material_id.map(|i| i as u32).unwrap_or(0);
+        for t in mm.indices.chunks_exact(3) {
+            if t.iter().any(|&i| i >= nv) {
+                return Err(Error::parse(path, format!("face index out of range (vertices: {nv})")));
+            }
+            mesh.push_tri(base + t[0], base + t[1], base + t[2], tm);
+        }
+    }
+    if !normals_ok {
+        mesh.nx.clear();
+        mesh.ny.clear();
+        mesh.nz.clear();
+    }
+    let materials = mtls.iter().map(material_from_mtl).collect();
+    Ok((finish_mesh(path, mesh)?, materials))
+}
+
+fn material_from_mtl(m: &tobj::Material) -> Material {
+    let kd = m.diffuse.map(Vec3::from).unwrap_or(Vec3::splat(0.7));
+    let ks = m.specular.map(|s| Vec3::from(s).max_element()).unwrap_or(0.0);
+    let d = m.dissolve.unwrap_or(1.0).clamp(0.0, 1.0);
+    Material {
+        name: m.name.clone(),
+        color: kd.max(Vec3::ZERO),
+        kd: 1.0,
+        ks: ks.clamp(0.0, 1.0),
+        shininess: m.shininess.unwrap_or(32.0).max(1.0),
+        reflect: 0.0,
+        transmit: 1.0 - d,
+        ior: m.optical_density.unwrap_or(1.5).max(1.0),
+        roughness: 0.0,
+    }
+}
+
+/// A scene holding one mesh, grey diffuse, on no floor, framed so the whole mesh fits the
+/// view, lit by a light above and behind the camera.
+pub fn bare_mesh_scene(mesh: Mesh) -> Result<Scene> {
+    let mut s = Scene::empty(&mesh.name);
+    s.materials[0] = Material::diffuse("grey", Vec3::splat(0.7));
+    let id = s.add_mesh(mesh);
+    s.instance(Target::Mesh(id), Affine3A::IDENTITY, None);
+    let (lo, hi) = s.bounds()?;
+    if !lo.is_finite() || !hi.is_finite() {
+        return Err(Error::Scene("mesh bounds are not finite".into()));
+    }
+    s.camera = frame_bounds(lo, hi, 40.0);
+    let r = (hi - lo).length().max(1e-6);
+    let eye = s.camera.eye;
+    let light_pos = eye + (s.camera.up * 0.5 * r) + (eye - s.camera.look).normalize() * 0.2 * r + s.camera.look.cross(Vec3::Y).normalize_or_zero() * 0.3 * r;
+    let d2 = (light_pos - (lo + hi) * 0.5).length_squared();
+    s.lights.push(Light::Point { pos: light_pos, intensity: Vec3::splat(d2 * 3.0) });
+    s.ambient = Vec3::splat(0.05);
+    Ok(s)
+}
+
+/// A camera looking at the centre of the box from the front-right-above, far enough that the
+/// bounding sphere fits the vertical field of view.
+pub fn frame_bounds(lo: Vec3, hi: Vec3, fovy: f32) -> Camera {
+    let c = (lo + hi) * 0.5;
+    let r = ((hi - lo).length() * 0.5).max(1e-6);
+    let dist = r / (fovy.to_radians() * 0.5).sin() * 1.05;
+    let dir = Vec3::new(0.35, 0.3, 1.0).normalize();
+    Camera { eye: c + dir * dist, look: c, up: Vec3::Y, fovy, aperture: 0.0, focal_dist: dist }
+}
