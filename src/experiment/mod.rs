@@ -1,3 +1,4 @@
 //! Side-by-side experiments: bench tables, JSON, plots, the demo report.
 pub mod bench;
 pub mod demo;
+pub mod plot;

@@ -1,0 +1,1 @@
+//! Plots (PNG) for bench results.
