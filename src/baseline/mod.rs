@@ -5,4 +5,6 @@ pub mod accel;
 pub mod bvh;
 #[cfg(feature = "embree")]
 pub mod embree;
+pub mod render;
+pub mod shade;
 pub mod tri;

@@ -234,7 +234,7 @@ pub fn spheres() -> Scene {
     });
     let board = s.add_mesh(checkerboard(16, 16.0, 0, black));
     s.instance(Target::Mesh(board), Affine3A::IDENTITY, None);
-    let sphere = s.add_mesh(uv_sphere(42, 40, 0));
+    let sphere = s.add_mesh(uv_sphere(43, 41, 0));
     s.instance(Target::Mesh(sphere), Affine3A::from_scale_rotation_translation(Vec3::splat(1.3), glam::Quat::IDENTITY, Vec3::new(-1.6, 1.3, -1.0)), Some(red));
     s.instance(Target::Mesh(sphere), Affine3A::from_scale_rotation_translation(Vec3::splat(1.1), glam::Quat::IDENTITY, Vec3::new(1.4, 1.1, 1.2)), Some(glass));
     s.camera = Camera { eye: Vec3::new(0.5, 3.2, 8.5), look: Vec3::new(0.0, 0.8, 0.0), up: Vec3::Y, fovy: 45.0, aperture: 0.0, focal_dist: 8.5 };

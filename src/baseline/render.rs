@@ -1,0 +1,393 @@
+//! The image loop of the conventional tracers: tiles in parallel (rayon), per-tile counters
+//! merged at the end, random numbers from a hash of (seed, pixel, sample, dimension) so the
+//! image is bit-identical for any `--threads`, and a progress bar once a render passes one
+//! second.
+//!
+//! - Whitted (`--method whitted`): one ray through each pixel centre, or `--spp N` jittered
+//!   rays. Primary rays go in packets of K = 8 (one tile row segment) through
+//!   [`Accel::intersect8`]; secondary rays are single.
+//! - Adaptive distributed (`--method distributed`, Wand & Straßer §6): pass 1 shoots
+//!   `first_pass_spp` jittered samples per pixel (paper: 1–3); the luminance variance of the
+//!   pixel means over each 5×5 neighbourhood decides where pass 2 adds g×g stratified jittered
+//!   samples (g = ⌊√(spp − first_pass_spp)⌋), so `--spp` is the per-pixel maximum. Area lights,
+//!   glossy reflection and depth of field are sampled. With `--variance-threshold 0` every
+//!   pixel is refined: that is the ground-truth reference.
+
+use super::accel::{Hit, Ray, K};
+use super::shade::TraceCtx;
+use crate::core::rng::Sampler;
+use crate::core::stats::{Counter, Counters};
+use crate::core::luminance;
+use crate::error::{Error, Result};
+use crate::film::Film;
+use crate::scene::camera::CameraFrame;
+use glam::Vec3;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+pub const TILE: u32 = 16;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Integrator {
+    Whitted,
+    Distributed,
+}
+
+#[derive(Clone, Debug)]
+pub struct RenderOpts {
+    pub integrator: Integrator,
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    pub seed: u32,
+    /// 0 = all cores.
+    pub threads: usize,
+    /// Primary-ray packet width: 1 or 8.
+    pub packet: u32,
+    pub first_pass_spp: u32,
+    pub variance_threshold: f32,
+    /// Fill the depth and normal AOVs (from the pixel-centre pinhole ray).
+    pub aov: bool,
+    pub quiet: bool,
+    /// Shown beside the progress bar.
+    pub label: String,
+}
+
+impl Default for RenderOpts {
+    fn default() -> Self {
+        RenderOpts {
+            integrator: Integrator::Whitted,
+            width: 64,
+            height: 64,
+            spp: 1,
+            seed: 0,
+            threads: 0,
+            packet: 8,
+            first_pass_spp: 2,
+            variance_threshold: 0.001,
+            aov: true,
+            quiet: true,
+            label: String::new(),
+        }
+    }
+}
+
+impl RenderOpts {
+    pub fn validate(&self) -> Result<()> {
+        if self.width == 0 || self.height == 0 {
+            return Err(Error::Usage(format!("image size {}x{} must be at least 1x1", self.width, self.height)));
+        }
+        if self.width > 32768 || self.height > 32768 {
+            return Err(Error::Usage(format!("image size {}x{} is too large (max 32768 per side)", self.width, self.height)));
+        }
+        if self.spp == 0 || self.spp > 65536 {
+            return Err(Error::Usage(format!("--spp {} out of range (1..=65536)", self.spp)));
+        }
+        if self.packet != 1 && self.packet != 8 {
+            return Err(Error::Usage(format!("--packet {} must be 1 or 8", self.packet)));
+        }
+        if self.first_pass_spp == 0 {
+            return Err(Error::Usage("--first-pass-spp must be at least 1".into()));
+        }
+        if !(self.variance_threshold >= 0.0) || !self.variance_threshold.is_finite() {
+            return Err(Error::Usage("--variance-threshold must be a finite number >= 0".into()));
+        }
+        if self.threads > 1024 {
+            return Err(Error::Usage(format!("--threads {} is absurd", self.threads)));
+        }
+        Ok(())
+    }
+}
+
+pub struct RenderOutput {
+    pub film: Film,
+    pub counters: Counters,
+    pub seconds: f64,
+    pub threads: usize,
+}
+
+#[derive(Clone, Copy)]
+struct Tile {
+    x0: u32,
+    y0: u32,
+    x1: u32,
+    y1: u32,
+}
+
+fn tiles(w: u32, h: u32) -> Vec<Tile> {
+    let mut v = Vec::new();
+    for y0 in (0..h).step_by(TILE as usize) {
+        for x0 in (0..w).step_by(TILE as usize) {
+            v.push(Tile { x0, y0, x1: (x0 + TILE).min(w), y1: (y0 + TILE).min(h) });
+        }
+    }
+    v
+}
+
+/// A progress bar that stays hidden for the first second.
+struct Progress {
+    bar: ProgressBar,
+    start: Instant,
+    shown: AtomicBool,
+    quiet: bool,
+}
+
+impl Progress {
+    fn new(len: u64, label: &str, quiet: bool) -> Self {
+        let bar = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::hidden());
+        bar.set_style(ProgressStyle::with_template("{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} tiles, eta {eta}").unwrap());
+        bar.set_prefix(label.to_string());
+        Progress { bar, start: Instant::now(), shown: AtomicBool::new(false), quiet }
+    }
+    fn tick(&self) {
+        self.bar.inc(1);
+        if !self.quiet && !self.shown.load(Ordering::Relaxed) && self.start.elapsed() > Duration::from_secs(1) && !self.shown.swap(true, Ordering::Relaxed) {
+            self.bar.set_draw_target(ProgressDrawTarget::stderr());
+        }
+    }
+    fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
+}
+
+struct PixelOut {
+    idx: usize,
+    color: Vec3,
+    depth: f32,
+    normal: Vec3,
+}
+
+/// Renders one frame with the conventional tracers.
+pub fn render(ctx: &TraceCtx, cam: &CameraFrame, opts: &RenderOpts) -> Result<RenderOutput> {
+    opts.validate()?;
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(opts.threads).build().map_err(|e| Error::Usage(format!("thread pool: {e}")))?;
+    let threads = pool.current_num_threads();
+    let start = Instant::now();
+    let (film, counters) = pool.install(|| match opts.integrator {
+        Integrator::Whitted => whitted(ctx, cam, opts),
+        Integrator::Distributed => distributed(ctx, cam, opts),
+    });
+    Ok(RenderOutput { film, counters, seconds: start.elapsed().as_secs_f64(), threads })
+}
+
+fn scatter(film: &mut Film, results: Vec<(Vec<PixelOut>, Counters)>) -> Counters {
+    let mut total = Counters::default();
+    for (px, c) in results {
+        total.merge(&c);
+        for p in px {
+            film.color[p.idx] = p.color;
+            film.depth[p.idx] = p.depth;
+            film.normal[p.idx] = p.normal;
+        }
+    }
+    total
+}
+
+/// Depth and normal of the pixel-centre ray's hit.
+fn aov_of(ctx: &TraceCtx, ray: &Ray, hit: Option<&Hit>) -> (f32, Vec3) {
+    match hit {
+        Some(h) => (h.t, ctx.surface(ray, h).ns),
+        None => (f32::INFINITY, Vec3::ZERO),
+    }
+}
+
+fn whitted(ctx: &TraceCtx, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Counters) {
+    let mut film = Film::new(opts.width, opts.height);
+    let ts = tiles(opts.width, opts.height);
+    let prog = Progress::new(ts.len() as u64, &opts.label, opts.quiet);
+    let w = opts.width;
+    let results: Vec<(Vec<PixelOut>, Counters)> = ts
+        .par_iter()
+        .map(|t| {
+            let mut c = Counters::default();
+            let mut out = Vec::with_capacity(((t.x1 - t.x0) * (t.y1 - t.y0)) as usize);
+            for j in t.y0..t.y1 {
+                if opts.spp == 1 {
+                    // Pixel-centre rays, K at a time along the row.
+                    let mut i0 = t.x0;
+                    while i0 < t.x1 {
+                        let n = (t.x1 - i0).min(K as u32) as usize;
+                        let mut rays = [Ray::new(cam.eye, Vec3::Z); K];
+                        for l in 0..n {
+                            rays[l] = Ray::new(cam.eye, cam.pixel_center_dir(i0 + l as u32, j));
+                        }
+                        let mut hits = [None; K];
+                        let valid = ((1u32 << n) - 1) as u8;
+                        if opts.packet == 8 {
+                            ctx.accel.intersect8(&rays, valid, &mut hits, &mut c);
+                        } else {
+                            for l in 0..n {
+                                hits[l] = ctx.accel.intersect1(&rays[l], &mut c);
+                            }
+                        }
+                        c.add(Counter::rays_primary, n as u64);
+                        c.add(Counter::samples, n as u64);
+                        for l in 0..n {
+                            let color = match &hits[l] {
+                                Some(h) => ctx.shade(&rays[l], h, 0, None, &mut c),
+                                None => ctx.scene.background,
+                            };
+                            let (depth, normal) = if opts.aov { aov_of(ctx, &rays[l], hits[l].as_ref()) } else { (f32::INFINITY, Vec3::ZERO) };
+                            out.push(PixelOut { idx: (j * w + i0 + l as u32) as usize, color, depth, normal });
+                        }
+                        i0 += n as u32;
+                    }
+                } else {
+                    for i in t.x0..t.x1 {
+                        let pix = j * w + i;
+                        let mut sum = Vec3::ZERO;
+                        for s in 0..opts.spp {
+                            let mut smp = Sampler::new(opts.seed, pix, s);
+                            let (u, v) = smp.next2();
+                            let ray = Ray::new(cam.eye, cam.dir_at(i as f32 + u, j as f32 + v));
+                            c.inc(Counter::rays_primary);
+                            c.inc(Counter::samples);
+                            sum += ctx.radiance(&ray, 0, None, &mut c);
+                        }
+                        let (depth, normal) = if opts.aov {
+                            let ray = Ray::new(cam.eye, cam.pixel_center_dir(i, j));
+                            let h = ctx.accel.intersect1(&ray, &mut c);
+                            aov_of(ctx, &ray, h.as_ref())
+                        } else {
+                            (f32::INFINITY, Vec3::ZERO)
+                        };
+                        out.push(PixelOut { idx: pix as usize, color: sum / opts.spp as f32, depth, normal });
+                    }
+                }
+            }
+            prog.tick();
+            (out, c)
+        })
+        .collect();
+    prog.finish();
+    let c = scatter(&mut film, results);
+    (film, c)
+}
+
+/// One distributed-ray-tracing sample of pixel (i, j) at image position (i+u, j+v).
+fn dist_sample(ctx: &TraceCtx, cam: &CameraFrame, i: u32, j: u32, u: f32, v: f32, smp: &mut Sampler, c: &mut Counters) -> Vec3 {
+    let d = cam.dir_at(i as f32 + u, j as f32 + v);
+    let (lu, lv) = smp.next2();
+    let (o, dir) = cam.lens_ray(d, lu, lv);
+    c.inc(Counter::rays_primary);
+    c.inc(Counter::samples);
+    ctx.radiance(&Ray::new(o, dir), 0, Some(smp), c)
+}
+
+fn distributed(ctx: &TraceCtx, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Counters) {
+    let (w, h) = (opts.width, opts.height);
+    let n1 = opts.first_pass_spp.min(opts.spp);
+    let g = if opts.spp > n1 { ((opts.spp - n1) as f32).sqrt().floor() as u32 } else { 0 };
+    let ts = tiles(w, h);
+    let passes = if g > 0 { 2 } else { 1 };
+    let prog = Progress::new((ts.len() * passes) as u64, &opts.label, opts.quiet);
+    let npix = (w * h) as usize;
+
+    // Pass 1: fixed jittered oversampling.
+    let mut sums = vec![Vec3::ZERO; npix];
+    let mut film = Film::new(w, h);
+    let pass1: Vec<(Vec<PixelOut>, Counters)> = ts
+        .par_iter()
+        .map(|t| {
+            let mut c = Counters::default();
+            let mut out = Vec::new();
+            for j in t.y0..t.y1 {
+                for i in t.x0..t.x1 {
+                    let pix = j * w + i;
+                    let mut sum = Vec3::ZERO;
+                    for s in 0..n1 {
+                        let mut smp = Sampler::new(opts.seed, pix, s);
+                        let (u, v) = smp.next2();
+                        sum += dist_sample(ctx, cam, i, j, u, v, &mut smp, &mut c);
+                    }
+                    let (depth, normal) = if opts.aov {
+                        let ray = Ray::new(cam.eye, cam.pixel_center_dir(i, j));
+                        let hh = ctx.accel.intersect1(&ray, &mut c);
+                        aov_of(ctx, &ray, hh.as_ref())
+                    } else {
+                        (f32::INFINITY, Vec3::ZERO)
+                    };
+                    out.push(PixelOut { idx: pix as usize, color: sum, depth, normal });
+                }
+            }
+            prog.tick();
+            (out, c)
+        })
+        .collect();
+    let mut counters = scatter(&mut film, pass1);
+    for k in 0..npix {
+        sums[k] = film.color[k];
+        film.color[k] = sums[k] / n1 as f32;
+    }
+    if g == 0 {
+        prog.finish();
+        return (film, counters);
+    }
+
+    // Variance of the (display-clamped) luminance of pixel means over 5×5 neighbourhoods.
+    let lum: Vec<f32> = film.color.iter().map(|c| luminance(c.clamp(Vec3::ZERO, Vec3::ONE))).collect();
+    let refine: Vec<bool> = (0..npix)
+        .into_par_iter()
+        .map(|k| {
+            let (i, j) = ((k as u32 % w) as i32, (k as u32 / w) as i32);
+            let (mut s, mut s2, mut n) = (0.0f64, 0.0f64, 0.0f64);
+            for dj in -2..=2 {
+                for di in -2..=2 {
+                    let (x, y) = (i + di, j + dj);
+                    if x >= 0 && y >= 0 && x < w as i32 && y < h as i32 {
+                        let v = lum[(y as u32 * w + x as u32) as usize] as f64;
+                        s += v;
+                        s2 += v * v;
+                        n += 1.0;
+                    }
+                }
+            }
+            let var = (s2 / n - (s / n) * (s / n)).max(0.0);
+            var > opts.variance_threshold as f64 || opts.variance_threshold == 0.0
+        })
+        .collect();
+
+    // Pass 2: g×g stratified jittered samples in the pixels of high variance.
+    let sums_ref = &sums;
+    let refine_ref = &refine;
+    let pass2: Vec<(Vec<(usize, Vec3)>, Counters)> = ts
+        .par_iter()
+        .map(|t| {
+            let mut c = Counters::default();
+            let mut out = Vec::new();
+            for j in t.y0..t.y1 {
+                for i in t.x0..t.x1 {
+                    let pix = (j * w + i) as usize;
+                    if !refine_ref[pix] {
+                        continue;
+                    }
+                    c.inc(Counter::pixels_refined);
+                    let mut sum = sums_ref[pix];
+                    for sy in 0..g {
+                        for sx in 0..g {
+                            let s = n1 + sy * g + sx;
+                            let mut smp = Sampler::new(opts.seed, pix as u32, s);
+                            let (a, b) = smp.next2();
+                            let u = (sx as f32 + a) / g as f32;
+                            let v = (sy as f32 + b) / g as f32;
+                            sum += dist_sample(ctx, cam, i, j, u, v, &mut smp, &mut c);
+                        }
+                    }
+                    out.push((pix, sum / (n1 + g * g) as f32));
+                }
+            }
+            prog.tick();
+            (out, c)
+        })
+        .collect();
+    prog.finish();
+    for (px, c) in pass2 {
+        counters.merge(&c);
+        for (k, col) in px {
+            film.color[k] = col;
+        }
+    }
+    (film, counters)
+}

@@ -1,0 +1,173 @@
+//! Surface interaction and the conventional shading model shared by the Whitted and the
+//! distributed tracer (Wand & Straßer §6: "a conventional raytracer based on the same code
+//! basis"): Phong local illumination with shadow rays, mirror reflection, refraction with the
+//! total-internal-reflection fallback, a recursion depth limit.
+//!
+//! Radiometry: lights are given as radiant intensity I; a diffuse surface of albedo ρ
+//! (`color·kd`) lit at distance d and incidence θ has radiance ρ/π · I·cosθ/d². The Phong
+//! highlight is energy-normalised: ks·(n+2)/(2π)·cosⁿα · I·cosθ/d².
+//!
+//! With a sampler (distributed ray tracing, Cook et al. 1984) the elliptical lights are
+//! sampled uniformly over their area and glossy reflections are sampled uniformly in a cone
+//! of half-angle `roughness` around the mirror direction; without one (Whitted) lights are
+//! taken at their centre and reflections are perfect mirrors.
+
+use super::accel::{Accel, Hit, Ray};
+use crate::core::rng::Sampler;
+use crate::core::stats::{Counter, Counters};
+use crate::scene::{LeafInstance, Light, Material, Scene};
+use glam::Vec3;
+
+/// Everything an integrator needs, shared read-only by all threads.
+pub struct TraceCtx<'a> {
+    pub scene: &'a Scene,
+    pub leaves: &'a [LeafInstance],
+    pub accel: &'a dyn Accel,
+    pub max_depth: u32,
+}
+
+/// A resolved hit: world position, unit geometric and shading normals facing the incoming
+/// ray, whether the ray came from the front (outside), and the material.
+pub struct Surface<'a> {
+    pub p: Vec3,
+    pub ng: Vec3,
+    pub ns: Vec3,
+    pub front: bool,
+    pub mat: &'a Material,
+}
+
+impl<'a> TraceCtx<'a> {
+    pub fn surface(&self, ray: &Ray, hit: &Hit) -> Surface<'a> {
+        let leaf = &self.leaves[hit.inst as usize];
+        let mesh = &self.scene.meshes[leaf.mesh as usize];
+        let [i0, i1, i2] = mesh.tris[hit.prim as usize];
+        let (p0, p1, p2) = (mesh.pos(i0), mesh.pos(i1), mesh.pos(i2));
+        let ng_obj = (p1 - p0).cross(p2 - p0);
+        let w = 1.0 - hit.u - hit.v;
+        let ns_obj = mesh.normal(i0) * w + mesh.normal(i1) * hit.u + mesh.normal(i2) * hit.v;
+        let nm = glam::Mat3::from(leaf.normal_mat);
+        let mut ng = (nm * ng_obj).normalize_or_zero();
+        let mut ns = (nm * ns_obj).normalize_or_zero();
+        if ns == Vec3::ZERO {
+            ns = ng;
+        }
+        let p = ray.org + ray.dir * hit.t;
+        let front = ng.dot(ray.dir) < 0.0;
+        if !front {
+            ng = -ng;
+        }
+        if ns.dot(ng) < 0.0 {
+            ns = -ns;
+        }
+        let mat_id = leaf.material.unwrap_or(mesh.mat[hit.prim as usize]);
+        Surface { p, ng, ns, front, mat: &self.scene.materials[mat_id as usize] }
+    }
+
+    /// Radiance arriving along `ray` (unit direction). `depth` counts bounces so far.
+    pub fn radiance(&self, ray: &Ray, depth: u32, mut smp: Option<&mut Sampler>, c: &mut Counters) -> Vec3 {
+        let Some(hit) = self.accel.intersect1(ray, c) else {
+            return self.scene.background;
+        };
+        self.shade(ray, &hit, depth, smp.as_deref_mut(), c)
+    }
+
+    /// Shades a known hit (used directly for packet-traced primary rays).
+    pub fn shade(&self, ray: &Ray, hit: &Hit, depth: u32, mut smp: Option<&mut Sampler>, c: &mut Counters) -> Vec3 {
+        let s = self.surface(ray, hit);
+        let m = s.mat;
+        let v = -ray.dir;
+        let eps = 1e-4 * (1.0 + s.p.abs().max_element());
+        let p_out = s.p + s.ng * eps;
+        let mut l = self.scene.ambient * m.color * m.kd;
+        for light in &self.scene.lights {
+            let lp = match (&mut smp, light) {
+                (Some(r), Light::Ellipse { .. }) => {
+                    let (a, b) = r.next2();
+                    light.sample(a, b)
+                }
+                _ => light.center(),
+            };
+            let to_l = lp - p_out;
+            let d2 = to_l.length_squared();
+            if !(d2 > 0.0) {
+                continue;
+            }
+            let d = d2.sqrt();
+            let ldir = to_l / d;
+            let cos = s.ns.dot(ldir);
+            if cos <= 0.0 || s.ng.dot(ldir) <= 0.0 {
+                continue;
+            }
+            c.inc(Counter::rays_shadow);
+            if self.accel.occluded1(&Ray::segment(p_out, ldir, 0.0, d * (1.0 - 1e-4)), c) {
+                continue;
+            }
+            let e = light.intensity() * (cos / d2);
+            let mut f = m.color * (m.kd / std::f32::consts::PI);
+            if m.ks > 0.0 {
+                let r = (2.0 * s.ns.dot(ldir)) * s.ns - ldir;
+                let ca = r.dot(v).max(0.0);
+                f += Vec3::splat(m.ks * (m.shininess + 2.0) / std::f32::consts::TAU * ca.powf(m.shininess));
+            }
+            l += f * e;
+        }
+        if depth >= self.max_depth {
+            return l;
+        }
+        let cos_i = v.dot(s.ns).clamp(-1.0, 1.0);
+        let mirror = (2.0 * cos_i) * s.ns - v;
+        let mut reflect_w = m.reflect;
+        if m.transmit > 0.0 {
+            let eta = if s.front { 1.0 / m.ior } else { m.ior };
+            let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+            if k < 0.0 {
+                // Total internal reflection: the transmitted part is reflected.
+                reflect_w += m.transmit;
+            } else {
+                let t = (-v * eta + s.ns * (eta * cos_i - k.sqrt())).normalize();
+                c.inc(Counter::rays_refract);
+                let lt = self.radiance(&Ray::new(s.p - s.ng * eps, t), depth + 1, smp.as_deref_mut(), c);
+                l += lt * m.color * m.transmit;
+            }
+        }
+        if reflect_w > 0.0 {
+            let mut dir = mirror;
+            if m.roughness > 0.0 {
+                if let Some(r) = smp.as_deref_mut() {
+                    dir = sample_cone(mirror, m.roughness, r.next(), r.next());
+                    if dir.dot(s.ng) <= 0.0 {
+                        dir = mirror;
+                    }
+                }
+            }
+            c.inc(Counter::rays_reflect);
+            l += self.radiance(&Ray::new(p_out, dir), depth + 1, smp, c) * reflect_w;
+        }
+        l
+    }
+}
+
+/// Uniform direction in the cone of half-angle `theta_max` around unit `axis`.
+pub fn sample_cone(axis: Vec3, theta_max: f32, u: f32, v: f32) -> Vec3 {
+    let cos_max = theta_max.min(std::f32::consts::FRAC_PI_2).cos();
+    let cos_t = 1.0 - u * (1.0 - cos_max);
+    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+    let phi = std::f32::consts::TAU * v;
+    let (t, b) = crate::core::onb(axis);
+    (t * (sin_t * phi.cos()) + b * (sin_t * phi.sin()) + axis * cos_t).normalize()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    #[test]
+    fn cone_samples_stay_in_cone() {
+        let axis = Vec3::new(0.3, -0.5, 0.8).normalize();
+        let mut s = Sampler::new(0, 0, 0);
+        for _ in 0..1000 {
+            let d = sample_cone(axis, 0.2, s.next(), s.next());
+            assert!(d.dot(axis) >= 0.2f32.cos() - 1e-5);
+            assert!((d.length() - 1.0).abs() < 1e-5);
+        }
+    }
+}

@@ -1,0 +1,91 @@
+//! Running one method on one scene: the shared core of `render`, `bench` and `demo`.
+//! Build time (acceleration structure) and render time are measured separately.
+
+use crate::baseline::accel::{self, AccelKind};
+use crate::baseline::render::{render, Integrator, RenderOpts, RenderOutput};
+use crate::baseline::shade::TraceCtx;
+use crate::cli::Method;
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+pub struct RunResult {
+    pub out: RenderOutput,
+    pub build_seconds: f64,
+    pub accel_bytes: usize,
+}
+
+/// The `--stats` JSON (DESIGN.md): at least method, accel, width, height, spp,
+/// build_seconds, render_seconds and counters.
+#[derive(Serialize, Debug, Clone)]
+pub struct Stats {
+    pub scene: String,
+    pub method: String,
+    pub accel: String,
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    pub threads: usize,
+    pub build_seconds: f64,
+    pub render_seconds: f64,
+    pub mrays_per_second: f64,
+    pub triangles_instanced: u64,
+    pub triangles_unique: u64,
+    pub accel_bytes: usize,
+    pub mesh_bytes: usize,
+    pub counters: BTreeMap<String, u64>,
+}
+
+fn unsupported(m: Method) -> Error {
+    let issue = match m {
+        Method::Multires | Method::Cone => "Wand & Strasser, issue 3",
+        Method::Surfel => "Adams et al., issue 4",
+        Method::Lod => "Papaioannou et al., issue 5",
+        _ => "",
+    };
+    Error::Usage(format!("--method {} is not implemented yet ({issue}); available: whitted, distributed", m.name()))
+}
+
+pub fn run(scene: &Scene, method: Method, accel_kind: AccelKind, opts: &RenderOpts) -> Result<RunResult> {
+    let integrator = match method {
+        Method::Whitted => Integrator::Whitted,
+        Method::Distributed => Integrator::Distributed,
+        m => return Err(unsupported(m)),
+    };
+    opts.validate()?;
+    let leaves = scene.leaf_instances()?;
+    let t0 = Instant::now();
+    let acc = accel::build(accel_kind, scene)?;
+    let build_seconds = t0.elapsed().as_secs_f64();
+    let ctx = TraceCtx { scene, leaves: &leaves, accel: acc.as_ref(), max_depth: scene.max_depth };
+    let cam = scene.camera.frame(opts.width, opts.height);
+    let o = RenderOpts { integrator, ..opts.clone() };
+    let out = render(&ctx, &cam, &o)?;
+    Ok(RunResult { out, build_seconds, accel_bytes: acc.memory_bytes() })
+}
+
+impl RunResult {
+    pub fn stats(&self, scene: &Scene, method: Method, accel_kind: AccelKind, opts: &RenderOpts) -> Stats {
+        let (inst, uniq) = scene.triangle_counts().unwrap_or((0, 0));
+        let rays = self.out.counters.total_rays();
+        Stats {
+            scene: scene.name.clone(),
+            method: method.name().into(),
+            accel: accel_kind.name().into(),
+            width: opts.width,
+            height: opts.height,
+            spp: opts.spp,
+            threads: self.out.threads,
+            build_seconds: self.build_seconds,
+            render_seconds: self.out.seconds,
+            mrays_per_second: rays as f64 / self.out.seconds.max(1e-9) / 1e6,
+            triangles_instanced: inst,
+            triangles_unique: uniq,
+            accel_bytes: self.accel_bytes,
+            mesh_bytes: scene.mesh_bytes(),
+            counters: self.out.counters.to_map(),
+        }
+    }
+}
