@@ -1,13 +1,118 @@
-//! `lodtrace demo`: the main job.
+//! `lodtrace demo`: the main job. Renders the built-in paper scenes with every method that
+//! exists, side by side through [`super::bench`], cross-checks the intersectors against
+//! Embree, and writes images, tables, plots and an `index.html` a person can open.
+
+use super::bench::{self, BenchArgs, BenchReport};
 use crate::error::{Error, Result};
-use std::path::PathBuf;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct DemoArgs {
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
+    /// Smaller images and fewer reference samples (a minute instead of several).
+    #[arg(long)]
+    pub quick: bool,
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
 }
 
-pub fn run(_a: &DemoArgs) -> Result<()> {
-    Err(Error::Usage("demo: not built yet".into()))
+struct Job {
+    scene: &'static str,
+    width: u32,
+    height: u32,
+    methods: String,
+    reference: String,
+}
+
+fn jobs(quick: bool) -> Vec<Job> {
+    let accel_list = if cfg!(feature = "embree") { vec!["embree", "bvh"] } else { vec!["bvh"] };
+    let a0 = accel_list[0];
+    let mut m = Vec::new();
+    for a in &accel_list {
+        m.push(format!("whitted:{a}"));
+    }
+    m.push(format!("whitted:{a0}:threads=1"));
+    m.push(format!("distributed:{a0}:spp=6"));
+    m.push(format!("distributed:{a0}:spp=27"));
+    let methods = m.join(",");
+    let (sw, sh, cw, ch, sref, cref) = if quick { (256, 256, 320, 240, 66, 27) } else { (512, 512, 640, 480, 258, 102) };
+    vec![
+        Job { scene: "spheres", width: sw, height: sh, methods: methods.clone(), reference: format!("distributed:{a0}:spp={sref}:vt=0") },
+        Job { scene: "complex", width: cw, height: ch, methods, reference: format!("distributed:{a0}:spp={cref}:vt=0") },
+    ]
+}
+
+pub fn run(a: &DemoArgs) -> Result<()> {
+    std::fs::create_dir_all(&a.out).map_err(|e| Error::io(&a.out, e))?;
+    let mut sections = Vec::new();
+    for job in jobs(a.quick) {
+        if crate::scene::builtin::get(job.scene).is_err() {
+            eprintln!("demo: skipping '{}' (not available: run tools/setup for its meshes)", job.scene);
+            continue;
+        }
+        eprintln!("demo: {} at {}x{}: {} (reference {})", job.scene, job.width, job.height, job.methods, job.reference);
+        let dir = a.out.join(job.scene);
+        let args = BenchArgs {
+            scenes: vec![job.scene.to_string()],
+            methods: job.methods.clone(),
+            reference: Some(job.reference.clone()),
+            out: Some(dir.clone()),
+            width: job.width,
+            height: job.height,
+            threads: a.threads,
+            repeat: 1,
+            quiet: false,
+        };
+        let report = bench::bench(&args)?;
+        bench::print_table(&report);
+        sections.push((job, report));
+    }
+    let html = index_html(&sections);
+    let p = a.out.join("index.html");
+    crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, html).map_err(|e| Error::io(&p, e)))?;
+    eprintln!("demo: open {}", p.display());
+    Ok(())
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+fn index_html(sections: &[(Job, BenchReport)]) -> String {
+    let mut h = String::new();
+    h.push_str("<!doctype html><html><head><meta charset=\"utf-8\"><title>lodtrace demo</title><style>body{font-family:sans-serif;margin:2em;max-width:1400px}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}td:nth-child(2),th:nth-child(2){text-align:left}figure{display:inline-block;margin:4px}figcaption{font-size:80%;max-width:320px}img{max-width:320px;image-rendering:pixelated}</style></head><body>");
+    h.push_str("<h1>lodtrace demo</h1><p>Every method on the built-in paper scenes, rendered one after the other in one process on this machine. Speed-up is the first method's render time divided by each method's. Errors are against the high-sample distributed reference (RMSE and PSNR on display values, mean FLIP).</p>");
+    for (job, r) in sections {
+        let _ = write!(h, "<h2>{} ({}×{})</h2><table><tr><th>method</th><th>spec</th><th>threads</th><th>build s</th><th>render s</th><th>Mrays/s</th><th>speed-up</th><th>RMSE</th><th>PSNR dB</th><th>mean FLIP</th></tr>", esc(job.scene), job.width, job.height);
+        for row in &r.rows {
+            let f = |x: Option<f64>, p: usize| x.map(|v| format!("{v:.p$}")).unwrap_or_else(|| "-".into());
+            let _ = write!(
+                h,
+                "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{:.2}</td><td>{:.2}×</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                esc(&row.stats.method),
+                esc(&row.spec),
+                row.stats.threads,
+                row.stats.build_seconds,
+                row.stats.render_seconds,
+                row.stats.mrays_per_second,
+                row.speedup_vs_first,
+                f(row.rmse, 4),
+                f(row.psnr, 2),
+                f(row.flip, 4)
+            );
+        }
+        h.push_str("</table>");
+        let dir = Path::new(job.scene);
+        let _ = write!(h, "<figure><img src=\"{}\"><figcaption>reference: {}</figcaption></figure>", dir.join(format!("{}-reference-{}.png", job.scene, bench::MethodSpec::parse(&job.reference).map(|s| s.slug()).unwrap_or_default())).display(), esc(&job.reference));
+        for row in &r.rows {
+            if let Some(img) = &row.image {
+                let _ = write!(h, "<figure><img src=\"{}\"><figcaption>{} — {:.3} s, FLIP {}</figcaption></figure>", dir.join(img).display(), esc(&row.spec), row.stats.render_seconds, row.flip.map(|v| format!("{v:.4}")).unwrap_or("-".into()));
+            }
+        }
+        let _ = write!(h, "<p><img src=\"{}\" style=\"max-width:640px\"></p>", dir.join("bench-time.png").display());
+    }
+    h.push_str("</body></html>\n");
+    h
 }

@@ -35,6 +35,8 @@ pub struct Stats {
     pub triangles_unique: u64,
     pub accel_bytes: usize,
     pub mesh_bytes: usize,
+    /// Peak resident memory of the process so far (Linux VmHWM), bytes.
+    pub peak_rss_bytes: u64,
     pub counters: BTreeMap<String, u64>,
 }
 
@@ -85,7 +87,17 @@ impl RunResult {
             triangles_unique: uniq,
             accel_bytes: self.accel_bytes,
             mesh_bytes: scene.mesh_bytes(),
+            peak_rss_bytes: peak_rss_bytes(),
             counters: self.out.counters.to_map(),
         }
     }
+}
+
+/// Peak resident set size of this process (VmHWM from /proc/self/status), 0 if unknown.
+pub fn peak_rss_bytes() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| l.split_whitespace().nth(1)).and_then(|k| k.parse::<u64>().ok()))
+        .map(|kb| kb * 1024)
+        .unwrap_or(0)
 }
