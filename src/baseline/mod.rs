@@ -8,3 +8,5 @@ pub mod embree;
 pub mod render;
 pub mod shade;
 pub mod tri;
+#[cfg(feature = "embree")]
+pub mod verify;

@@ -60,11 +60,11 @@ impl Method {
 /// Camera overrides, shared by the commands that render.
 #[derive(Args, Debug, Clone, Default)]
 pub struct CameraArgs {
-    #[arg(long, value_parser = parse_vec3)]
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub eye: Option<glam::Vec3>,
-    #[arg(long, value_parser = parse_vec3)]
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub look: Option<glam::Vec3>,
-    #[arg(long, value_parser = parse_vec3)]
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub up: Option<glam::Vec3>,
     /// Vertical field of view in degrees.
     #[arg(long)]

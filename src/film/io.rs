@@ -1,7 +1,19 @@
 //! Image files: PNG beauty (8-bit sRGB), EXR AOVs, all written atomically.
+//!
+//! - PNG: 8-bit sRGB (the beauty image for viewing).
+//! - EXR (`write_film_exr`, `write_exr_depth`, `write_exr_normal`): 32-bit float, linear,
+//!   three channels R, G, B. The `image` crate's EXR encoder writes RGB or RGBA only, so the
+//!   depth AOV stores the same value in all three channels (any channel reads it back).
+//!   **Misses are written as depth 0**: no hit is ever at distance 0 (rays start past an
+//!   epsilon), so `depth > 0` is the hit mask, and viewers are not blown out by a huge value.
+//!   Non-finite normals/colours (NaN) are written as 0 for the same reason.
+//! - `read_image_linear` reads either back as linear RGB: PNG (8- or 16-bit) is taken to be
+//!   sRGB-encoded and decoded with `srgb_to_linear`; EXR is already linear. Bad or missing
+//!   files give one error naming the file, never a panic.
 
-use super::{linear_to_srgb, Film};
+use super::{linear_to_srgb, srgb_to_linear, Film};
 use crate::error::{Error, Result};
+use glam::Vec3;
 use std::path::{Path, PathBuf};
 
 /// Writes via `write` to a temporary file beside `path`, then renames it into place.
@@ -43,4 +55,81 @@ pub fn write_rgb8_png(path: &Path, img: &image::RgbImage) -> Result<()> {
     write_atomic(path, |tmp| {
         img.save_with_format(tmp, image::ImageFormat::Png).map_err(|e| Error::Image(format!("{}: {e}", path.display())))
     })
+}
+
+/// Writes `w*h` linear RGB triples as a 32-bit float RGB EXR, atomically.
+fn write_rgb32f_exr(path: &Path, w: u32, h: u32, px: impl Iterator<Item = [f32; 3]>) -> Result<()> {
+    let n = w as usize * h as usize;
+    let mut data = Vec::with_capacity(n * 3);
+    for p in px {
+        data.extend(p.map(|v| if v.is_finite() { v } else { 0.0 }));
+    }
+    if data.len() != n * 3 {
+        return Err(Error::Image(format!("{}: film buffer has {} pixels, expected {w}x{h}", path.display(), data.len() / 3)));
+    }
+    let img = image::Rgb32FImage::from_raw(w, h, data)
+        .ok_or_else(|| Error::Image(format!("{}: film buffer does not match {w}x{h}", path.display())))?;
+    write_atomic(path, |tmp| {
+        image::DynamicImage::ImageRgb32F(img)
+            .save_with_format(tmp, image::ImageFormat::OpenExr)
+            .map_err(|e| Error::Image(format!("{}: {e}", path.display())))
+    })
+}
+
+/// The beauty image as linear RGB float EXR (no tone mapping, no clamping).
+pub fn write_film_exr(path: &Path, film: &Film) -> Result<()> {
+    write_rgb32f_exr(path, film.width, film.height, film.color.iter().map(|c| c.to_array()))
+}
+
+/// The depth AOV as float EXR, the distance in all three channels; misses (`+inf`) as 0.
+pub fn write_exr_depth(path: &Path, film: &Film) -> Result<()> {
+    write_rgb32f_exr(
+        path,
+        film.width,
+        film.height,
+        film.depth.iter().map(|&d| {
+            let d = if d.is_finite() { d } else { 0.0 };
+            [d, d, d]
+        }),
+    )
+}
+
+/// The normal AOV as float EXR: x, y, z in R, G, B (in [-1, 1]; zero for a miss).
+pub fn write_exr_normal(path: &Path, film: &Film) -> Result<()> {
+    write_rgb32f_exr(path, film.width, film.height, film.normal.iter().map(|n| n.to_array()))
+}
+
+/// Reads a PNG (sRGB-encoded, converted to linear) or an EXR (already linear) as
+/// `(width, height, linear RGB row-major)`. Alpha is dropped.
+pub fn read_image_linear(path: &Path) -> Result<(u32, u32, Vec<Vec3>)> {
+    let bad = |e: &dyn std::fmt::Display| Error::Image(format!("{}: cannot read image: {e}", path.display()));
+    let reader = image::ImageReader::open(path).map_err(|e| Error::io(path, e))?;
+    let reader = reader.with_guessed_format().map_err(|e| Error::io(path, e))?;
+    let format = reader.format().ok_or_else(|| bad(&"not a PNG or EXR file"))?;
+    let linear = match format {
+        image::ImageFormat::OpenExr => true,
+        image::ImageFormat::Png => false,
+        other => return Err(bad(&format!("{other:?} files are not supported (PNG or EXR)"))),
+    };
+    // A malformed file must give an error, not a panic: decoders are guarded as well.
+    let decoded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| reader.decode()))
+        .map_err(|_| bad(&"decoder failed on malformed data"))?
+        .map_err(|e| bad(&e))?;
+    let (w, h) = (decoded.width(), decoded.height());
+    if w == 0 || h == 0 {
+        return Err(bad(&"image is empty"));
+    }
+    let rgb = decoded.into_rgb32f();
+    let px = rgb
+        .pixels()
+        .map(|p| {
+            let v = Vec3::from_array(p.0);
+            if linear {
+                v
+            } else {
+                Vec3::new(srgb_to_linear(v.x), srgb_to_linear(v.y), srgb_to_linear(v.z))
+            }
+        })
+        .collect();
+    Ok((w, h, px))
 }

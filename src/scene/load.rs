@@ -96,11 +96,11 @@ fn finish_mesh(path: &Path, mut mesh: Mesh) -> Result<Mesh> {
         return Err(Error::parse(path, "no faces"));
     }
     let bad = mesh.remove_degenerate();
-    if bad > 0 {
-        eprintln!("lodtrace: warning: {}: skipped {bad} degenerate or non-finite triangles", path.display());
-    }
     if mesh.tris.is_empty() {
         return Err(Error::parse(path, "every triangle is degenerate or non-finite"));
+    }
+    if bad > 0 {
+        eprintln!("lodtrace: warning: {}: skipped {bad} degenerate or non-finite triangles", path.display());
     }
     if !mesh.has_normals() || !(0..mesh.vertex_count() as u32).all(|i| mesh.normal(i).is_finite()) {
         mesh.compute_normals();

@@ -1,0 +1,399 @@
+//! The Embree cross-check behind `lodtrace verify` and `tests/crosscheck.rs`: the same rays
+//! through a candidate back-end and through Embree in robust (watertight) mode, compared ray
+//! by ray.
+//!
+//! Ray sets (all reproducible from `seed`):
+//! - `camera`: the scene camera's primary rays on a 64×64 grid (DESIGN.md camera);
+//! - `aimed`: rays from random outside points at random points of random triangles of random
+//!   leaf instances, a quarter of them exactly on an edge or a vertex of the triangle — these
+//!   probe watertightness (a crack between neighbours shows up as a miss);
+//! - `random`: uniform origins in the scene's bounds, uniform directions;
+//! - `invalid`: NaN/infinite origins and directions, zero directions, empty intervals; both
+//!   back-ends must report a miss.
+//!
+//! Tolerances, written down once (constants below). Distances agree when `|t_a − t_b| ≤
+//! 1e-4·max(t_a, t_b) + 1e-6`. Different triangles at the same distance are a *tie* (a shared
+//! edge or vertex, coplanar overlap), accepted. A hit/miss disagreement, or different
+//! distances, is accepted as *grazing* when the nearer hit is uncertain in float precision:
+//! within `1e-5·s` world units of its triangle's border (s = the largest coordinate magnitude
+//! of origin, hit point and triangle, i.e. ~80 ulps) or 1e-4 in barycentrics, or at a grazing
+//! angle (|cos| < 1e-2). Two watertight tests may both be right about which side of an edge
+//! such a ray passes. The same triangle with hit points more than `10·1e-5·s/|cos|` apart is a
+//! mismatch. Occlusion is checked on segments ending just before (`0.999·t`) and just after (`1.001·t`)
+//! Embree's closest hit. Packets (`intersect8`) are checked against each back-end's own
+//! single-ray path on the camera rays.
+
+use super::accel::{self, Accel, AccelKind, Hit, Ray, K};
+use super::embree::EmbreeAccel;
+use crate::core::rng::Sampler;
+use crate::core::stats::Counters;
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+use glam::Vec3;
+use rayon::prelude::*;
+
+const T_REL: f32 = 1e-4;
+/// Float precision budget, relative to the magnitude of the coordinates involved.
+const WORLD_REL: f32 = 1e-5;
+const BARY_EPS: f32 = 1e-4;
+/// Rays this close to parallel with the hit triangle (|cos| below) are ill-conditioned.
+const GRAZING_COS: f32 = 1e-2;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RaySet {
+    Camera,
+    Aimed,
+    Random,
+    Invalid,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Verdict {
+    /// Same triangle (or both miss).
+    Agree,
+    /// Different triangles at the same distance.
+    Tie,
+    /// Disagreement explained by finite precision at a triangle border or a grazing angle.
+    Grazing,
+    Mismatch,
+}
+
+/// World-space geometry of a hit, for the precision-aware comparison.
+struct HitGeom {
+    /// Triangle vertices in world space.
+    v: [Vec3; 3],
+    /// |cos| between the ray and the triangle's geometric normal.
+    cos: f32,
+    /// The precision budget in world units around this hit.
+    tol: f32,
+}
+
+impl HitGeom {
+    fn new(scene: &Scene, leaves: &[crate::scene::LeafInstance], ray: &Ray, h: &Hit) -> Self {
+        let l = &leaves[h.inst as usize];
+        let [a, b, c] = scene.meshes[l.mesh as usize].tri_verts(h.prim as usize);
+        let v = [a, b, c].map(|p| l.xform.transform_point3(p));
+        let n = (v[1] - v[0]).cross(v[2] - v[0]);
+        let cos = n.normalize_or_zero().dot(ray.dir.normalize_or_zero()).abs();
+        let p = ray.org + ray.dir * h.t;
+        let scale = ray.org.abs().max_element().max(p.abs().max_element()).max(v.iter().map(|q| q.abs().max_element()).fold(0.0, f32::max));
+        HitGeom { v, cos, tol: WORLD_REL * scale.max(1e-3) }
+    }
+    fn point(&self, u: f32, v: f32) -> Vec3 {
+        self.v[0] + u * (self.v[1] - self.v[0]) + v * (self.v[2] - self.v[0])
+    }
+    /// Within the precision budget of the triangle's border, or at a grazing angle.
+    fn uncertain(&self, h: &Hit) -> bool {
+        if self.cos < GRAZING_COS {
+            return true;
+        }
+        let w = [1.0 - h.u - h.v, h.u, h.v];
+        if w.iter().any(|&x| x < BARY_EPS) {
+            return true;
+        }
+        // Distance to the edge opposite vertex i is w_i · (2·area / |edge_i|).
+        let area2 = (self.v[1] - self.v[0]).cross(self.v[2] - self.v[0]).length();
+        (0..3).any(|i| {
+            let e = (self.v[(i + 2) % 3] - self.v[(i + 1) % 3]).length();
+            e > 0.0 && w[i] * area2 / e < self.tol
+        })
+    }
+}
+
+/// Classifies a candidate result `c` against the reference `r` for `ray` (module docs).
+fn compare_in(scene: &Scene, leaves: &[crate::scene::LeafInstance], ray: &Ray, r: Option<Hit>, c: Option<Hit>) -> Verdict {
+    let geom = |h: &Hit| HitGeom::new(scene, leaves, ray, h);
+    match (r, c) {
+        (None, None) => Verdict::Agree,
+        (Some(h), None) | (None, Some(h)) => {
+            if geom(&h).uncertain(&h) {
+                Verdict::Grazing
+            } else {
+                Verdict::Mismatch
+            }
+        }
+        (Some(a), Some(b)) => {
+            // Relative agreement, or agreement within the world-space precision budget (an
+            // origin almost on the surface makes t tiny and its relative error large).
+            let dt = (a.t - b.t).abs();
+            let close = dt <= T_REL * a.t.max(b.t) + 1e-6 || dt * ray.dir.length() <= 10.0 * geom(&a).tol;
+            if !close {
+                let near = if a.t < b.t { &a } else { &b };
+                return if geom(near).uncertain(near) { Verdict::Grazing } else { Verdict::Mismatch };
+            }
+            if (a.inst, a.prim) == (b.inst, b.prim) {
+                let g = geom(&a);
+                let d = (g.point(a.u, a.v) - g.point(b.u, b.v)).length();
+                if d <= 10.0 * g.tol / g.cos.max(GRAZING_COS) {
+                    Verdict::Agree
+                } else {
+                    Verdict::Mismatch
+                }
+            } else {
+                Verdict::Tie
+            }
+        }
+    }
+}
+
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct SetReport {
+    pub rays: u64,
+    pub hits: u64,
+    pub agree: u64,
+    pub ties: u64,
+    pub grazing: u64,
+    pub mismatches: u64,
+    /// Largest relative distance difference among agreeing hits.
+    pub max_t_rel: f64,
+}
+
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct MismatchExample {
+    pub set: RaySet,
+    pub org: [f32; 3],
+    pub dir: [f32; 3],
+    /// (t, leaf instance, triangle, u, v)
+    pub embree: Option<(f32, u32, u32, f32, f32)>,
+    pub candidate: Option<(f32, u32, u32, f32, f32)>,
+    /// |cos| between the ray and the geometric normal of each hit triangle.
+    pub cos: (Option<f32>, Option<f32>),
+}
+
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct VerifyReport {
+    pub scene: String,
+    pub candidate: String,
+    pub sets: Vec<(RaySet, SetReport)>,
+    /// Occlusion queries whose answer differs from the expected one (see module docs).
+    pub occlusion_checks: u64,
+    pub occlusion_mismatches: u64,
+    /// Packet lanes (intersect8) differing from the same back-end's intersect1.
+    pub packet_lanes: u64,
+    pub packet_mismatches: u64,
+    pub examples: Vec<MismatchExample>,
+}
+
+impl VerifyReport {
+    pub fn mismatches(&self) -> u64 {
+        self.sets.iter().map(|(_, s)| s.mismatches).sum::<u64>() + self.occlusion_mismatches + self.packet_mismatches
+    }
+    pub fn total_rays(&self) -> u64 {
+        self.sets.iter().map(|(_, s)| s.rays).sum()
+    }
+}
+
+/// The verification rays, tagged with their set.
+pub fn make_rays(scene: &Scene, n: usize, seed: u32) -> Result<Vec<(RaySet, Ray)>> {
+    let mut out = Vec::with_capacity(n + 64 * 64 + 16);
+    let fr = scene.camera.frame(64, 64);
+    for j in 0..64 {
+        for i in 0..64 {
+            out.push((RaySet::Camera, Ray::new(fr.eye, fr.pixel_center_dir(i, j))));
+        }
+    }
+    let leaves = scene.leaf_instances()?;
+    if leaves.is_empty() {
+        return Err(Error::Scene("nothing to verify".into()));
+    }
+    let (lo, hi) = scene.bounds()?;
+    let diag = (hi - lo).length().max(1e-6);
+    let n_aimed = n / 2;
+    for k in 0..n_aimed as u32 {
+        let mut s = Sampler::new(seed, k, 1);
+        let l = &leaves[((s.next() * leaves.len() as f32) as usize).min(leaves.len() - 1)];
+        let mesh = &scene.meshes[l.mesh as usize];
+        let t = ((s.next() * mesh.tri_count() as f32) as usize).min(mesh.tri_count() - 1);
+        let [a, b, c] = mesh.tri_verts(t);
+        let (mut u, mut v) = s.next2();
+        if u + v > 1.0 {
+            u = 1.0 - u;
+            v = 1.0 - v;
+        }
+        match k % 8 {
+            0 => v = 0.0,             // edge a–b
+            1 => u = 1.0 - v,         // edge b–c
+            2 => (u, v) = (0.0, 0.0), // vertex a
+            _ => {}
+        }
+        let p_local = a + u * (b - a) + v * (c - a);
+        let p = l.xform.transform_point3(p_local);
+        let d = uniform_sphere(s.next(), s.next());
+        let o = p + d * (diag * (0.05 + s.next()));
+        out.push((RaySet::Aimed, Ray::new(o, p - o)));
+    }
+    // Padded by a tenth of the diagonal on every axis, so flat scenes get a volume too.
+    let ext = Vec3::splat(diag * 0.1);
+    for k in 0..(n - n_aimed) as u32 {
+        let mut s = Sampler::new(seed, k, 2);
+        let o = lo - ext + (hi - lo + 2.0 * ext) * Vec3::new(s.next(), s.next(), s.next());
+        out.push((RaySet::Random, Ray::new(o, uniform_sphere(s.next(), s.next()))));
+    }
+    let c = (lo + hi) * 0.5;
+    let nan = f32::NAN;
+    let inf = f32::INFINITY;
+    for r in [
+        Ray::new(Vec3::new(nan, 0.0, 0.0), Vec3::X),
+        Ray::new(c, Vec3::new(0.0, nan, 1.0)),
+        Ray::new(c, Vec3::new(inf, 0.0, 0.0)),
+        Ray::new(Vec3::splat(inf), -Vec3::X),
+        Ray::new(fr.eye, Vec3::ZERO),
+        Ray::segment(fr.eye, fr.f, 2.0, 1.0),
+        Ray::segment(fr.eye, fr.f, nan, 1.0),
+        Ray::segment(fr.eye, fr.f, 0.0, nan),
+        Ray::segment(fr.eye, fr.f, 0.0, 0.0),
+    ] {
+        out.push((RaySet::Invalid, r));
+    }
+    Ok(out)
+}
+
+fn uniform_sphere(u: f32, v: f32) -> Vec3 {
+    let z = 1.0 - 2.0 * u;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = std::f32::consts::TAU * v;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+fn brief(h: Option<Hit>) -> Option<(f32, u32, u32, f32, f32)> {
+    h.map(|h| (h.t, h.inst, h.prim, h.u, h.v))
+}
+
+/// Runs the cross-check of `kind` against Embree (robust mode) on `n` random rays plus the
+/// camera and invalid sets.
+pub fn verify_scene(scene: &Scene, kind: AccelKind, n: usize, seed: u32) -> Result<VerifyReport> {
+    let reference = EmbreeAccel::build_with(scene, true)?;
+    let cand = accel::build(kind, scene)?;
+    verify_with(scene, &reference, cand.as_ref(), n, seed)
+}
+
+/// As [`verify_scene`] with both back-ends already built.
+pub fn verify_with(scene: &Scene, reference: &dyn Accel, cand: &dyn Accel, n: usize, seed: u32) -> Result<VerifyReport> {
+    let rays = make_rays(scene, n, seed)?;
+    let leaves = scene.leaf_instances()?;
+    struct One {
+        set: RaySet,
+        v: Verdict,
+        hit: bool,
+        t_rel: f64,
+        occ_checks: u64,
+        occ_bad: u64,
+        ex: Option<MismatchExample>,
+    }
+    let results: Vec<One> = rays
+        .par_iter()
+        .map(|&(set, ray)| {
+            let mut c = Counters::default();
+            let r = reference.intersect1(&ray, &mut c);
+            let h = cand.intersect1(&ray, &mut c);
+            let mut v = compare_in(scene, &leaves, &ray, r, h);
+            if set == RaySet::Invalid && (r.is_some() || h.is_some()) {
+                v = Verdict::Mismatch;
+            }
+            let t_rel = match (r, h) {
+                (Some(a), Some(b)) if v == Verdict::Agree => ((a.t - b.t).abs() / a.t.max(b.t).max(1e-30)) as f64,
+                _ => 0.0,
+            };
+            // Occlusion just before / after the reference hit (only where the hit is clear).
+            let (mut occ_checks, mut occ_bad) = (0, 0);
+            if v == Verdict::Agree {
+                let segs: Vec<(Ray, bool)> = match r {
+                    // Segments ending 0.1 % before / after the hit; skipped where that margin is
+                    // below the precision budget (origin almost on the surface, grazing, border).
+                    Some(a) if !HitGeom::new(scene, &leaves, &ray, &a).uncertain(&a) && a.t * ray.dir.length() * 1e-3 > HitGeom::new(scene, &leaves, &ray, &a).tol * 10.0 => vec![
+                        (Ray::segment(ray.org, ray.dir, ray.tnear, a.t * (1.0 - 1e-3)), false),
+                        (Ray::segment(ray.org, ray.dir, ray.tnear, a.t * (1.0 + 1e-3)), true),
+                    ],
+                    None if set != RaySet::Invalid => vec![(ray, false)],
+                    _ => vec![],
+                };
+                for (s, expect) in segs {
+                    occ_checks += 2;
+                    occ_bad += (reference.occluded1(&s, &mut c) != expect) as u64;
+                    occ_bad += (cand.occluded1(&s, &mut c) != expect) as u64;
+                }
+            }
+            let ex = (v == Verdict::Mismatch || occ_bad > 0).then(|| MismatchExample {
+                set,
+                org: ray.org.to_array(),
+                dir: ray.dir.to_array(),
+                embree: brief(r),
+                candidate: brief(h),
+                cos: (r.map(|x| HitGeom::new(scene, &leaves, &ray, &x).cos), h.map(|x| HitGeom::new(scene, &leaves, &ray, &x).cos)),
+            });
+            One { set, v, hit: r.is_some(), t_rel, occ_checks, occ_bad, ex }
+        })
+        .collect();
+
+    let mut sets: Vec<(RaySet, SetReport)> =
+        [RaySet::Camera, RaySet::Aimed, RaySet::Random, RaySet::Invalid].iter().map(|&s| (s, SetReport::default())).collect();
+    let mut rep = VerifyReport {
+        scene: scene.name.clone(),
+        candidate: cand.name().to_string(),
+        sets: Vec::new(),
+        occlusion_checks: 0,
+        occlusion_mismatches: 0,
+        packet_lanes: 0,
+        packet_mismatches: 0,
+        examples: Vec::new(),
+    };
+    for o in results {
+        let s = &mut sets.iter_mut().find(|(k, _)| *k == o.set).expect("all sets listed").1;
+        s.rays += 1;
+        s.hits += o.hit as u64;
+        match o.v {
+            Verdict::Agree => s.agree += 1,
+            Verdict::Tie => s.ties += 1,
+            Verdict::Grazing => s.grazing += 1,
+            Verdict::Mismatch => s.mismatches += 1,
+        }
+        s.max_t_rel = s.max_t_rel.max(o.t_rel);
+        rep.occlusion_checks += o.occ_checks;
+        rep.occlusion_mismatches += o.occ_bad;
+        if let Some(e) = o.ex {
+            if rep.examples.len() < 10 {
+                rep.examples.push(e);
+            }
+        }
+    }
+    rep.sets = sets;
+
+    // Packets against each back-end's own single-ray path, on the camera rays.
+    let cam: Vec<Ray> = rays.iter().filter(|(s, _)| *s == RaySet::Camera).map(|&(_, r)| r).collect();
+    for be in [reference, cand] {
+        let mut c = Counters::default();
+        for chunk in cam.chunks(K) {
+            let mut pk = [Ray::new(Vec3::ZERO, Vec3::X); K];
+            pk[..chunk.len()].copy_from_slice(chunk);
+            let valid = ((1u32 << chunk.len()) - 1) as u8;
+            let mut out = [None; K];
+            be.intersect8(&pk, valid, &mut out, &mut c);
+            let mut occ = [false; K];
+            be.occluded8(&pk, valid, &mut occ, &mut c);
+            for (i, r) in chunk.iter().enumerate() {
+                let single = be.intersect1(r, &mut c);
+                rep.packet_lanes += 1;
+                let bad = compare_in(scene, &leaves, r, single, out[i]) == Verdict::Mismatch || occ[i] != be.occluded1(r, &mut c);
+                rep.packet_mismatches += bad as u64;
+            }
+        }
+    }
+    Ok(rep)
+}
+
+/// The report as an aligned table.
+pub fn format_report(rep: &VerifyReport) -> String {
+    let mut s = format!("verify {} against Embree (robust) on '{}'\n", rep.candidate, rep.scene);
+    s += &format!("{:<8} {:>9} {:>9} {:>9} {:>7} {:>8} {:>10} {:>11}\n", "rays", "count", "hits", "agree", "ties", "grazing", "MISMATCH", "max |dt|/t");
+    for (k, r) in &rep.sets {
+        let name = serde_json::to_value(k).ok().and_then(|v| v.as_str().map(String::from)).unwrap_or_default();
+        s += &format!("{:<8} {:>9} {:>9} {:>9} {:>7} {:>8} {:>10} {:>11.2e}\n", name, r.rays, r.hits, r.agree, r.ties, r.grazing, r.mismatches, r.max_t_rel);
+    }
+    s += &format!("occlusion: {} checks, {} wrong; packets: {} lanes, {} differ from single rays\n", rep.occlusion_checks, rep.occlusion_mismatches, rep.packet_lanes, rep.packet_mismatches);
+    for e in &rep.examples {
+        s += &format!("  mismatch ({:?}): org {:?} dir {:?}: embree {:?}, {} {:?}, |cos| {:?}\n", e.set, e.org, e.dir, e.embree, rep.candidate, e.candidate, e.cos);
+    }
+    s += if rep.mismatches() == 0 { "OK: no disagreement beyond tolerance\n" } else { "FAILED: disagreements beyond tolerance\n" };
+    s
+}
