@@ -19,7 +19,8 @@
 //! of origin, hit point and triangle, i.e. ~80 ulps) or 1e-4 in barycentrics, or at a grazing
 //! angle (|cos| < 1e-2). Two watertight tests may both be right about which side of an edge
 //! such a ray passes. The same triangle with hit points more than `10·1e-5·s/|cos|` apart is a
-//! mismatch. Occlusion is checked on segments ending just before (`0.999·t`) and just after (`1.001·t`)
+//! mismatch, and so is any hit whose (instance, triangle, u, v) does not name the point at its
+//! distance t within that budget. Occlusion is checked on segments ending just before (`0.999·t`) and just after (`1.001·t`)
 //! Embree's closest hit. Packets (`intersect8`) are checked against each back-end's own
 //! single-ray path on the camera rays.
 
@@ -70,6 +71,16 @@ struct HitGeom {
 }
 
 impl HitGeom {
+    /// `None` when the hit names an instance or triangle that does not exist.
+    fn get(scene: &Scene, leaves: &[crate::scene::LeafInstance], ray: &Ray, h: &Hit) -> Option<Self> {
+        let l = leaves.get(h.inst as usize)?;
+        let mesh = &scene.meshes[l.mesh as usize];
+        if h.prim as usize >= mesh.tri_count() {
+            return None;
+        }
+        Some(Self::new(scene, leaves, ray, h))
+    }
+
     fn new(scene: &Scene, leaves: &[crate::scene::LeafInstance], ray: &Ray, h: &Hit) -> Self {
         let l = &leaves[h.inst as usize];
         let [a, b, c] = scene.meshes[l.mesh as usize].tri_verts(h.prim as usize);
@@ -104,6 +115,16 @@ impl HitGeom {
 /// Classifies a candidate result `c` against the reference `r` for `ray` (module docs).
 fn compare_in(scene: &Scene, leaves: &[crate::scene::LeafInstance], ray: &Ray, r: Option<Hit>, c: Option<Hit>) -> Verdict {
     let geom = |h: &Hit| HitGeom::new(scene, leaves, ray, h);
+    // Every reported hit must be self-consistent: its (instance, triangle, u, v) names the
+    // point at distance t along the ray (catches wrong IDs and barycentrics, not only t).
+    for h in [r, c].into_iter().flatten() {
+        let Some(g) = HitGeom::get(scene, leaves, ray, &h) else {
+            return Verdict::Mismatch;
+        };
+        if g.cos >= GRAZING_COS && (g.point(h.u, h.v) - (ray.org + ray.dir * h.t)).length() > 10.0 * g.tol / g.cos {
+            return Verdict::Mismatch;
+        }
+    }
     match (r, c) {
         (None, None) => Verdict::Agree,
         (Some(h), None) | (None, Some(h)) => {
@@ -320,7 +341,7 @@ pub fn verify_with(scene: &Scene, reference: &dyn Accel, cand: &dyn Accel, n: us
                 dir: ray.dir.to_array(),
                 embree: brief(r),
                 candidate: brief(h),
-                cos: (r.map(|x| HitGeom::new(scene, &leaves, &ray, &x).cos), h.map(|x| HitGeom::new(scene, &leaves, &ray, &x).cos)),
+                cos: (r.and_then(|x| HitGeom::get(scene, &leaves, &ray, &x)).map(|g| g.cos), h.and_then(|x| HitGeom::get(scene, &leaves, &ray, &x)).map(|g| g.cos)),
             });
             One { set, v, hit: r.is_some(), t_rel, occ_checks, occ_bad, ex }
         })

@@ -126,9 +126,9 @@ pub fn parse_vec3(s: &str) -> Result<glam::Vec3, String> {
 }
 
 fn parse_aov(s: &str) -> Result<(String, PathBuf), String> {
-    let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}': expected depth=FILE.exr or normal=FILE.exr"))?;
-    if k != "depth" && k != "normal" {
-        return Err(format!("unknown AOV '{k}' (depth or normal)"));
+    let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}': expected depth=FILE.exr, normal=FILE.exr or color=FILE.exr"))?;
+    if k != "depth" && k != "normal" && k != "color" {
+        return Err(format!("unknown AOV '{k}' (depth, normal or color)"));
     }
     if v.is_empty() {
         return Err(format!("AOV '{k}' needs a file name"));

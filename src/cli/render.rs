@@ -78,8 +78,12 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     let r = run::run(&scene, a.method, a.accel, &opts)?;
     io::write_png(&out, &r.out.film)?;
     for (kind, p) in &a.aov {
-        // AOV_WRITE
-        let _ = (kind, p);
+        match kind.as_str() {
+            "depth" => io::write_exr_depth(p, &r.out.film)?,
+            "normal" => io::write_exr_normal(p, &r.out.film)?,
+            "color" => io::write_film_exr(p, &r.out.film)?,
+            other => return Err(Error::Usage(format!("--aov {other}: unknown AOV (depth, normal, color)"))),
+        }
     }
     let stats = r.stats(&scene, a.method, a.accel, &opts);
     if let Some(p) = &a.stats {

@@ -171,10 +171,17 @@ pub fn run_spec(scene: &Scene, spec: &MethodSpec, width: u32, height: u32, threa
     Ok((r.out.film, stats))
 }
 
-/// Errors of `film` against `reference`: (RMSE, PSNR dB, mean FLIP).
-pub fn errors(film: &Film, reference: &Film) -> Result<(f64, f64, f64)> {
-    let _ = (film, reference);
-    Err(Error::Usage("metrics pending".into()))
+/// Errors of `film` against `reference`: (RMSE, PSNR dB, mean FLIP) and the FLIP error map.
+pub fn errors(film: &Film, reference: &Film) -> Result<(f64, f64, f64, image::RgbImage)> {
+    use crate::film::metrics;
+    let (w, h) = (film.width, film.height);
+    if (w, h) != (reference.width, reference.height) {
+        return Err(Error::Usage(format!("image {w}x{h} and reference {}x{} differ in size", reference.width, reference.height)));
+    }
+    let rmse = metrics::rmse(&reference.color, &film.color, w, h);
+    let psnr = metrics::psnr(&reference.color, &film.color, w, h);
+    let (flip, map) = metrics::flip_mean(&reference.color, &film.color, w, h)?;
+    Ok((rmse, psnr, flip, map))
 }
 
 pub fn run(a: &BenchArgs) -> Result<()> {
@@ -213,8 +220,12 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
             let t0 = *first_time.get_or_insert(stats.render_seconds);
             let (rmse, psnr, flip) = match &ref_film {
                 Some(r) => {
-                    let (x, y, z) = errors(&film, r)?;
-                    (Some(x), Some(y), Some(z))
+                    let (x, y, z, map) = errors(&film, r)?;
+                    if let Some(out) = &a.out {
+                        crate::film::io::write_rgb8_png(&out.join(format!("{}-{}-flip.png", scene.name, spec.slug())), &map)?;
+                    }
+                    // PSNR is +inf for an identical image; JSON has no infinity.
+                    (Some(x), y.is_finite().then_some(y), Some(z))
                 }
                 None => (None, None, None),
             };
@@ -256,7 +267,24 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
     let md = table_string(report);
     crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, md).map_err(|e| Error::io(&p, e)))?;
     let bars: Vec<(String, f64)> = report.rows.iter().map(|r| (format!("{} {}", r.scene, r.spec), r.stats.render_seconds)).collect();
-    let _ = bars;
+    super::plot::bar_chart(&out.join("bench-time.png"), &format!("Render time, {}x{}", report.width, report.height), "seconds", &bars)?;
+    // Error against the reference versus time, one curve per scene: the trade-off a
+    // multi-resolution method is meant to win.
+    let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    for r in &report.rows {
+        if let Some(flip) = r.flip {
+            match series.iter_mut().find(|(n, _)| *n == r.scene) {
+                Some((_, v)) => v.push((r.stats.render_seconds, flip)),
+                None => series.push((r.scene.clone(), vec![(r.stats.render_seconds, flip)])),
+            }
+        }
+    }
+    if !series.is_empty() {
+        for (_, v) in &mut series {
+            v.sort_by(|a, b| a.0.total_cmp(&b.0));
+        }
+        super::plot::line_chart(&out.join("bench-error.png"), "Error against the reference vs render time", "render time (s)", "mean FLIP", &series)?;
+    }
     Ok(())
 }
 

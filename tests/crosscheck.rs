@@ -1,0 +1,226 @@
+//! Intersection correctness against Embree: the `verify` cross-check on every built-in scene
+//! and the real meshes, fault injection (a broken candidate must be caught), watertightness
+//! from inside closed meshes, invalid rays, and packets against single rays.
+#![cfg(feature = "embree")]
+
+use glam::Vec3;
+use lodtrace::baseline::accel::{self, Accel, AccelKind, Hit, Ray, K};
+use lodtrace::baseline::bvh::BvhAccel;
+use lodtrace::baseline::embree::EmbreeAccel;
+use lodtrace::baseline::verify::{verify_scene, verify_with, RaySet};
+use lodtrace::core::rng::Sampler;
+use lodtrace::core::stats::Counters;
+use lodtrace::scene::{builtin, load::load_scene, Scene};
+
+fn scene(name: &str) -> Scene {
+    let mut s = load_scene(name).unwrap_or_else(|e| panic!("{name}: {e} (run tools/setup)"));
+    s.validate().unwrap();
+    s
+}
+
+fn check(name: &str, rays: usize) {
+    let s = scene(name);
+    let rep = verify_scene(&s, AccelKind::Bvh, rays, 7).unwrap();
+    let text = lodtrace::baseline::verify::format_report(&rep);
+    assert_eq!(rep.mismatches(), 0, "{text}");
+    // The check must have looked at something: most aimed rays hit, some camera rays hit.
+    let set = |k: RaySet| rep.sets.iter().find(|(s, _)| *s == k).unwrap().1.clone();
+    assert!(set(RaySet::Aimed).hits as f64 > 0.95 * set(RaySet::Aimed).rays as f64, "{text}");
+    assert!(set(RaySet::Camera).hits > 0, "{text}");
+    assert_eq!(set(RaySet::Invalid).hits, 0, "{text}");
+    assert!(rep.occlusion_checks > rays as u64, "{text}");
+    assert!(rep.packet_lanes >= 2 * 4096);
+}
+
+#[test]
+fn bvh_agrees_with_embree_on_builtin_scenes() {
+    for name in ["spheres", "instanced", "plane", "cube", "ico"] {
+        check(name, 20_000);
+    }
+}
+
+#[test]
+fn bvh_agrees_with_embree_on_the_complex_scene() {
+    check("complex", 20_000);
+}
+
+#[test]
+fn bvh_agrees_with_embree_on_real_meshes() {
+    let dir = lodtrace::scene::builtin::assets_dir();
+    for m in ["bunny00.off", "cow.off", "armadillo.off"] {
+        check(dir.join(m).to_str().unwrap(), 20_000);
+    }
+}
+
+/// A candidate with a deliberate defect, to show the cross-check catches it.
+struct Faulty {
+    inner: BvhAccel,
+    fault: fn(Hit) -> Option<Hit>,
+}
+
+impl Accel for Faulty {
+    fn name(&self) -> &'static str {
+        "faulty"
+    }
+    fn intersect1(&self, ray: &Ray, c: &mut Counters) -> Option<Hit> {
+        self.inner.intersect1(ray, c).and_then(self.fault)
+    }
+    fn occluded1(&self, ray: &Ray, c: &mut Counters) -> bool {
+        self.inner.occluded1(ray, c)
+    }
+    fn memory_bytes(&self) -> usize {
+        0
+    }
+}
+
+#[test]
+fn verify_catches_broken_intersectors() {
+    let s = scene("spheres");
+    let reference = EmbreeAccel::build_with(&s, true).unwrap();
+    let faults: [(&str, fn(Hit) -> Option<Hit>); 4] = [
+        ("drops every 50th triangle", |h| (h.prim % 50 != 0).then_some(h)),
+        ("t off by 0.1 %", |h| Some(Hit { t: h.t * 1.001, ..h })),
+        ("swapped barycentrics", |h| Some(Hit { u: h.v, v: h.u, ..h })),
+        ("wrong instance", |h| Some(Hit { inst: h.inst ^ 1, ..h })),
+    ];
+    for (what, fault) in faults {
+        let cand = Faulty { inner: BvhAccel::build(&s).unwrap(), fault };
+        let rep = verify_with(&s, &reference, &cand, 5_000, 3).unwrap();
+        assert!(rep.mismatches() > 10, "fault '{what}' went unnoticed: {}", rep.mismatches());
+    }
+    // And the healthy candidate passes with the same rays.
+    let good = BvhAccel::build(&s).unwrap();
+    assert_eq!(verify_with(&s, &reference, &good, 5_000, 3).unwrap().mismatches(), 0);
+}
+
+fn backends(s: &Scene) -> Vec<Box<dyn Accel>> {
+    vec![accel::build(AccelKind::Bvh, s).unwrap(), accel::build(AccelKind::Embree, s).unwrap(), Box::new(EmbreeAccel::build_with(s, true).unwrap())]
+}
+
+/// Rays from the centre of a closed mesh, including through its vertices and edge midpoints,
+/// must all hit (no cracks): the property the watertight tests exist for.
+#[test]
+fn no_ray_escapes_a_closed_mesh() {
+    for name in ["cube", "ico"] {
+        let s = scene(name);
+        let mesh = &s.meshes[0];
+        let (lo, hi) = mesh.bounds();
+        let c = (lo + hi) * 0.5;
+        let mut dirs: Vec<Vec3> = (0..mesh.vertex_count() as u32).map(|i| mesh.pos(i) - c).collect();
+        for t in &mesh.tris {
+            for k in 0..3 {
+                dirs.push((mesh.pos(t[k]) + mesh.pos(t[(k + 1) % 3])) * 0.5 - c);
+            }
+        }
+        for k in 0..50_000u32 {
+            let mut r = Sampler::new(11, k, 0);
+            dirs.push(Vec3::new(r.next() - 0.5, r.next() - 0.5, r.next() - 0.5));
+        }
+        // Also from off-centre points (the shear differs).
+        let origins = [c, c + (hi - lo) * 0.1, c - (hi - lo) * Vec3::new(0.2, -0.1, 0.05)];
+        for be in backends(&s) {
+            let mut cnt = Counters::default();
+            for o in origins {
+                for d in &dirs {
+                    let r = Ray::new(o, *d);
+                    assert!(be.intersect1(&r, &mut cnt).is_some(), "{name}/{}: ray {o:?} {d:?} escaped", be.name());
+                    assert!(be.occluded1(&r, &mut cnt), "{name}/{}: occlusion ray {o:?} {d:?} escaped", be.name());
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn invalid_rays_miss_on_every_backend() {
+    let s = builtin::get("spheres").unwrap();
+    let eye = s.camera.eye;
+    let look = s.camera.look - eye;
+    let nan = f32::NAN;
+    let bad = [
+        Ray::new(Vec3::new(nan, 0.0, 0.0), look),
+        Ray::new(eye, Vec3::new(nan, 1.0, 0.0)),
+        Ray::new(eye, Vec3::new(f32::INFINITY, 0.0, 0.0)),
+        Ray::new(eye, Vec3::ZERO),
+        Ray::segment(eye, look, 1.0, 0.5),
+        Ray::segment(eye, look, nan, 1.0),
+    ];
+    for be in backends(&s) {
+        let mut c = Counters::default();
+        for r in &bad {
+            assert_eq!(be.intersect1(r, &mut c), None, "{}: {r:?}", be.name());
+            assert!(!be.occluded1(r, &mut c), "{}: {r:?}", be.name());
+        }
+        // Packets: invalid lanes miss, disabled lanes are untouched.
+        let mut pk = [Ray::new(eye, look); K];
+        pk[..6].copy_from_slice(&bad);
+        let sentinel = Some(Hit { t: -7.0, u: 0.0, v: 0.0, prim: 9, inst: 9 });
+        let mut out = [sentinel; K];
+        be.intersect8(&pk, 0b0111_1111, &mut out, &mut c);
+        assert!(out[..6].iter().all(|h| h.is_none()), "{}: {out:?}", be.name());
+        assert!(out[6].is_some() && out[6] != sentinel, "{}: valid lane 6 should hit", be.name());
+        assert_eq!(out[7], sentinel, "{}: disabled lane 7 was written", be.name());
+        let mut occ = [true; K];
+        be.occluded8(&pk, 0b0111_1111, &mut occ, &mut c);
+        assert!(occ[..6].iter().all(|o| !o) && occ[6] && occ[7], "{}: {occ:?}", be.name());
+    }
+}
+
+#[test]
+fn packets_match_single_rays_with_partial_masks() {
+    let s = scene("complex");
+    let fr = s.camera.frame(96, 64);
+    for be in backends(&s) {
+        let mut c = Counters::default();
+        let mut k = 0u32;
+        for j in 0..64 {
+            for i in (0..96).step_by(K) {
+                k += 1;
+                let valid = (lodtrace::core::rng::pcg_hash(k) & 0xff) as u8 | 1;
+                let mut pk = [Ray::new(fr.eye, fr.f); K];
+                for l in 0..K {
+                    pk[l] = Ray::new(fr.eye, fr.pixel_center_dir(i + l as u32, j));
+                }
+                let mut out = [None; K];
+                be.intersect8(&pk, valid, &mut out, &mut c);
+                let mut occ = [false; K];
+                be.occluded8(&pk, valid, &mut occ, &mut c);
+                for l in 0..K {
+                    if valid & (1 << l) == 0 {
+                        assert_eq!(out[l], None);
+                        continue;
+                    }
+                    let single = be.intersect1(&pk[l], &mut c);
+                    match (single, out[l]) {
+                        (None, None) => {}
+                        (Some(a), Some(b)) => {
+                            assert!((a.t - b.t).abs() <= 1e-4 * a.t, "{}: {a:?} vs {b:?}", be.name());
+                            assert_eq!((a.inst, a.prim), (b.inst, b.prim), "{}", be.name());
+                        }
+                        (a, b) => panic!("{}: single {a:?} packet {b:?}", be.name()),
+                    }
+                    assert_eq!(occ[l], be.occluded1(&pk[l], &mut c));
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn embree_reports_its_memory_and_stream_agrees_with_single_rays() {
+    let s = scene("complex");
+    let e = EmbreeAccel::build(&s).unwrap();
+    assert!(e.memory_bytes() > 1_000_000, "{}", e.memory_bytes());
+    let fr = s.camera.frame(64, 48);
+    let rays: Vec<Ray> = (0..48).flat_map(|j| (0..64).map(move |i| (i, j))).map(|(i, j)| Ray::new(fr.eye, fr.pixel_center_dir(i, j))).collect();
+    let mut out = vec![None; rays.len()];
+    let mut c = Counters::default();
+    e.intersect_stream(&rays, &mut out, &mut c);
+    let mut hits = 0;
+    for (r, h) in rays.iter().zip(&out) {
+        let single = e.intersect1(r, &mut c);
+        assert_eq!(single.map(|h| (h.inst, h.prim)), h.map(|h| (h.inst, h.prim)));
+        hits += h.is_some() as u32;
+    }
+    assert!(hits > 100);
+}
