@@ -4,9 +4,8 @@
 //! - EXR (`write_film_exr`, `write_exr_depth`, `write_exr_normal`): 32-bit float, linear,
 //!   three channels R, G, B. The `image` crate's EXR encoder writes RGB or RGBA only, so the
 //!   depth AOV stores the same value in all three channels (any channel reads it back).
-//!   **Misses are written as depth 0**: no hit is ever at distance 0 (rays start past an
-//!   epsilon), so `depth > 0` is the hit mask, and viewers are not blown out by a huge value.
-//!   Non-finite normals/colours (NaN) are written as 0 for the same reason.
+//!   Misses keep depth `+inf`, the DESIGN.md contract (EXR stores infinities; `depth <
+//!   inf` is the hit mask). NaN (never expected) is written as 0.
 //! - `read_image_linear` reads either back as linear RGB: PNG (8- or 16-bit) is taken to be
 //!   sRGB-encoded and decoded with `srgb_to_linear`; EXR is already linear. Bad or missing
 //!   files give one error naming the file, never a panic.
@@ -62,7 +61,8 @@ fn write_rgb32f_exr(path: &Path, w: u32, h: u32, px: impl Iterator<Item = [f32; 
     let n = w as usize * h as usize;
     let mut data = Vec::with_capacity(n * 3);
     for p in px {
-        data.extend(p.map(|v| if v.is_finite() { v } else { 0.0 }));
+        // NaN (never expected) is written as 0; ±inf is kept (the depth AOV's miss value).
+        data.extend(p.map(|v| if v.is_nan() { 0.0 } else { v }));
     }
     if data.len() != n * 3 {
         return Err(Error::Image(format!("{}: film buffer has {} pixels, expected {w}x{h}", path.display(), data.len() / 3)));
@@ -81,17 +81,10 @@ pub fn write_film_exr(path: &Path, film: &Film) -> Result<()> {
     write_rgb32f_exr(path, film.width, film.height, film.color.iter().map(|c| c.to_array()))
 }
 
-/// The depth AOV as float EXR, the distance in all three channels; misses (`+inf`) as 0.
+/// The depth AOV as float EXR, the distance in all three channels; misses are `+inf`, as
+/// DESIGN.md specifies.
 pub fn write_exr_depth(path: &Path, film: &Film) -> Result<()> {
-    write_rgb32f_exr(
-        path,
-        film.width,
-        film.height,
-        film.depth.iter().map(|&d| {
-            let d = if d.is_finite() { d } else { 0.0 };
-            [d, d, d]
-        }),
-    )
+    write_rgb32f_exr(path, film.width, film.height, film.depth.iter().map(|&d| [d, d, d]))
 }
 
 /// The normal AOV as float EXR: x, y, z in R, G, B (in [-1, 1]; zero for a miss).
