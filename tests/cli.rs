@@ -1,0 +1,120 @@
+//! The command line end to end: `verify` exit codes and JSON, `bench` outputs (table, JSON,
+//! images, FLIP maps, plots), `render --aov`, and one-line errors with exit 2 on bad input.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn lodtrace(args: &[&str]) -> (i32, String, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_lodtrace")).args(args).output().expect("run lodtrace");
+    (o.status.code().unwrap_or(-1), String::from_utf8_lossy(&o.stdout).into(), String::from_utf8_lossy(&o.stderr).into())
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("lodtrace-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn one_error_line(stderr: &str) {
+    let lines: Vec<&str> = stderr.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert_eq!(lines.len(), 1, "expected one line: {stderr:?}");
+    assert!(lines[0].starts_with("lodtrace: error:"), "{stderr:?}");
+}
+
+#[test]
+#[cfg(feature = "embree")]
+fn verify_passes_and_writes_json() {
+    let d = tmp("verify");
+    let j = d.join("v.json");
+    let (code, out, err) = lodtrace(&["verify", "instanced", "--rays", "5000", "--json", j.to_str().unwrap()]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.contains("OK: no disagreement"), "{out}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&j).unwrap()).unwrap();
+    assert_eq!(v["candidate"], "bvh");
+    assert_eq!(v["occlusion_mismatches"], 0);
+}
+
+#[test]
+fn bad_verify_input_is_one_line_exit_2() {
+    for args in [
+        &["verify", "no-such-scene"][..],
+        &["verify", "/nonexistent/mesh.off"],
+        &["verify", "cube", "--rays", "0"],
+        &["verify", "cube", "--accel", "gpu"],
+        &["verify", "cube", "--json", "/nonexistent/dir/v.json"],
+    ] {
+        let (code, _, err) = lodtrace(args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+    }
+}
+
+#[test]
+fn bench_writes_table_json_images_and_plots() {
+    let d = tmp("bench");
+    let (code, out, err) = lodtrace(&[
+        "bench",
+        "spheres",
+        "--methods",
+        "whitted:bvh,distributed:bvh:spp=4:vt=0",
+        "--reference",
+        "distributed:bvh:spp=16:vt=0",
+        "--width",
+        "48",
+        "--height",
+        "36",
+        "--quiet",
+        "--out",
+        d.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("| spheres | whitted:bvh |"), "{out}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("bench.json")).unwrap()).unwrap();
+    let rows = v["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    for r in rows {
+        let flip = r["flip"].as_f64().unwrap();
+        assert!(flip > 0.0 && flip < 0.5, "{r}");
+        assert!(r["rmse"].as_f64().unwrap() > 0.0);
+    }
+    // More samples, closer to the reference.
+    assert!(rows[1]["rmse"].as_f64().unwrap() < rows[0]["rmse"].as_f64().unwrap() * 1.5);
+    for f in ["bench.md", "bench-time.png", "bench-error.png", "spheres-whitted_bvh.png"] {
+        assert!(d.join(f).metadata().map(|m| m.len() > 0).unwrap_or(false), "missing {f}: {:?}", std::fs::read_dir(&d).unwrap().map(|e| e.unwrap().file_name()).collect::<Vec<_>>());
+    }
+    let flips = std::fs::read_dir(&d).unwrap().filter(|e| e.as_ref().unwrap().file_name().to_string_lossy().ends_with("-flip.png")).count();
+    assert_eq!(flips, 2);
+    image::open(d.join("bench-time.png")).unwrap();
+}
+
+#[test]
+fn render_writes_exr_aovs() {
+    let d = tmp("aov");
+    let (dp, np, cp) = (d.join("d.exr"), d.join("n.exr"), d.join("c.png"));
+    let (code, _, err) = lodtrace(&[
+        "render",
+        "spheres",
+        "--accel",
+        "bvh",
+        "--width",
+        "40",
+        "--height",
+        "30",
+        "--quiet",
+        "--out",
+        cp.to_str().unwrap(),
+        "--aov",
+        &format!("depth={}", dp.display()),
+        "--aov",
+        &format!("normal={}", np.display()),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let (w, h, depth) = lodtrace::film::io::read_image_linear(&dp).unwrap();
+    assert_eq!((w, h), (40, 30));
+    let hits = depth.iter().filter(|v| v.x.is_finite() && v.x > 0.0).count();
+    let misses = depth.iter().filter(|v| v.x == f32::INFINITY).count();
+    assert!(hits > 100 && hits + misses == depth.len(), "{hits} hits, {misses} misses");
+    let (_, _, n) = lodtrace::film::io::read_image_linear(&np).unwrap();
+    assert!(n.iter().filter(|v| v.length() > 0.5).all(|v| (v.length() - 1.0).abs() < 1e-3));
+}
