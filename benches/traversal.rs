@@ -1,6 +1,6 @@
 //! Criterion benchmarks of the intersection kernels and of primary-ray throughput:
 //!
-//! - `node8`: one CWBVH node (8 quantised child boxes) against one ray — our `wide::f32x8`
+//! - `node8`: one CWBVH node (8 quantised child boxes) against one ray — our SSE2 test (`wide::f32x8` off x86-64)
 //!   test, obvhs' SSE test and obvhs' scalar reference;
 //! - `triangle`: the watertight test (Woop et al.) against Möller–Trumbore;
 //! - `primary/<scene>`: the DESIGN.md camera's primary rays (160×120) through each back-end:
@@ -41,7 +41,7 @@ fn node8(c: &mut Criterion) {
     let nodes = &bvh.nodes[..bvh.nodes.len().min(64)];
     let mut g = c.benchmark_group("node8");
     g.throughput(Throughput::Elements((rays.len() * nodes.len()) as u64));
-    g.bench_function("lodtrace_f32x8", |b| {
+    g.bench_function("lodtrace_simd", |b| {
         b.iter(|| {
             let mut acc = 0u32;
             for (r, oct) in &rays {
@@ -115,7 +115,8 @@ fn primary(c: &mut Criterion) {
         scene.validate().unwrap();
         let (w, h) = (160u32, 120u32);
         let fr = scene.camera.frame(w, h);
-        let rays: Vec<Ray> = (0..h).flat_map(|j| (0..w).map(move |i| (i, j))).map(|(i, j)| Ray::new(fr.eye, fr.pixel_center_dir(i, j))).collect();
+        let rays: Vec<Ray> =
+            (0..h).flat_map(|j| (0..w).map(move |i| (i, j))).map(|(i, j)| Ray::new(fr.eye, fr.pixel_center_dir(i, j))).collect();
         let mut g = c.benchmark_group(format!("primary/{name}"));
         g.throughput(Throughput::Elements(rays.len() as u64));
         g.sample_size(20);

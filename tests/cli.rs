@@ -81,7 +81,11 @@ fn bench_writes_table_json_images_and_plots() {
     // More samples, closer to the reference.
     assert!(rows[1]["rmse"].as_f64().unwrap() < rows[0]["rmse"].as_f64().unwrap() * 1.5);
     for f in ["bench.md", "bench-time.png", "bench-error.png", "spheres-whitted_bvh.png"] {
-        assert!(d.join(f).metadata().map(|m| m.len() > 0).unwrap_or(false), "missing {f}: {:?}", std::fs::read_dir(&d).unwrap().map(|e| e.unwrap().file_name()).collect::<Vec<_>>());
+        assert!(
+            d.join(f).metadata().map(|m| m.len() > 0).unwrap_or(false),
+            "missing {f}: {:?}",
+            std::fs::read_dir(&d).unwrap().map(|e| e.unwrap().file_name()).collect::<Vec<_>>()
+        );
     }
     let flips = std::fs::read_dir(&d).unwrap().filter(|e| e.as_ref().unwrap().file_name().to_string_lossy().ends_with("-flip.png")).count();
     assert_eq!(flips, 2);

@@ -94,7 +94,11 @@ fn verify_catches_broken_intersectors() {
 }
 
 fn backends(s: &Scene) -> Vec<Box<dyn Accel>> {
-    vec![accel::build(AccelKind::Bvh, s).unwrap(), accel::build(AccelKind::Embree, s).unwrap(), Box::new(EmbreeAccel::build_with(s, true).unwrap())]
+    vec![
+        accel::build(AccelKind::Bvh, s).unwrap(),
+        accel::build(AccelKind::Embree, s).unwrap(),
+        Box::new(EmbreeAccel::build_with(s, true).unwrap()),
+    ]
 }
 
 /// Rays from the centre of a closed mesh, including through its vertices and edge midpoints,
@@ -212,7 +216,8 @@ fn embree_reports_its_memory_and_stream_agrees_with_single_rays() {
     let e = EmbreeAccel::build(&s).unwrap();
     assert!(e.memory_bytes() > 1_000_000, "{}", e.memory_bytes());
     let fr = s.camera.frame(64, 48);
-    let rays: Vec<Ray> = (0..48).flat_map(|j| (0..64).map(move |i| (i, j))).map(|(i, j)| Ray::new(fr.eye, fr.pixel_center_dir(i, j))).collect();
+    let rays: Vec<Ray> =
+        (0..48).flat_map(|j| (0..64).map(move |i| (i, j))).map(|(i, j)| Ray::new(fr.eye, fr.pixel_center_dir(i, j))).collect();
     let mut out = vec![None; rays.len()];
     let mut c = Counters::default();
     e.intersect_stream(&rays, &mut out, &mut c);

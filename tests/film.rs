@@ -186,7 +186,9 @@ fn read_bad_files_is_err() {
     let missing = d.join("nope.png");
     let e = io::read_image_linear(&missing).unwrap_err().to_string();
     assert!(e.contains("nope.png"), "{e}");
-    for (name, bytes) in [("garbage.png", &b"this is not an image at all"[..]), ("garbage.exr", &b"\x76\x2f\x31\x01garbage"[..]), ("empty.png", &b""[..])] {
+    for (name, bytes) in
+        [("garbage.png", &b"this is not an image at all"[..]), ("garbage.exr", &b"\x76\x2f\x31\x01garbage"[..]), ("empty.png", &b""[..])]
+    {
         let p = d.join(name);
         std::fs::write(&p, bytes).unwrap();
         let e = io::read_image_linear(&p).unwrap_err().to_string();

@@ -25,10 +25,7 @@ fn assets_present() -> bool {
     let d = builtin::assets_dir();
     let ok = d.join("bunny00.off").is_file() && d.join("cow.off").is_file();
     if !ok {
-        eprintln!(
-            "note: skipping, assets missing in {} (run tools/setup)",
-            d.display()
-        );
+        eprintln!("note: skipping, assets missing in {} (run tools/setup)", d.display());
     }
     ok
 }
@@ -66,18 +63,9 @@ fn complex_has_the_papers_triangle_counts() {
     s.validate().unwrap();
     let (inst, uniq) = s.triangle_counts().unwrap();
     let leaves = s.leaf_instances().unwrap();
-    println!(
-        "complex: {inst} instanced, {uniq} unique triangles, {} leaf instances, built in {built:.3} s",
-        leaves.len()
-    );
-    assert!(
-        (8_000_000..=9_500_000).contains(&inst),
-        "instanced triangles {inst}"
-    );
-    assert!(
-        (100_000..=125_000).contains(&uniq),
-        "unique triangles {uniq}"
-    );
+    println!("complex: {inst} instanced, {uniq} unique triangles, {} leaf instances, built in {built:.3} s", leaves.len());
+    assert!((8_000_000..=9_500_000).contains(&inst), "instanced triangles {inst}");
+    assert!((100_000..=125_000).contains(&uniq), "unique triangles {uniq}");
 }
 
 #[test]
@@ -87,56 +75,23 @@ fn complex_keeps_the_instance_hierarchy() {
     let leaves = s.leaf_instances().unwrap();
     // Instancing is resolved to leaf instances, never to copied triangles.
     assert!(leaves.len() < 10_000, "{} leaf instances", leaves.len());
-    assert!(
-        inst / leaves.len() as u64 > 500,
-        "leaf instances are not much fewer than triangles"
-    );
+    assert!(inst / leaves.len() as u64 > 500, "leaf instances are not much fewer than triangles");
     // Each unique mesh is stored once: bunny, cow, one board patch, three plants.
-    assert_eq!(
-        s.meshes.len(),
-        6,
-        "meshes: {:?}",
-        s.meshes.iter().map(|m| &m.name).collect::<Vec<_>>()
-    );
+    assert_eq!(s.meshes.len(), 6, "meshes: {:?}", s.meshes.iter().map(|m| &m.name).collect::<Vec<_>>());
     let mut used = vec![0usize; s.meshes.len()];
     for l in &leaves {
         used[l.mesh as usize] += 1;
     }
-    assert!(
-        used.iter().all(|&n| n > 0),
-        "a mesh is never instanced: {used:?}"
-    );
-    assert!(
-        used.iter().filter(|&&n| n > 1).count() >= 5,
-        "meshes are not shared: {used:?}"
-    );
-    assert_eq!(
-        uniq,
-        s.meshes.iter().map(|m| m.tri_count() as u64).sum::<u64>()
-    );
+    assert!(used.iter().all(|&n| n > 0), "a mesh is never instanced: {used:?}");
+    assert!(used.iter().filter(|&&n| n > 1).count() >= 5, "meshes are not shared: {used:?}");
+    assert_eq!(uniq, s.meshes.iter().map(|m| m.tri_count() as u64).sum::<u64>());
     // Memory holds the unique triangles only (~110k), not 8.7 million.
-    assert!(
-        s.mesh_bytes() < 16 << 20,
-        "{} bytes of meshes",
-        s.mesh_bytes()
-    );
+    assert!(s.mesh_bytes() < 16 << 20, "{} bytes of meshes", s.mesh_bytes());
     // Several levels of groups: root → field → clump → plant, root → board → block → row → patch.
-    assert!(
-        depth(&s, s.root) >= 4,
-        "hierarchy depth {}",
-        depth(&s, s.root)
-    );
+    assert!(depth(&s, s.root) >= 4, "hierarchy depth {}", depth(&s, s.root));
     // Materials of the paper: specular (reflective) cows, transparent bunnies.
-    let bunny = s
-        .meshes
-        .iter()
-        .position(|m| m.name == "bunny00")
-        .expect("bunny mesh") as u32;
-    let cow = s
-        .meshes
-        .iter()
-        .position(|m| m.name == "cow")
-        .expect("cow mesh") as u32;
+    let bunny = s.meshes.iter().position(|m| m.name == "bunny00").expect("bunny mesh") as u32;
+    let cow = s.meshes.iter().position(|m| m.name == "cow").expect("cow mesh") as u32;
     for l in &leaves {
         let mesh = &s.meshes[l.mesh as usize];
         let m = &s.materials[l.material.unwrap_or(mesh.mat[0]) as usize];
@@ -149,10 +104,7 @@ fn complex_keeps_the_instance_hierarchy() {
     }
     // All on the board (y ≥ 0, up to small drooping leaf tips) and inside it.
     let (lo, hi) = s.bounds().unwrap();
-    assert!(
-        lo.y >= -1e-4 && hi.y < 10.0 && lo.x >= -128.001 && hi.x <= 128.001,
-        "{lo} {hi}"
-    );
+    assert!(lo.y >= -1e-4 && hi.y < 10.0 && lo.x >= -128.001 && hi.x <= 128.001, "{lo} {hi}");
 }
 
 #[test]
@@ -162,17 +114,10 @@ fn complex_is_deterministic() {
     };
     assert_eq!(a.triangle_counts().unwrap(), b.triangle_counts().unwrap());
     for (m, n) in a.meshes.iter().zip(&b.meshes) {
-        assert!(
-            m.px == n.px && m.py == n.py && m.pz == n.pz && m.tris == n.tris,
-            "mesh {} differs",
-            m.name
-        );
+        assert!(m.px == n.px && m.py == n.py && m.pz == n.pz && m.tris == n.tris, "mesh {} differs", m.name);
     }
     let (la, lb) = (a.leaf_instances().unwrap(), b.leaf_instances().unwrap());
-    assert!(la
-        .iter()
-        .zip(&lb)
-        .all(|(x, y)| x.xform == y.xform && x.mesh == y.mesh));
+    assert!(la.iter().zip(&lb).all(|(x, y)| x.xform == y.xform && x.mesh == y.mesh));
 }
 
 #[test]
@@ -185,47 +130,28 @@ fn asset_meshes_are_normalised_to_a_unit_box_on_the_floor() {
         let k = builtin::normalize_mesh(&mut m);
         assert!(k > 0.0 && k.is_finite());
         let (lo, hi) = m.bounds();
-        assert!(
-            ((hi - lo).max_element() - 1.0).abs() < 1e-5,
-            "{f}: {lo} {hi}"
-        );
+        assert!(((hi - lo).max_element() - 1.0).abs() < 1e-5, "{f}: {lo} {hi}");
         assert!(lo.y.abs() < 1e-6, "{f}: base at {}", lo.y);
-        assert!(
-            (lo.x + hi.x).abs() < 1e-5 && (lo.z + hi.z).abs() < 1e-5,
-            "{f}: not centred: {lo} {hi}"
-        );
+        assert!((lo.x + hi.x).abs() < 1e-5 && (lo.z + hi.z).abs() < 1e-5, "{f}: not centred: {lo} {hi}");
     }
 }
 
 #[test]
 fn plants_are_deterministic_branching_meshes() {
-    for (p, lo, hi) in [
-        (PlantParams::shrub(11), 6_000, 14_000),
-        (PlantParams::herb(23), 6_000, 14_000),
-        (PlantParams::fern(37), 6_000, 14_000),
-    ] {
+    for (p, lo, hi) in
+        [(PlantParams::shrub(11), 6_000, 14_000), (PlantParams::herb(23), 6_000, 14_000), (PlantParams::fern(37), 6_000, 14_000)]
+    {
         let a = builtin::plant(&p, 0, 1);
         let b = builtin::plant(&p, 0, 1);
         assert!(a.px == b.px && a.tris == b.tris, "not deterministic");
-        let c = builtin::plant(
-            &PlantParams {
-                seed: p.seed + 1,
-                ..p.clone()
-            },
-            0,
-            1,
-        );
+        let c = builtin::plant(&PlantParams { seed: p.seed + 1, ..p.clone() }, 0, 1);
         assert!(a.px != c.px, "the seed changes nothing");
         let n = a.tri_count();
         assert!((lo..=hi).contains(&n), "{n} triangles");
         let leaves = a.mat.iter().filter(|&&m| m == 1).count();
-        assert!(
-            leaves > n / 2 && leaves % 4 == 0,
-            "{leaves} leaf triangles of {n}"
-        );
+        assert!(leaves > n / 2 && leaves % 4 == 0, "{leaves} leaf triangles of {n}");
         assert!(a.has_normals());
-        assert!((0..a.vertex_count() as u32)
-            .all(|i| a.pos(i).is_finite() && (a.normal(i).length() - 1.0).abs() < 1e-3));
+        assert!((0..a.vertex_count() as u32).all(|i| a.pos(i).is_finite() && (a.normal(i).length() - 1.0).abs() < 1e-3));
         assert_eq!(a.clone().remove_degenerate(), 0, "degenerate triangles");
         let (blo, bhi) = a.bounds();
         assert!(blo.y >= -1e-6 && bhi.y > 0.4 && bhi.y < 3.0, "{blo} {bhi}");
@@ -239,16 +165,10 @@ fn instanced_scene_nests_groups_with_overrides() {
     let mut s = builtin::get("instanced").unwrap();
     s.validate().unwrap();
     let (inst, uniq) = s.triangle_counts().unwrap();
-    assert!(
-        (2_000..=10_000).contains(&inst) && uniq < inst / 10,
-        "{inst} {uniq}"
-    );
+    assert!((2_000..=10_000).contains(&inst) && uniq < inst / 10, "{inst} {uniq}");
     assert!(depth(&s, s.root) >= 4, "depth {}", depth(&s, s.root));
     let leaves = s.leaf_instances().unwrap();
-    let name = |m: Option<u32>| {
-        m.map(|i| s.materials[i as usize].name.clone())
-            .unwrap_or_default()
-    };
+    let name = |m: Option<u32>| m.map(|i| s.materials[i as usize].name.clone()).unwrap_or_default();
     let count = |n: &str| leaves.iter().filter(|l| name(l.material) == n).count();
     // Tower 3 is overridden "dark" as a whole (the outermost override wins), the middle ring
     // of towers 1 and 2 "blue mirror", alternate pairs of the other rings "red".
@@ -263,12 +183,7 @@ fn instanced_scene_nests_groups_with_overrides() {
         let p = Vec3::new(rng.next(), rng.next(), rng.next());
         assert!((l.inv.transform_point3(l.xform.transform_point3(p)) - p).length() < 1e-4);
         let (t, n) = (Vec3::new(1.0, 2.0, 0.5), Vec3::new(-2.0, 1.0, 0.0)); // t ⟂ n
-        assert!(
-            (l.normal_mat * glam::Vec3A::from(n))
-                .dot(l.xform.transform_vector3a(t.into()))
-                .abs()
-                < 1e-4
-        );
+        assert!((l.normal_mat * glam::Vec3A::from(n)).dot(l.xform.transform_vector3a(t.into())).abs() < 1e-4);
     }
     // A non-uniformly scaled instance is present (normal matrix ≠ rotation).
     assert!(leaves.iter().any(|l| {
@@ -276,10 +191,7 @@ fn instanced_scene_nests_groups_with_overrides() {
         (c.x_axis.length() - c.y_axis.length()).abs() > 0.1
     }));
     // The hierarchy's transform chain for one known leaf: root tower → ring 0 → pair 0 → cube.
-    let first_cube = leaves
-        .iter()
-        .find(|l| s.meshes[l.mesh as usize].name == "cube")
-        .unwrap();
+    let first_cube = leaves.iter().find(|l| s.meshes[l.mesh as usize].name == "cube").unwrap();
     let tower = match s.groups[s.root as usize].children[1].target {
         Target::Group(g) => g,
         _ => panic!("root child 1 is the tower"),
@@ -312,16 +224,10 @@ fn toml_example_loads() {
     assert_eq!(s.name, "example");
     let (inst, uniq) = s.triangle_counts().unwrap();
     assert!(inst > uniq && uniq > 5_804, "{inst} {uniq}");
-    assert!(s
-        .meshes
-        .iter()
-        .any(|m| m.name == "cow" && m.tri_count() == 5_804));
+    assert!(s.meshes.iter().any(|m| m.name == "cow" && m.tri_count() == 5_804));
     assert!(s.groups.iter().any(|g| g.name == "herd"));
     assert_eq!(s.lights.len(), 2);
-    assert!(s
-        .materials
-        .iter()
-        .any(|m| m.name == "glass" && m.transmit > 0.5));
+    assert!(s.materials.iter().any(|m| m.name == "glass" && m.transmit > 0.5));
     // The cow was normalised: its instances stand on the board.
     let (lo, _) = s.bounds().unwrap();
     assert!(lo.y >= -1e-4, "{lo}");
@@ -337,15 +243,9 @@ fn toml_err(dir: &Path, file: &str, text: &str) -> String {
         Ok(_) => panic!("{file} loaded:\n{text}"),
         Err(e) => e,
     };
-    assert!(
-        matches!(e, Error::Parse { .. }),
-        "{file}: not a parse error: {e:?}"
-    );
+    assert!(matches!(e, Error::Parse { .. }), "{file}: not a parse error: {e:?}");
     let msg = e.to_string();
-    assert!(
-        msg.contains(p.to_str().unwrap()),
-        "{file}: message does not name the file: {msg}"
-    );
+    assert!(msg.contains(p.to_str().unwrap()), "{file}: message does not name the file: {msg}");
     assert!(!msg.contains('\n'), "{file}: message spans lines: {msg}");
     msg
 }
@@ -353,69 +253,36 @@ fn toml_err(dir: &Path, file: &str, text: &str) -> String {
 #[test]
 fn toml_errors_name_the_file_and_the_problem() {
     let d = scratch("toml-errors");
-    let m = toml_err(
-        &d,
-        "unknown_field.toml",
-        &format!("{GOOD_MESH}[[instances]]\ntarget = \"ball\"\nscael = 2\n"),
-    );
-    assert!(
-        m.contains("unknown field") && m.contains("scael") && m.contains("line 6"),
-        "{m}"
-    );
-    let m = toml_err(
-        &d,
-        "unknown_mesh.toml",
-        &format!("{GOOD_MESH}[[instances]]\ntarget = \"bal\"\n"),
-    );
-    assert!(
-        m.contains("unknown target 'bal'") && m.contains("ball"),
-        "{m}"
-    );
-    let m = toml_err(
-        &d,
-        "unknown_material.toml",
-        &format!("{GOOD_MESH}[[instances]]\ntarget = \"ball\"\nmaterial = \"gold\"\n"),
-    );
+    let m = toml_err(&d, "unknown_field.toml", &format!("{GOOD_MESH}[[instances]]\ntarget = \"ball\"\nscael = 2\n"));
+    assert!(m.contains("unknown field") && m.contains("scael") && m.contains("line 6"), "{m}");
+    let m = toml_err(&d, "unknown_mesh.toml", &format!("{GOOD_MESH}[[instances]]\ntarget = \"bal\"\n"));
+    assert!(m.contains("unknown target 'bal'") && m.contains("ball"), "{m}");
+    let m = toml_err(&d, "unknown_material.toml", &format!("{GOOD_MESH}[[instances]]\ntarget = \"ball\"\nmaterial = \"gold\"\n"));
     assert!(m.contains("unknown material 'gold'"), "{m}");
     let cyc = format!(
         "{GOOD_MESH}[[groups.a.instances]]\ntarget = \"b\"\n[[groups.b.instances]]\ntarget = \"c\"\n[[groups.c.instances]]\ntarget = \"a\"\n[[groups.c.instances]]\ntarget = \"ball\"\n[[instances]]\ntarget = \"a\"\n"
     );
     let m = toml_err(&d, "cycle.toml", &cyc);
     assert!(m.contains("cycle") && m.contains("a -> b -> c -> a"), "{m}");
-    let m = toml_err(
-        &d,
-        "self_cycle.toml",
-        &format!(
-            "{GOOD_MESH}[[groups.g.instances]]\ntarget = \"g\"\n[[instances]]\ntarget = \"ball\"\n"
-        ),
-    );
+    let m =
+        toml_err(&d, "self_cycle.toml", &format!("{GOOD_MESH}[[groups.g.instances]]\ntarget = \"g\"\n[[instances]]\ntarget = \"ball\"\n"));
     assert!(m.contains("cycle") && m.contains("g -> g"), "{m}");
-    let m = toml_err(
-        &d,
-        "missing_mesh_file.toml",
-        "[meshes.cow]\nfile = \"no/such/cow.off\"\n[[instances]]\ntarget = \"cow\"\n",
-    );
-    assert!(
-        m.contains("mesh 'cow'") && m.contains("no/such/cow.off"),
-        "{m}"
-    );
-    let m = toml_err(
-        &d,
-        "bad_number.toml",
-        &format!("{GOOD_MESH}[[instances]]\ntarget = \"ball\"\ntranslate = [0, inf, 0]\n"),
-    );
+    let m = toml_err(&d, "missing_mesh_file.toml", "[meshes.cow]\nfile = \"no/such/cow.off\"\n[[instances]]\ntarget = \"cow\"\n");
+    assert!(m.contains("mesh 'cow'") && m.contains("no/such/cow.off"), "{m}");
+    let m = toml_err(&d, "bad_number.toml", &format!("{GOOD_MESH}[[instances]]\ntarget = \"ball\"\ntranslate = [0, inf, 0]\n"));
     assert!(m.contains("translate") && m.contains("finite"), "{m}");
-    let m = toml_err(&d, "bad_light.toml", &format!("{GOOD_MESH}[[instances]]\ntarget = \"ball\"\n[[lights]]\ntype = \"point\"\npos = [0, 1]\nintensity = 1\n"));
+    let m = toml_err(
+        &d,
+        "bad_light.toml",
+        &format!("{GOOD_MESH}[[instances]]\ntarget = \"ball\"\n[[lights]]\ntype = \"point\"\npos = [0, 1]\nintensity = 1\n"),
+    );
     assert!(m.contains("line"), "{m}");
     let m = toml_err(&d, "syntax.toml", "[meshes.ball\n");
     assert!(m.contains("line 1"), "{m}");
     // A missing scene file is an I/O error naming it.
     let p = d.join("absent.toml");
     let e = load::load_scene(p.to_str().unwrap()).unwrap_err();
-    assert!(
-        matches!(e, Error::Io { .. }) && e.to_string().contains("absent.toml"),
-        "{e}"
-    );
+    assert!(matches!(e, Error::Io { .. }) && e.to_string().contains("absent.toml"), "{e}");
     let _ = std::fs::remove_dir_all(&d);
 }
 
@@ -423,16 +290,8 @@ fn toml_errors_name_the_file_and_the_problem() {
 fn toml_mesh_file_paths_are_relative_to_the_scene_file() {
     let d = scratch("toml-relative");
     std::fs::create_dir_all(d.join("sub/meshes")).unwrap();
-    std::fs::write(
-        d.join("sub/meshes/tri.off"),
-        "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
-    )
-    .unwrap();
-    std::fs::write(
-        d.join("sub/s.toml"),
-        "[meshes.t]\nfile = \"meshes/tri.off\"\n[[instances]]\ntarget = \"t\"\n",
-    )
-    .unwrap();
+    std::fs::write(d.join("sub/meshes/tri.off"), "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n").unwrap();
+    std::fs::write(d.join("sub/s.toml"), "[meshes.t]\nfile = \"meshes/tri.off\"\n[[instances]]\ntarget = \"t\"\n").unwrap();
     let s = load::load_scene(d.join("sub/s.toml").to_str().unwrap()).unwrap();
     assert_eq!(s.triangle_counts().unwrap(), (1, 1));
     let _ = std::fs::remove_dir_all(&d);
@@ -452,36 +311,15 @@ fn lodtrace(args: &[&str], env: &[(&str, &str)]) -> Run {
         c.env(k, v);
     }
     let o = c.output().expect("run lodtrace");
-    Run {
-        code: o.status.code(),
-        stderr: String::from_utf8_lossy(&o.stderr).into_owned(),
-    }
+    Run { code: o.status.code(), stderr: String::from_utf8_lossy(&o.stderr).into_owned() }
 }
 
 /// Renders `scene` (16×16, bvh) with `extra` arguments and checks the bad-input contract:
 /// exit 2, exactly one stderr line and it starts "lodtrace: error:", no output file.
 /// Returns a description of the failure, or None.
-fn check_bad(
-    dir: &Path,
-    label: &str,
-    scene: &str,
-    extra: &[&str],
-    env: &[(&str, &str)],
-) -> Option<String> {
+fn check_bad(dir: &Path, label: &str, scene: &str, extra: &[&str], env: &[(&str, &str)]) -> Option<String> {
     let out = dir.join(format!("{label}.png"));
-    let mut args = vec![
-        "render",
-        scene,
-        "--accel",
-        "bvh",
-        "--width",
-        "16",
-        "--height",
-        "16",
-        "--quiet",
-        "--out",
-        out.to_str().unwrap(),
-    ];
+    let mut args = vec!["render", scene, "--accel", "bvh", "--width", "16", "--height", "16", "--quiet", "--out", out.to_str().unwrap()];
     args.extend_from_slice(extra);
     let r = lodtrace(&args, env);
     let lines: Vec<&str> = r.stderr.lines().filter(|l| !l.trim().is_empty()).collect();
@@ -490,10 +328,7 @@ fn check_bad(
         bad.push(format!("exit {:?} (want 2)", r.code));
     }
     if lines.len() != 1 || !lines[0].starts_with("lodtrace: error:") {
-        bad.push(format!(
-            "stderr is not one 'lodtrace: error:' line: {:?}",
-            r.stderr
-        ));
+        bad.push(format!("stderr is not one 'lodtrace: error:' line: {:?}", r.stderr));
     }
     if out.exists() {
         bad.push("an output file was written".into());
@@ -517,16 +352,10 @@ fn bad_input_exits_2_with_one_error_line_and_no_output() {
     };
     let truncated = f("truncated.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n");
     let out_of_range = f("range.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n");
-    let all_nan = f(
-        "nan.off",
-        "OFF\n4 2 0\nnan 0 0\n1 0 0\n0 1 0\n1 1 nan\n3 0 1 2\n3 1 3 2\n",
-    );
+    let all_nan = f("nan.off", "OFF\n4 2 0\nnan 0 0\n1 0 0\n0 1 0\n1 1 nan\n3 0 1 2\n3 1 3 2\n");
     let empty_obj = f("empty.obj", "");
     let comment_obj = f("comments.obj", "# no geometry here\no nothing\n");
-    let bad_toml = f(
-        "bad.toml",
-        &format!("{GOOD_MESH}[[instances]]\ntarget = \"nope\"\n"),
-    );
+    let bad_toml = f("bad.toml", &format!("{GOOD_MESH}[[instances]]\ntarget = \"nope\"\n"));
     let missing = d.join("missing.off").to_str().unwrap().to_string();
     let no_assets = d.join("no-assets").to_str().unwrap().to_string();
     let cases: Vec<BadCase> = vec![
@@ -540,80 +369,27 @@ fn bad_input_exits_2_with_one_error_line_and_no_output() {
         ("width_0", "plane", vec!["--width", "0"], vec![]),
         ("unknown_scene", "no-such-scene", vec![], vec![]),
         ("unknown_method", "plane", vec!["--method", "bogus"], vec![]),
-        (
-            "complex_without_assets",
-            "complex",
-            vec![],
-            vec![("LODTRACE_ASSETS", &no_assets)],
-        ),
+        ("complex_without_assets", "complex", vec![], vec![("LODTRACE_ASSETS", &no_assets)]),
     ];
-    let failures: Vec<String> = cases
-        .iter()
-        .filter_map(|(label, scene, extra, env)| check_bad(&d, label, scene, extra, env))
-        .collect();
+    let failures: Vec<String> = cases.iter().filter_map(|(label, scene, extra, env)| check_bad(&d, label, scene, extra, env)).collect();
     // The messages say what is wrong.
     let r = lodtrace(
-        &[
-            "render",
-            &truncated,
-            "--accel",
-            "bvh",
-            "--width",
-            "16",
-            "--height",
-            "16",
-            "--out",
-            d.join("t.png").to_str().unwrap(),
-        ],
+        &["render", &truncated, "--accel", "bvh", "--width", "16", "--height", "16", "--out", d.join("t.png").to_str().unwrap()],
         &[],
     );
-    assert!(
-        r.stderr.contains("truncated.off") && r.stderr.contains("truncated"),
-        "{}",
-        r.stderr
-    );
+    assert!(r.stderr.contains("truncated.off") && r.stderr.contains("truncated"), "{}", r.stderr);
     let r = lodtrace(
-        &[
-            "render",
-            "complex",
-            "--accel",
-            "bvh",
-            "--width",
-            "16",
-            "--height",
-            "16",
-            "--out",
-            d.join("c.png").to_str().unwrap(),
-        ],
+        &["render", "complex", "--accel", "bvh", "--width", "16", "--height", "16", "--out", d.join("c.png").to_str().unwrap()],
         &[("LODTRACE_ASSETS", &no_assets)],
     );
     assert!(r.stderr.contains("tools/setup"), "{}", r.stderr);
     let r = lodtrace(
-        &[
-            "render",
-            &bad_toml,
-            "--accel",
-            "bvh",
-            "--width",
-            "16",
-            "--height",
-            "16",
-            "--out",
-            d.join("b.png").to_str().unwrap(),
-        ],
+        &["render", &bad_toml, "--accel", "bvh", "--width", "16", "--height", "16", "--out", d.join("b.png").to_str().unwrap()],
         &[],
     );
-    assert!(
-        r.stderr.contains("bad.toml") && r.stderr.contains("unknown target 'nope'"),
-        "{}",
-        r.stderr
-    );
+    assert!(r.stderr.contains("bad.toml") && r.stderr.contains("unknown target 'nope'"), "{}", r.stderr);
     let _ = std::fs::remove_dir_all(&d);
-    assert!(
-        failures.is_empty(),
-        "bad-input contract broken:\n{}",
-        failures.join("\n")
-    );
+    assert!(failures.is_empty(), "bad-input contract broken:\n{}", failures.join("\n"));
 }
 
 #[test]
@@ -621,40 +397,20 @@ fn a_mesh_with_some_nan_triangles_loads_with_a_warning() {
     let d = scratch("some-nan");
     let p = d.join("some_nan.off");
     // Three triangles: the middle one uses a NaN vertex.
-    std::fs::write(
-        &p,
-        "OFF\n5 3 0\n0 0 0\n1 0 0\n0 1 0\nnan 1 1\n1 1 0\n3 0 1 2\n3 1 3 2\n3 1 4 2\n",
-    )
-    .unwrap();
+    std::fs::write(&p, "OFF\n5 3 0\n0 0 0\n1 0 0\n0 1 0\nnan 1 1\n1 1 0\n3 0 1 2\n3 1 3 2\n3 1 4 2\n").unwrap();
     let m = load::load_off(&p, 0).unwrap();
     assert_eq!(m.tri_count(), 2);
     assert!(m.tris.iter().all(|t| !t.contains(&3)));
     let out = d.join("x.png");
     let r = lodtrace(
-        &[
-            "render",
-            p.to_str().unwrap(),
-            "--accel",
-            "bvh",
-            "--width",
-            "16",
-            "--height",
-            "16",
-            "--quiet",
-            "--out",
-            out.to_str().unwrap(),
-        ],
+        &["render", p.to_str().unwrap(), "--accel", "bvh", "--width", "16", "--height", "16", "--quiet", "--out", out.to_str().unwrap()],
         &[],
     );
     assert_eq!(r.code, Some(0), "{}", r.stderr);
     assert!(out.is_file(), "no image written");
     let warn: Vec<&str> = r.stderr.lines().filter(|l| l.contains("warning")).collect();
     assert_eq!(warn.len(), 1, "{}", r.stderr);
-    assert!(
-        warn[0].contains("some_nan.off") && warn[0].contains(" 1 "),
-        "{}",
-        warn[0]
-    );
+    assert!(warn[0].contains("some_nan.off") && warn[0].contains(" 1 "), "{}", warn[0]);
     assert!(!r.stderr.contains("error"), "{}", r.stderr);
     let _ = std::fs::remove_dir_all(&d);
 }

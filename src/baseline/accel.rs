@@ -102,6 +102,8 @@ pub fn build(kind: AccelKind, scene: &Scene) -> Result<Box<dyn Accel>> {
         AccelKind::Embree => Ok(Box::new(super::embree::EmbreeAccel::build(scene)?)),
         #[cfg(not(feature = "embree"))]
         AccelKind::Embree => Err(Error::Usage("this build has no Embree (cargo feature 'embree' is off); use --accel bvh".into())),
-        AccelKind::Octree => Err(Error::Usage("--accel octree needs the multires octree (not built yet); use --accel bvh or embree".into())),
+        AccelKind::Octree => {
+            Err(Error::Usage("--accel octree needs the multires octree (not built yet); use --accel bvh or embree".into()))
+        }
     }
 }

@@ -22,10 +22,10 @@ use crate::error::{Error, Result};
 use crate::scene::Scene;
 use glam::{Affine3A, UVec2, Vec3, Vec3A};
 use obvhs::{aabb::Aabb, cwbvh::node::CwBvhNode, cwbvh::CwBvh, BvhBuildParams};
-#[cfg(not(target_arch = "x86_64"))]
-use wide::f32x8;
 use rayon::prelude::*;
 use std::time::Duration;
+#[cfg(not(target_arch = "x86_64"))]
+use wide::f32x8;
 
 struct Blas {
     bvh: CwBvh,

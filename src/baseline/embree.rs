@@ -98,7 +98,10 @@ impl EmbreeAccel {
         unsafe {
             let device = rtcNewDevice(cfg.as_ptr());
             if device.is_null() {
-                return Err(Error::Accel(format!("Embree: cannot create device ({})", error_text(rtcGetDeviceError(std::ptr::null_mut())))));
+                return Err(Error::Accel(format!(
+                    "Embree: cannot create device ({})",
+                    error_text(rtcGetDeviceError(std::ptr::null_mut()))
+                )));
             }
             let mem = Box::new(AtomicIsize::new(0));
             rtcSetDeviceMemoryMonitorFunction(device, Some(memory_monitor), &*mem as *const AtomicIsize as *mut c_void);
@@ -144,7 +147,10 @@ impl EmbreeAccel {
                 // FLOAT3X4_COLUMN_MAJOR: the three columns of the linear part, then the translation.
                 let m = l.xform.matrix3;
                 let t = l.xform.translation;
-                let cols: [f32; 12] = [m.x_axis.x, m.x_axis.y, m.x_axis.z, m.y_axis.x, m.y_axis.y, m.y_axis.z, m.z_axis.x, m.z_axis.y, m.z_axis.z, t.x, t.y, t.z];
+                let cols: [f32; 12] = [
+                    m.x_axis.x, m.x_axis.y, m.x_axis.z, m.y_axis.x, m.y_axis.y, m.y_axis.z, m.z_axis.x, m.z_axis.y, m.z_axis.z, t.x, t.y,
+                    t.z,
+                ];
                 rtcSetGeometryTransform(g, 0, RTCFormat::FLOAT3X4_COLUMN_MAJOR, cols.as_ptr() as *const c_void);
                 rtcCommitGeometry(g);
                 rtcAttachGeometryByID(top, g, i as u32);

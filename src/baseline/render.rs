@@ -15,9 +15,9 @@
 
 use super::accel::{Hit, Ray, K};
 use super::shade::TraceCtx;
+use crate::core::luminance;
 use crate::core::rng::Sampler;
 use crate::core::stats::{Counter, Counters};
-use crate::core::luminance;
 use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::scene::camera::CameraFrame;
@@ -143,7 +143,11 @@ impl Progress {
     }
     fn tick(&self) {
         self.bar.inc(1);
-        if !self.quiet && !self.shown.load(Ordering::Relaxed) && self.start.elapsed() > Duration::from_secs(1) && !self.shown.swap(true, Ordering::Relaxed) {
+        if !self.quiet
+            && !self.shown.load(Ordering::Relaxed)
+            && self.start.elapsed() > Duration::from_secs(1)
+            && !self.shown.swap(true, Ordering::Relaxed)
+        {
             self.bar.set_draw_target(ProgressDrawTarget::stderr());
         }
     }
@@ -229,7 +233,8 @@ fn whitted(ctx: &TraceCtx, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Count
                                 Some(h) => ctx.shade(&rays[l], h, 0, None, &mut c),
                                 None => ctx.scene.background,
                             };
-                            let (depth, normal) = if opts.aov { aov_of(ctx, &rays[l], hits[l].as_ref()) } else { (f32::INFINITY, Vec3::ZERO) };
+                            let (depth, normal) =
+                                if opts.aov { aov_of(ctx, &rays[l], hits[l].as_ref()) } else { (f32::INFINITY, Vec3::ZERO) };
                             out.push(PixelOut { idx: (j * w + i0 + l as u32) as usize, color, depth, normal });
                         }
                         i0 += n as u32;

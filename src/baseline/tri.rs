@@ -21,7 +21,17 @@ impl RayShear {
     #[inline]
     pub fn new(org: Vec3, dir: Vec3) -> Self {
         let a = dir.abs();
-        let kz = if a.x > a.y { if a.x > a.z { 0 } else { 2 } } else if a.y > a.z { 1 } else { 2 };
+        let kz = if a.x > a.y {
+            if a.x > a.z {
+                0
+            } else {
+                2
+            }
+        } else if a.y > a.z {
+            1
+        } else {
+            2
+        };
         let mut kx = (kz + 1) % 3;
         let mut ky = (kx + 1) % 3;
         if dir[kz] < 0.0 {

@@ -322,10 +322,15 @@ pub fn verify_with(scene: &Scene, reference: &dyn Accel, cand: &dyn Accel, n: us
                 let segs: Vec<(Ray, bool)> = match r {
                     // Segments ending 0.1 % before / after the hit; skipped where that margin is
                     // below the precision budget (origin almost on the surface, grazing, border).
-                    Some(a) if !HitGeom::new(scene, &leaves, &ray, &a).uncertain(&a) && a.t * ray.dir.length() * 1e-3 > HitGeom::new(scene, &leaves, &ray, &a).tol * 10.0 => vec![
-                        (Ray::segment(ray.org, ray.dir, ray.tnear, a.t * (1.0 - 1e-3)), false),
-                        (Ray::segment(ray.org, ray.dir, ray.tnear, a.t * (1.0 + 1e-3)), true),
-                    ],
+                    Some(a)
+                        if !HitGeom::new(scene, &leaves, &ray, &a).uncertain(&a)
+                            && a.t * ray.dir.length() * 1e-3 > HitGeom::new(scene, &leaves, &ray, &a).tol * 10.0 =>
+                    {
+                        vec![
+                            (Ray::segment(ray.org, ray.dir, ray.tnear, a.t * (1.0 - 1e-3)), false),
+                            (Ray::segment(ray.org, ray.dir, ray.tnear, a.t * (1.0 + 1e-3)), true),
+                        ]
+                    }
                     None if set != RaySet::Invalid => vec![(ray, false)],
                     _ => vec![],
                 };
@@ -341,7 +346,10 @@ pub fn verify_with(scene: &Scene, reference: &dyn Accel, cand: &dyn Accel, n: us
                 dir: ray.dir.to_array(),
                 embree: brief(r),
                 candidate: brief(h),
-                cos: (r.and_then(|x| HitGeom::get(scene, &leaves, &ray, &x)).map(|g| g.cos), h.and_then(|x| HitGeom::get(scene, &leaves, &ray, &x)).map(|g| g.cos)),
+                cos: (
+                    r.and_then(|x| HitGeom::get(scene, &leaves, &ray, &x)).map(|g| g.cos),
+                    h.and_then(|x| HitGeom::get(scene, &leaves, &ray, &x)).map(|g| g.cos),
+                ),
             });
             One { set, v, hit: r.is_some(), t_rel, occ_checks, occ_bad, ex }
         })
@@ -406,14 +414,26 @@ pub fn verify_with(scene: &Scene, reference: &dyn Accel, cand: &dyn Accel, n: us
 /// The report as an aligned table.
 pub fn format_report(rep: &VerifyReport) -> String {
     let mut s = format!("verify {} against Embree (robust) on '{}'\n", rep.candidate, rep.scene);
-    s += &format!("{:<8} {:>9} {:>9} {:>9} {:>7} {:>8} {:>10} {:>11}\n", "rays", "count", "hits", "agree", "ties", "grazing", "MISMATCH", "max |dt|/t");
+    s += &format!(
+        "{:<8} {:>9} {:>9} {:>9} {:>7} {:>8} {:>10} {:>11}\n",
+        "rays", "count", "hits", "agree", "ties", "grazing", "MISMATCH", "max |dt|/t"
+    );
     for (k, r) in &rep.sets {
         let name = serde_json::to_value(k).ok().and_then(|v| v.as_str().map(String::from)).unwrap_or_default();
-        s += &format!("{:<8} {:>9} {:>9} {:>9} {:>7} {:>8} {:>10} {:>11.2e}\n", name, r.rays, r.hits, r.agree, r.ties, r.grazing, r.mismatches, r.max_t_rel);
+        s += &format!(
+            "{:<8} {:>9} {:>9} {:>9} {:>7} {:>8} {:>10} {:>11.2e}\n",
+            name, r.rays, r.hits, r.agree, r.ties, r.grazing, r.mismatches, r.max_t_rel
+        );
     }
-    s += &format!("occlusion: {} checks, {} wrong; packets: {} lanes, {} differ from single rays\n", rep.occlusion_checks, rep.occlusion_mismatches, rep.packet_lanes, rep.packet_mismatches);
+    s += &format!(
+        "occlusion: {} checks, {} wrong; packets: {} lanes, {} differ from single rays\n",
+        rep.occlusion_checks, rep.occlusion_mismatches, rep.packet_lanes, rep.packet_mismatches
+    );
     for e in &rep.examples {
-        s += &format!("  mismatch ({:?}): org {:?} dir {:?}: embree {:?}, {} {:?}, |cos| {:?}\n", e.set, e.org, e.dir, e.embree, rep.candidate, e.candidate, e.cos);
+        s += &format!(
+            "  mismatch ({:?}): org {:?} dir {:?}: embree {:?}, {} {:?}, |cos| {:?}\n",
+            e.set, e.org, e.dir, e.embree, rep.candidate, e.candidate, e.cos
+        );
     }
     s += if rep.mismatches() == 0 { "OK: no disagreement beyond tolerance\n" } else { "FAILED: disagreements beyond tolerance\n" };
     s

@@ -87,12 +87,9 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
         println!("A: {} ({w}x{h})", a.a.display());
         println!("B: {}", a.b.display());
         let psnr_s = if psnr.is_finite() { format!("{psnr:.3}") } else { "inf".to_string() };
-        for (k, v) in [
-            ("RMSE", format!("{rmse:.6}")),
-            ("PSNR (dB)", psnr_s),
-            ("mean FLIP", format!("{flip:.6}")),
-            ("SSIM", format!("{ssim:.6}")),
-        ] {
+        for (k, v) in
+            [("RMSE", format!("{rmse:.6}")), ("PSNR (dB)", psnr_s), ("mean FLIP", format!("{flip:.6}")), ("SSIM", format!("{ssim:.6}"))]
+        {
             println!("  {k:<10} {v:>12}");
         }
     }

@@ -65,7 +65,8 @@ impl MethodSpec {
         let bad = |m: String| Error::Usage(format!("method spec '{s}': {m}"));
         let mut parts = s.trim().split(':');
         let m = parts.next().unwrap_or("");
-        let method = Method::from_str(m, true).map_err(|_| bad(format!("unknown method '{m}' (whitted, distributed, multires, cone, lod, surfel)")))?;
+        let method = Method::from_str(m, true)
+            .map_err(|_| bad(format!("unknown method '{m}' (whitted, distributed, multires, cone, lod, surfel)")))?;
         let mut spec = MethodSpec {
             text: s.trim().to_string(),
             method,
@@ -79,7 +80,9 @@ impl MethodSpec {
         };
         for p in parts {
             if let Some((k, v)) = p.split_once('=') {
-                let num = |v: &str| v.parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0).ok_or_else(|| bad(format!("bad value '{v}' for {k}")));
+                let num = |v: &str| {
+                    v.parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0).ok_or_else(|| bad(format!("bad value '{v}' for {k}")))
+                };
                 match k {
                     "spp" => spec.spp = num(v)? as u32,
                     "threads" => spec.threads = Some(num(v)? as usize),
@@ -149,7 +152,15 @@ pub struct BenchReport {
 }
 
 /// Renders `spec` on `scene` (best of `repeat` renders).
-pub fn run_spec(scene: &Scene, spec: &MethodSpec, width: u32, height: u32, threads: usize, repeat: u32, quiet: bool) -> Result<(Film, run::Stats)> {
+pub fn run_spec(
+    scene: &Scene,
+    spec: &MethodSpec,
+    width: u32,
+    height: u32,
+    threads: usize,
+    repeat: u32,
+    quiet: bool,
+) -> Result<(Film, run::Stats)> {
     let mut sc;
     let scene = if let Some(d) = spec.max_depth {
         sc = scene.clone();
@@ -283,7 +294,13 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
         for (_, v) in &mut series {
             v.sort_by(|a, b| a.0.total_cmp(&b.0));
         }
-        super::plot::line_chart(&out.join("bench-error.png"), "Error against the reference vs render time", "render time (s)", "mean FLIP", &series)?;
+        super::plot::line_chart(
+            &out.join("bench-error.png"),
+            "Error against the reference vs render time",
+            "render time (s)",
+            "mean FLIP",
+            &series,
+        )?;
     }
     Ok(())
 }
@@ -291,7 +308,12 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
 /// The table as Markdown (printed to stdout and written to bench.md).
 pub fn table_string(report: &BenchReport) -> String {
     let mut s = String::new();
-    s.push_str(&format!("{}x{}{}\n\n", report.width, report.height, report.reference.as_ref().map(|r| format!(", errors against {r}")).unwrap_or_default()));
+    s.push_str(&format!(
+        "{}x{}{}\n\n",
+        report.width,
+        report.height,
+        report.reference.as_ref().map(|r| format!(", errors against {r}")).unwrap_or_default()
+    ));
     s.push_str("| scene | method | thr | build s | render s | Mrays/s | speed-up vs first | RMSE | PSNR dB | FLIP | triangle tests | node tests |\n");
     s.push_str("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for r in &report.rows {

@@ -105,10 +105,27 @@ fn index_html(sections: &[(Job, BenchReport)]) -> String {
         }
         h.push_str("</table>");
         let dir = Path::new(job.scene);
-        let _ = write!(h, "<figure><img src=\"{}\"><figcaption>reference: {}</figcaption></figure>", dir.join(format!("{}-reference-{}.png", job.scene, bench::MethodSpec::parse(&job.reference).map(|s| s.slug()).unwrap_or_default())).display(), esc(&job.reference));
+        let _ = write!(
+            h,
+            "<figure><img src=\"{}\"><figcaption>reference: {}</figcaption></figure>",
+            dir.join(format!(
+                "{}-reference-{}.png",
+                job.scene,
+                bench::MethodSpec::parse(&job.reference).map(|s| s.slug()).unwrap_or_default()
+            ))
+            .display(),
+            esc(&job.reference)
+        );
         for row in &r.rows {
             if let Some(img) = &row.image {
-                let _ = write!(h, "<figure><img src=\"{}\"><figcaption>{} — {:.3} s, FLIP {}</figcaption></figure>", dir.join(img).display(), esc(&row.spec), row.stats.render_seconds, row.flip.map(|v| format!("{v:.4}")).unwrap_or("-".into()));
+                let _ = write!(
+                    h,
+                    "<figure><img src=\"{}\"><figcaption>{} — {:.3} s, FLIP {}</figcaption></figure>",
+                    dir.join(img).display(),
+                    esc(&row.spec),
+                    row.stats.render_seconds,
+                    row.flip.map(|v| format!("{v:.4}")).unwrap_or("-".into())
+                );
             }
         }
         let _ = write!(h, "<p><img src=\"{}\" style=\"max-width:640px\"></p>", dir.join("bench-time.png").display());

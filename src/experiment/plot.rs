@@ -97,7 +97,11 @@ fn fmt_axis(v: f64) -> String {
     }
     let s = format!("{v:.4}");
     let s = s.trim_end_matches('0').trim_end_matches('.');
-    if s == "-0" { "0".into() } else { s.to_string() }
+    if s == "-0" {
+        "0".into()
+    } else {
+        s.to_string()
+    }
 }
 
 /// A bar chart, one bar per `(label, value)`, the value printed above each bar.
@@ -114,7 +118,13 @@ pub fn bar_chart(path: &Path, title: &str, ylabel: &str, bars: &[(String, f64)])
     let span = hi - lo;
     let (y0, y1) = (if lo < 0.0 { lo - 0.12 * span } else { 0.0 }, if hi > 0.0 { hi + 0.12 * span } else { 0.0 });
     let n = bars.len() as u32;
-    let label_px = if n > 12 { 11 } else if n > 6 { 14 } else { 16 };
+    let label_px = if n > 12 {
+        11
+    } else if n > 6 {
+        14
+    } else {
+        16
+    };
     render(path, |root| {
         let e = |e: &dyn std::fmt::Display| e.to_string();
         // Bar i is centred on x = i. Asking for n ticks over the span n makes plotters' 1-2-5

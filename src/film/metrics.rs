@@ -40,11 +40,7 @@ fn finite_or_zero(v: f32) -> f64 {
 fn check(a: &[Vec3], b: &[Vec3], w: u32, h: u32) -> Result<usize> {
     let n = w as usize * h as usize;
     if a.len() != n || b.len() != n {
-        return Err(Error::Usage(format!(
-            "image metrics: sizes differ (expected {w}x{h} = {n} pixels, got {} and {})",
-            a.len(),
-            b.len()
-        )));
+        return Err(Error::Usage(format!("image metrics: sizes differ (expected {w}x{h} = {n} pixels, got {} and {})", a.len(), b.len())));
     }
     Ok(n)
 }
@@ -101,18 +97,13 @@ pub fn flip_mean(a: &[Vec3], b: &[Vec3], w: u32, h: u32) -> Result<(f64, image::
     let values = err.to_vec();
     let mean = values.iter().map(|&v| finite_or_zero(v)).sum::<f64>() / values.len().max(1) as f64;
     let vis = err.apply_color_lut(&nv_flip::magma_lut());
-    let map = image::RgbImage::from_raw(w, h, vis.to_vec())
-        .ok_or_else(|| Error::Image("FLIP: error map has the wrong size".into()))?;
+    let map = image::RgbImage::from_raw(w, h, vis.to_vec()).ok_or_else(|| Error::Image("FLIP: error map has the wrong size".into()))?;
     Ok((mean, map))
 }
 
 /// Luma of the sRGB-encoded values, in [0,1].
 fn luma(a: &[Vec3]) -> Vec<f64> {
-    a.iter()
-        .map(|c| {
-            0.299 * linear_to_srgb(c.x) as f64 + 0.587 * linear_to_srgb(c.y) as f64 + 0.114 * linear_to_srgb(c.z) as f64
-        })
-        .collect()
+    a.iter().map(|c| 0.299 * linear_to_srgb(c.x) as f64 + 0.587 * linear_to_srgb(c.y) as f64 + 0.114 * linear_to_srgb(c.z) as f64).collect()
 }
 
 /// Normalised 1-D Gaussian of odd size `k`.
@@ -188,11 +179,7 @@ pub fn ssim(a: &[Vec3], b: &[Vec3], w: u32, h: u32) -> f64 {
 pub fn diff_image(a: &[Vec3], b: &[Vec3], w: u32, h: u32) -> image::RgbImage {
     debug_assert_eq!(a.len(), w as usize * h as usize);
     debug_assert_eq!(b.len(), w as usize * h as usize);
-    let d: Vec<[f64; 3]> = a
-        .iter()
-        .zip(b)
-        .map(|(p, q)| [0, 1, 2].map(|c| (finite_or_zero(p[c]) - finite_or_zero(q[c])).abs()))
-        .collect();
+    let d: Vec<[f64; 3]> = a.iter().zip(b).map(|(p, q)| [0, 1, 2].map(|c| (finite_or_zero(p[c]) - finite_or_zero(q[c])).abs())).collect();
     let max = d.iter().flatten().fold(0.0f64, |m, &v| m.max(v));
     let scale = if max > 0.0 { 1.0 / max } else { 0.0 };
     let mut img = image::RgbImage::new(w, h);

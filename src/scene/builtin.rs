@@ -92,15 +92,43 @@ pub fn uv_sphere(stacks: u32, slices: u32, mat: u32) -> Mesh {
 pub fn icosphere(level: u32, mat: u32) -> Mesh {
     let t = (1.0 + 5f32.sqrt()) / 2.0;
     let mut v: Vec<Vec3> = [
-        (-1., t, 0.), (1., t, 0.), (-1., -t, 0.), (1., -t, 0.), (0., -1., t), (0., 1., t),
-        (0., -1., -t), (0., 1., -t), (t, 0., -1.), (t, 0., 1.), (-t, 0., -1.), (-t, 0., 1.),
+        (-1., t, 0.),
+        (1., t, 0.),
+        (-1., -t, 0.),
+        (1., -t, 0.),
+        (0., -1., t),
+        (0., 1., t),
+        (0., -1., -t),
+        (0., 1., -t),
+        (t, 0., -1.),
+        (t, 0., 1.),
+        (-t, 0., -1.),
+        (-t, 0., 1.),
     ]
     .iter()
     .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
     .collect();
     let mut f: Vec<[u32; 3]> = vec![
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
     ];
     for _ in 0..level {
         let mut mid = std::collections::HashMap::new();
@@ -324,14 +352,7 @@ impl PlantParams {
 /// small folded blades of 4 triangles. Deterministic in `p.seed` (random numbers from
 /// [`Sampler`]). Stems use `stem_mat`, leaves `leaf_mat`. Smooth normals are set.
 pub fn plant(p: &PlantParams, stem_mat: u32, leaf_mat: u32) -> Mesh {
-    let mut g = PlantGen {
-        p,
-        rng: Sampler::new(p.seed, 0x504c_414e, 0),
-        m: Mesh::new("plant"),
-        stem_mat,
-        leaf_mat,
-        azimuth: 0.0,
-    };
+    let mut g = PlantGen { p, rng: Sampler::new(p.seed, 0x504c_414e, 0), m: Mesh::new("plant"), stem_mat, leaf_mat, azimuth: 0.0 };
     g.branch(Vec3::ZERO, Vec3::Y, p.length, p.radius, 0);
     g.m
 }
@@ -429,43 +450,26 @@ impl PlantGen<'_> {
         let tip = self.vertex(pts[segs] + t_end * (r1 * 2.0), t_end);
         let last = base + segs as u32 * sides;
         for k in 0..sides {
-            self.m
-                .push_tri(last + k, last + (k + 1) % sides, tip, self.stem_mat);
+            self.m.push_tri(last + k, last + (k + 1) % sides, tip, self.stem_mat);
         }
         // A point, direction and radius at fraction f of the stem.
         let along = |f: f32| -> (Vec3, Vec3, f32) {
             let x = f.clamp(0.0, 1.0) * segs as f32;
             let i = (x as usize).min(segs - 1);
             let fr = x - i as f32;
-            (
-                pts[i].lerp(pts[i + 1], fr),
-                (pts[i + 1] - pts[i]).normalize_or(dir),
-                r0 + (r1 - r0) * f,
-            )
+            (pts[i].lerp(pts[i + 1], fr), (pts[i + 1] - pts[i]).normalize_or(dir), r0 + (r1 - r0) * f)
         };
         if level < p.levels {
             let span = p.children[1].saturating_sub(p.children[0]) + 1;
             let n = p.children[0] + ((self.rand() * span as f32) as u32).min(span - 1);
             for k in 0..n {
                 let apical = k + 1 == n;
-                let f = if apical {
-                    1.0
-                } else {
-                    0.3 + 0.65 * (k as f32 + self.rand()) / n as f32
-                };
+                let f = if apical { 1.0 } else { 0.3 + 0.65 * (k as f32 + self.rand()) / n as f32 };
                 let (pos, sd, r) = along(f);
                 let out = self.next_out(sd);
-                let ang = p.branch_angle.to_radians()
-                    * if apical {
-                        0.25
-                    } else {
-                        self.rand_range(0.75, 1.25)
-                    };
+                let ang = p.branch_angle.to_radians() * if apical { 0.25 } else { self.rand_range(0.75, 1.25) };
                 let cdir = (sd * ang.cos() + out * ang.sin()).normalize();
-                let clen = len
-                    * p.length_ratio
-                    * self.rand_range(0.8, 1.1)
-                    * if apical { 0.9 } else { 1.0 - 0.3 * f };
+                let clen = len * p.length_ratio * self.rand_range(0.8, 1.1) * if apical { 0.9 } else { 1.0 - 0.3 * f };
                 self.branch(pos, cdir, clen, (r * 0.85).max(r1), level + 1);
             }
         }
@@ -501,9 +505,7 @@ impl PlantGen<'_> {
             ld = h * (1.0 - y * y).sqrt() + Vec3::Y * y;
         }
         let droop = (0.2 * l).min(room + ld.y.min(0.0) * l).max(0.0);
-        let w = ld
-            .cross(Vec3::Y)
-            .normalize_or(out.cross(ld).normalize_or(crate::core::onb(ld).0));
+        let w = ld.cross(Vec3::Y).normalize_or(out.cross(ld).normalize_or(crate::core::onb(ld).0));
         let n = w.cross(ld).normalize();
         let fold = n * (0.2 * wd);
         let tip = base + ld * l - Vec3::Y * droop;
@@ -512,8 +514,7 @@ impl PlantGen<'_> {
         let right = base + ld * (0.35 * l) + w * (0.5 * wd) + fold;
         let nt = (tip - mid).cross(w).normalize_or(n);
         let nt = if nt.dot(n) < 0.0 { -nt } else { nt };
-        let [b, m, lft, rgt, t] = [(base, n), (mid, n), (left, n), (right, n), (tip, nt)]
-            .map(|(q, nn)| self.vertex(q, nn));
+        let [b, m, lft, rgt, t] = [(base, n), (mid, n), (left, n), (right, n), (tip, nt)].map(|(q, nn)| self.vertex(q, nn));
         let mat = self.leaf_mat;
         self.m.push_tri(b, lft, m, mat);
         self.m.push_tri(b, m, rgt, mat);
@@ -540,8 +541,19 @@ pub fn plane() -> Scene {
     let mut s = Scene::empty("plane");
     s.materials[0] = Material::diffuse("white", Vec3::splat(0.5));
     let id = s.add_mesh(unit_quad(0));
-    s.instance(Target::Mesh(id), Affine3A::from_scale_rotation_translation(Vec3::new(2.0, 1.0, 2.0), glam::Quat::IDENTITY, Vec3::new(-1.0, 0.0, -1.0)), None);
-    s.camera = Camera { eye: Vec3::new(0.0, 3.0, 0.0), look: Vec3::ZERO, up: Vec3::new(0.0, 0.0, -1.0), fovy: 30.0, aperture: 0.0, focal_dist: 3.0 };
+    s.instance(
+        Target::Mesh(id),
+        Affine3A::from_scale_rotation_translation(Vec3::new(2.0, 1.0, 2.0), glam::Quat::IDENTITY, Vec3::new(-1.0, 0.0, -1.0)),
+        None,
+    );
+    s.camera = Camera {
+        eye: Vec3::new(0.0, 3.0, 0.0),
+        look: Vec3::ZERO,
+        up: Vec3::new(0.0, 0.0, -1.0),
+        fovy: 30.0,
+        aperture: 0.0,
+        focal_dist: 3.0,
+    };
     s.lights.push(Light::Point { pos: Vec3::new(0.0, 2.0, 0.0), intensity: Vec3::splat(10.0) });
     s.ambient = Vec3::ZERO;
     s.background = Vec3::ZERO;
@@ -577,10 +589,24 @@ pub fn spheres() -> Scene {
     let board = s.add_mesh(checkerboard(16, 16.0, 0, black));
     s.instance(Target::Mesh(board), Affine3A::IDENTITY, None);
     let sphere = s.add_mesh(uv_sphere(43, 41, 0));
-    s.instance(Target::Mesh(sphere), Affine3A::from_scale_rotation_translation(Vec3::splat(1.3), glam::Quat::IDENTITY, Vec3::new(-1.6, 1.3, -1.0)), Some(red));
-    s.instance(Target::Mesh(sphere), Affine3A::from_scale_rotation_translation(Vec3::splat(1.1), glam::Quat::IDENTITY, Vec3::new(1.4, 1.1, 1.2)), Some(glass));
-    s.camera = Camera { eye: Vec3::new(0.5, 3.2, 8.5), look: Vec3::new(0.0, 0.8, 0.0), up: Vec3::Y, fovy: 45.0, aperture: 0.0, focal_dist: 8.5 };
-    s.lights.push(Light::Ellipse { center: Vec3::new(-4.0, 8.0, 5.0), axis_a: Vec3::new(0.8, 0.0, 0.0), axis_b: Vec3::new(0.0, 0.0, 0.8), intensity: Vec3::splat(90.0) });
+    s.instance(
+        Target::Mesh(sphere),
+        Affine3A::from_scale_rotation_translation(Vec3::splat(1.3), glam::Quat::IDENTITY, Vec3::new(-1.6, 1.3, -1.0)),
+        Some(red),
+    );
+    s.instance(
+        Target::Mesh(sphere),
+        Affine3A::from_scale_rotation_translation(Vec3::splat(1.1), glam::Quat::IDENTITY, Vec3::new(1.4, 1.1, 1.2)),
+        Some(glass),
+    );
+    s.camera =
+        Camera { eye: Vec3::new(0.5, 3.2, 8.5), look: Vec3::new(0.0, 0.8, 0.0), up: Vec3::Y, fovy: 45.0, aperture: 0.0, focal_dist: 8.5 };
+    s.lights.push(Light::Ellipse {
+        center: Vec3::new(-4.0, 8.0, 5.0),
+        axis_a: Vec3::new(0.8, 0.0, 0.0),
+        axis_b: Vec3::new(0.0, 0.0, 0.8),
+        intensity: Vec3::splat(90.0),
+    });
     s.background = Vec3::new(0.45, 0.55, 0.75);
     s.ambient = Vec3::splat(0.08);
     s
@@ -603,10 +629,7 @@ pub fn assets_dir() -> PathBuf {
 fn asset_mesh(scene: &str, file: &str, mat: u32) -> Result<Mesh> {
     let p = assets_dir().join(file);
     if !p.is_file() {
-        return Err(Error::Scene(format!(
-            "scene '{scene}' needs the mesh {} (not found): run tools/setup",
-            p.display()
-        )));
+        return Err(Error::Scene(format!("scene '{scene}' needs the mesh {} (not found): run tools/setup", p.display())));
     }
     let mut m = super::load::load_off(&p, mat)?;
     normalize_mesh(&mut m);
@@ -696,44 +719,21 @@ pub fn complex() -> Result<Scene> {
 
     // The board: 8×8-cell patch (4×4 units) → row of 16 → block of 16 rows → 4×4 blocks.
     let patch = s.add_mesh(checkerboard(8, 4.0, 0, dark));
-    let row = s.add_group(super::Group {
-        name: "board row".into(),
-        children: vec![],
-    });
+    let row = s.add_group(super::Group { name: "board row".into(), children: vec![] });
     for i in 0..16 {
-        s.add_to_group(
-            row,
-            Target::Mesh(patch),
-            Affine3A::from_translation(Vec3::new(2.0 + 4.0 * i as f32, 0.0, 0.0)),
-            None,
-        );
+        s.add_to_group(row, Target::Mesh(patch), Affine3A::from_translation(Vec3::new(2.0 + 4.0 * i as f32, 0.0, 0.0)), None);
     }
-    let block = s.add_group(super::Group {
-        name: "board block".into(),
-        children: vec![],
-    });
+    let block = s.add_group(super::Group { name: "board block".into(), children: vec![] });
     for j in 0..16 {
-        s.add_to_group(
-            block,
-            Target::Group(row),
-            Affine3A::from_translation(Vec3::new(0.0, 0.0, 2.0 + 4.0 * j as f32)),
-            None,
-        );
+        s.add_to_group(block, Target::Group(row), Affine3A::from_translation(Vec3::new(0.0, 0.0, 2.0 + 4.0 * j as f32)), None);
     }
-    let board = s.add_group(super::Group {
-        name: "board".into(),
-        children: vec![],
-    });
+    let board = s.add_group(super::Group { name: "board".into(), children: vec![] });
     for bi in 0..4 {
         for bj in 0..4 {
             s.add_to_group(
                 board,
                 Target::Group(block),
-                Affine3A::from_translation(Vec3::new(
-                    -128.0 + 64.0 * bi as f32,
-                    0.0,
-                    -128.0 + 64.0 * bj as f32,
-                )),
+                Affine3A::from_translation(Vec3::new(-128.0 + 64.0 * bi as f32, 0.0, -128.0 + 64.0 * bj as f32)),
                 None,
             );
         }
@@ -749,10 +749,7 @@ pub fn complex() -> Result<Scene> {
     let mut rng = Sampler::new(2003, 0x636f_6d70, 0);
     let mut clumps = Vec::new();
     for c in 0..3u32 {
-        let g = s.add_group(super::Group {
-            name: format!("clump {c}"),
-            children: vec![],
-        });
+        let g = s.add_group(super::Group { name: format!("clump {c}"), children: vec![] });
         for k in 0..6u32 {
             let which = plants[((c + k) % 3) as usize];
             let a = std::f32::consts::TAU * (k as f32 + rng.next() * 0.6) / 6.0;
@@ -761,161 +758,60 @@ pub fn complex() -> Result<Scene> {
             s.add_to_group(
                 g,
                 Target::Mesh(which),
-                srt(
-                    Vec3::splat(sc),
-                    rng.next() * std::f32::consts::TAU,
-                    Vec3::new(r * a.cos(), 0.0, r * a.sin()),
-                ),
+                srt(Vec3::splat(sc), rng.next() * std::f32::consts::TAU, Vec3::new(r * a.cos(), 0.0, r * a.sin())),
                 None,
             );
         }
         clumps.push(g);
     }
-    let field = s.add_group(super::Group {
-        name: "field".into(),
-        children: vec![],
-    });
+    let field = s.add_group(super::Group { name: "field".into(), children: vec![] });
     for i in 0..4 {
         for j in 0..4 {
             let c = clumps[(rng.next() * 3.0) as usize % 3];
-            let t = Vec3::new(
-                -4.5 + 3.0 * i as f32 + rng.next() - 0.5,
-                0.0,
-                -4.5 + 3.0 * j as f32 + rng.next() - 0.5,
-            );
-            s.add_to_group(
-                field,
-                Target::Group(c),
-                srt(
-                    Vec3::splat(0.9 + 0.3 * rng.next()),
-                    rng.next() * std::f32::consts::TAU,
-                    t,
-                ),
-                None,
-            );
+            let t = Vec3::new(-4.5 + 3.0 * i as f32 + rng.next() - 0.5, 0.0, -4.5 + 3.0 * j as f32 + rng.next() - 0.5);
+            s.add_to_group(field, Target::Group(c), srt(Vec3::splat(0.9 + 0.3 * rng.next()), rng.next() * std::f32::consts::TAU, t), None);
         }
     }
-    for (x, z) in [
-        (-9.0, -2.0),
-        (9.5, -4.0),
-        (-11.0, -16.0),
-        (11.0, -18.0),
-        (-3.0, -30.0),
-        (12.0, -36.0),
-        (-14.0, -44.0),
-        (2.0, -58.0),
-    ] {
-        s.instance(
-            Target::Group(field),
-            srt(
-                Vec3::ONE,
-                rng.next() * std::f32::consts::TAU,
-                Vec3::new(x, 0.0, z),
-            ),
-            None,
-        );
+    for (x, z) in [(-9.0, -2.0), (9.5, -4.0), (-11.0, -16.0), (11.0, -18.0), (-3.0, -30.0), (12.0, -36.0), (-14.0, -44.0), (2.0, -58.0)] {
+        s.instance(Target::Group(field), srt(Vec3::ONE, rng.next() * std::f32::consts::TAU, Vec3::new(x, 0.0, z)), None);
     }
     // A hedge of clumps far away across the view, where the plants shrink below a pixel.
-    let hedge = s.add_group(super::Group {
-        name: "hedge".into(),
-        children: vec![],
-    });
+    let hedge = s.add_group(super::Group { name: "hedge".into(), children: vec![] });
     for k in 0..7 {
         let c = clumps[k % 3];
-        let t = Vec3::new(
-            -18.0 + 6.0 * k as f32 + 2.0 * rng.next(),
-            0.0,
-            rng.next() * 2.0,
-        );
-        s.add_to_group(
-            hedge,
-            Target::Group(c),
-            srt(Vec3::splat(1.3), rng.next() * std::f32::consts::TAU, t),
-            None,
-        );
+        let t = Vec3::new(-18.0 + 6.0 * k as f32 + 2.0 * rng.next(), 0.0, rng.next() * 2.0);
+        s.add_to_group(hedge, Target::Group(c), srt(Vec3::splat(1.3), rng.next() * std::f32::consts::TAU, t), None);
     }
-    s.instance(
-        Target::Group(hedge),
-        Affine3A::from_translation(Vec3::new(-4.0, 0.0, -80.0)),
-        None,
-    );
+    s.instance(Target::Group(hedge), Affine3A::from_translation(Vec3::new(-4.0, 0.0, -80.0)), None);
 
     // Cows: a herd of 5 (chrome and gold), instanced three times.
-    let herd = s.add_group(super::Group {
-        name: "herd".into(),
-        children: vec![],
-    });
-    for (k, (x, z, a)) in [
-        (0.0, 0.0, 0.3),
-        (2.6, -1.5, -0.6),
-        (-2.4, -2.2, 2.6),
-        (0.8, -4.0, 1.2),
-        (-1.0, 2.4, -2.0),
-    ]
-    .into_iter()
-    .enumerate()
+    let herd = s.add_group(super::Group { name: "herd".into(), children: vec![] });
+    for (k, (x, z, a)) in
+        [(0.0, 0.0, 0.3), (2.6, -1.5, -0.6), (-2.4, -2.2, 2.6), (0.8, -4.0, 1.2), (-1.0, 2.4, -2.0)].into_iter().enumerate()
     {
-        s.add_to_group(
-            herd,
-            Target::Mesh(cow),
-            srt(Vec3::splat(2.2), a, Vec3::new(x, 0.0, z)),
-            (k % 2 == 1).then_some(gold),
-        );
+        s.add_to_group(herd, Target::Mesh(cow), srt(Vec3::splat(2.2), a, Vec3::new(x, 0.0, z)), (k % 2 == 1).then_some(gold));
     }
     for (x, z, a) in [(2.5, 2.0, 0.0), (-6.0, -24.0, 1.0), (18.0, -60.0, -0.7)] {
-        s.instance(
-            Target::Group(herd),
-            srt(Vec3::ONE, a, Vec3::new(x, 0.0, z)),
-            None,
-        );
+        s.instance(Target::Group(herd), srt(Vec3::ONE, a, Vec3::new(x, 0.0, z)), None);
     }
 
     // Bunnies: a group of 3 glass bunnies, instanced twice (the far one tinted).
-    let bunnies = s.add_group(super::Group {
-        name: "bunnies".into(),
-        children: vec![],
-    });
-    for (x, z, a, sc) in [
-        (0.0, 0.0, 1.3, 1.8),
-        (2.8, -2.0, 0.6, 1.4),
-        (-2.5, -1.2, 2.2, 1.2),
-    ] {
-        s.add_to_group(
-            bunnies,
-            Target::Mesh(bunny),
-            srt(Vec3::splat(sc), a, Vec3::new(x, 0.0, z)),
-            None,
-        );
+    let bunnies = s.add_group(super::Group { name: "bunnies".into(), children: vec![] });
+    for (x, z, a, sc) in [(0.0, 0.0, 1.3, 1.8), (2.8, -2.0, 0.6, 1.4), (-2.5, -1.2, 2.2, 1.2)] {
+        s.add_to_group(bunnies, Target::Mesh(bunny), srt(Vec3::splat(sc), a, Vec3::new(x, 0.0, z)), None);
     }
-    s.instance(
-        Target::Group(bunnies),
-        srt(Vec3::ONE, 0.0, Vec3::new(-3.0, 0.0, 6.0)),
-        None,
-    );
-    s.instance(
-        Target::Group(bunnies),
-        srt(Vec3::ONE, 2.0, Vec3::new(4.0, 0.0, -14.0)),
-        Some(tinted),
-    );
+    s.instance(Target::Group(bunnies), srt(Vec3::ONE, 0.0, Vec3::new(-3.0, 0.0, 6.0)), None);
+    s.instance(Target::Group(bunnies), srt(Vec3::ONE, 2.0, Vec3::new(4.0, 0.0, -14.0)), Some(tinted));
 
-    s.camera = Camera {
-        eye: Vec3::new(0.5, 3.4, 13.5),
-        look: Vec3::new(0.0, 0.3, 0.0),
-        up: Vec3::Y,
-        fovy: 50.0,
-        aperture: 0.0,
-        focal_dist: 13.9,
-    };
+    s.camera =
+        Camera { eye: Vec3::new(0.5, 3.4, 13.5), look: Vec3::new(0.0, 0.3, 0.0), up: Vec3::Y, fovy: 50.0, aperture: 0.0, focal_dist: 13.9 };
     s.lights.push(Light::Ellipse {
         center: Vec3::new(-40.0, 70.0, 45.0),
         axis_a: Vec3::new(4.0, 0.0, 0.0),
         axis_b: Vec3::new(0.0, 0.0, 4.0),
         intensity: Vec3::new(30000.0, 28500.0, 26000.0),
     });
-    s.lights.push(Light::Point {
-        pos: Vec3::new(12.0, 10.0, 25.0),
-        intensity: Vec3::new(120.0, 130.0, 150.0),
-    });
+    s.lights.push(Light::Point { pos: Vec3::new(12.0, 10.0, 25.0), intensity: Vec3::new(120.0, 130.0, 150.0) });
     s.background = Vec3::new(0.55, 0.7, 0.95);
     s.ambient = Vec3::splat(0.12);
     Ok(s)
@@ -960,10 +856,7 @@ pub fn instanced() -> Scene {
     let board = s.add_mesh(checkerboard(8, 16.0, 0, dark));
     let cube = s.add_mesh(cube_mesh(0));
     let ico = s.add_mesh(icosphere(1, 0));
-    let pair = s.add_group(super::Group {
-        name: "pair".into(),
-        children: vec![],
-    });
+    let pair = s.add_group(super::Group { name: "pair".into(), children: vec![] });
     s.add_to_group(
         pair,
         Target::Mesh(cube),
@@ -977,43 +870,24 @@ pub fn instanced() -> Scene {
     s.add_to_group(
         pair,
         Target::Mesh(ico),
-        Affine3A::from_scale_rotation_translation(
-            Vec3::new(0.35, 0.45, 0.35),
-            Quat::IDENTITY,
-            Vec3::new(0.45, 0.45, 0.0),
-        ),
+        Affine3A::from_scale_rotation_translation(Vec3::new(0.35, 0.45, 0.35), Quat::IDENTITY, Vec3::new(0.45, 0.45, 0.0)),
         None,
     );
-    let ring = s.add_group(super::Group {
-        name: "ring".into(),
-        children: vec![],
-    });
+    let ring = s.add_group(super::Group { name: "ring".into(), children: vec![] });
     for k in 0..6 {
         let a = std::f32::consts::TAU * k as f32 / 6.0;
-        let xf =
-            Affine3A::from_rotation_y(a) * Affine3A::from_translation(Vec3::new(2.0, 0.0, 0.0));
+        let xf = Affine3A::from_rotation_y(a) * Affine3A::from_translation(Vec3::new(2.0, 0.0, 0.0));
         s.add_to_group(ring, Target::Group(pair), xf, (k % 2 == 1).then_some(red));
     }
-    let tower = s.add_group(super::Group {
-        name: "tower".into(),
-        children: vec![],
-    });
+    let tower = s.add_group(super::Group { name: "tower".into(), children: vec![] });
     for k in 0..3 {
-        let xf = srt(
-            Vec3::splat(1.0 - 0.25 * k as f32),
-            0.25 * k as f32,
-            Vec3::new(0.0, 1.0 * k as f32, 0.0),
-        );
+        let xf = srt(Vec3::splat(1.0 - 0.25 * k as f32), 0.25 * k as f32, Vec3::new(0.0, 1.0 * k as f32, 0.0));
         s.add_to_group(tower, Target::Group(ring), xf, (k == 1).then_some(blue));
     }
     s.add_to_group(
         tower,
         Target::Mesh(ico),
-        Affine3A::from_scale_rotation_translation(
-            Vec3::splat(0.6),
-            Quat::IDENTITY,
-            Vec3::new(0.0, 0.6, 0.0),
-        ),
+        Affine3A::from_scale_rotation_translation(Vec3::splat(0.6), Quat::IDENTITY, Vec3::new(0.0, 0.6, 0.0)),
         Some(glass),
     );
     s.instance(Target::Mesh(board), Affine3A::IDENTITY, None);
@@ -1027,8 +901,7 @@ pub fn instanced() -> Scene {
     );
     s.instance(
         Target::Group(tower),
-        Affine3A::from_translation(Vec3::new(4.5, 0.0, -3.0))
-            * Affine3A::from_scale(Vec3::new(0.5, 1.4, 0.8)),
+        Affine3A::from_translation(Vec3::new(4.5, 0.0, -3.0)) * Affine3A::from_scale(Vec3::new(0.5, 1.4, 0.8)),
         Some(dark),
     );
     s.camera = Camera {
@@ -1039,10 +912,7 @@ pub fn instanced() -> Scene {
         aperture: 0.0,
         focal_dist: 11.0,
     };
-    s.lights.push(Light::Point {
-        pos: Vec3::new(5.0, 9.0, 6.0),
-        intensity: Vec3::splat(120.0),
-    });
+    s.lights.push(Light::Point { pos: Vec3::new(5.0, 9.0, 6.0), intensity: Vec3::splat(120.0) });
     s.lights.push(Light::Ellipse {
         center: Vec3::new(-6.0, 8.0, 2.0),
         axis_a: Vec3::new(1.0, 0.0, 0.0),

@@ -48,8 +48,10 @@ pub fn load_off(path: &Path, mat: u32) -> Result<Mesh> {
         // Some files omit the header.
         first_count = Some(head);
     }
-    let mut next_num = |what: &str| -> Result<&str> { tokens.next().ok_or_else(|| Error::parse(path, format!("truncated: expected {what}"))) };
-    let parse_usize = |s: &str, what: &str| -> Result<usize> { s.parse::<usize>().map_err(|_| Error::parse(path, format!("bad {what} '{s}'"))) };
+    let mut next_num =
+        |what: &str| -> Result<&str> { tokens.next().ok_or_else(|| Error::parse(path, format!("truncated: expected {what}"))) };
+    let parse_usize =
+        |s: &str, what: &str| -> Result<usize> { s.parse::<usize>().map_err(|_| Error::parse(path, format!("bad {what} '{s}'"))) };
     let nv = match first_count {
         Some(s) => parse_usize(s, "vertex count")?,
         None => parse_usize(next_num("vertex count")?, "vertex count")?,
@@ -187,7 +189,10 @@ pub fn bare_mesh_scene(mesh: Mesh) -> Result<Scene> {
     s.camera = frame_bounds(lo, hi, 40.0);
     let r = (hi - lo).length().max(1e-6);
     let eye = s.camera.eye;
-    let light_pos = eye + (s.camera.up * 0.5 * r) + (eye - s.camera.look).normalize() * 0.2 * r + s.camera.look.cross(Vec3::Y).normalize_or_zero() * 0.3 * r;
+    let light_pos = eye
+        + (s.camera.up * 0.5 * r)
+        + (eye - s.camera.look).normalize() * 0.2 * r
+        + s.camera.look.cross(Vec3::Y).normalize_or_zero() * 0.3 * r;
     let d2 = (light_pos - (lo + hi) * 0.5).length_squared();
     s.lights.push(Light::Point { pos: light_pos, intensity: Vec3::splat(d2 * 3.0) });
     s.ambient = Vec3::splat(0.05);

@@ -256,11 +256,8 @@ impl Scene {
         for l in self.leaf_instances()? {
             let (a, b) = *cache[l.mesh as usize].get_or_insert_with(|| self.meshes[l.mesh as usize].bounds());
             for i in 0..8 {
-                let c = Vec3::new(
-                    if i & 1 == 0 { a.x } else { b.x },
-                    if i & 2 == 0 { a.y } else { b.y },
-                    if i & 4 == 0 { a.z } else { b.z },
-                );
+                let c =
+                    Vec3::new(if i & 1 == 0 { a.x } else { b.x }, if i & 2 == 0 { a.y } else { b.y }, if i & 4 == 0 { a.z } else { b.z });
                 let w = l.xform.transform_point3(c);
                 lo = lo.min(w);
                 hi = hi.max(w);

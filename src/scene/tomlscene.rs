@@ -178,10 +178,7 @@ struct InstanceDef {
 }
 
 #[derive(Deserialize, Debug)]
-#[serde(
-    untagged,
-    expecting = "rotate: Euler angles [x, y, z] in degrees, or { axis = [x, y, z], angle = degrees }"
-)]
+#[serde(untagged, expecting = "rotate: Euler angles [x, y, z] in degrees, or { axis = [x, y, z], angle = degrees }")]
 enum RotateDef {
     Euler([f32; 3]),
     AxisAngle(AxisAngleDef),
@@ -197,16 +194,8 @@ struct AxisAngleDef {
 #[derive(Deserialize, Debug)]
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
 enum LightDef {
-    Point {
-        pos: [f32; 3],
-        intensity: Vec3Def,
-    },
-    Ellipse {
-        center: [f32; 3],
-        axis_a: [f32; 3],
-        axis_b: [f32; 3],
-        intensity: Vec3Def,
-    },
+    Point { pos: [f32; 3], intensity: Vec3Def },
+    Ellipse { center: [f32; 3], axis_a: [f32; 3], axis_b: [f32; 3], intensity: Vec3Def },
 }
 
 // ---------------------------------------------------------------- loading
@@ -220,12 +209,8 @@ pub fn load(path: &Path) -> Result<Scene> {
 
 /// Parses TOML scene text as if read from `path` (for messages and relative mesh paths).
 pub fn from_str(text: &str, path: &Path) -> Result<Scene> {
-    let def: FileDef =
-        toml::from_str(text).map_err(|e| Error::parse(path, syntax_message(text, &e)))?;
-    let mut b = Builder {
-        path,
-        dir: path.parent().map(Path::to_path_buf).unwrap_or_default(),
-    };
+    let def: FileDef = toml::from_str(text).map_err(|e| Error::parse(path, syntax_message(text, &e)))?;
+    let mut b = Builder { path, dir: path.parent().map(Path::to_path_buf).unwrap_or_default() };
     let mut scene = b.build(def)?;
     scene.validate().map_err(|e| b.err(e.to_string()))?;
     Ok(scene)
@@ -239,12 +224,7 @@ fn syntax_message(text: &str, e: &toml::de::Error) -> String {
             let start = sp.start.min(text.len());
             let before = &text[..start];
             let line = before.matches('\n').count() + 1;
-            let col = before
-                .rsplit('\n')
-                .next()
-                .map(|l| l.chars().count())
-                .unwrap_or(0)
-                + 1;
+            let col = before.rsplit('\n').next().map(|l| l.chars().count()).unwrap_or(0) + 1;
             format!("line {line}, column {col}: {msg}")
         }
         None => msg,
@@ -300,12 +280,10 @@ impl Builder<'_> {
     }
 
     fn build(&mut self, def: FileDef) -> Result<Scene> {
-        let name = def.name.clone().unwrap_or_else(|| {
-            self.path
-                .file_stem()
-                .map(|s| s.to_string_lossy().to_string())
-                .unwrap_or_else(|| "scene".into())
-        });
+        let name = def
+            .name
+            .clone()
+            .unwrap_or_else(|| self.path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scene".into()));
         let mut s = Scene::empty(&name);
         if let Some(v) = def.background {
             s.background = self.colour(v, "background")?;
@@ -334,28 +312,17 @@ impl Builder<'_> {
             mats.insert(mname.clone(), id);
         }
         let mat_of = |b: &Self, name: &str, whose: &str| -> Result<u32> {
-            mats.get(name).copied().ok_or_else(|| {
-                b.err(format!(
-                    "{whose}: unknown material '{name}' (materials: {})",
-                    list(def.materials.keys().cloned())
-                ))
-            })
+            mats.get(name)
+                .copied()
+                .ok_or_else(|| b.err(format!("{whose}: unknown material '{name}' (materials: {})", list(def.materials.keys().cloned()))))
         };
 
         // Meshes.
         let mut targets: HashMap<String, Target> = HashMap::new();
         for (mname, md) in &def.meshes {
             let whose = format!("mesh '{mname}'");
-            let mat = md
-                .material
-                .as_deref()
-                .map(|n| mat_of(self, n, &whose))
-                .transpose()?;
-            let mat_b = md
-                .material_b
-                .as_deref()
-                .map(|n| mat_of(self, n, &whose))
-                .transpose()?;
+            let mat = md.material.as_deref().map(|n| mat_of(self, n, &whose)).transpose()?;
+            let mat_b = md.material_b.as_deref().map(|n| mat_of(self, n, &whose)).transpose()?;
             let mut mesh = self.mesh(mname, md, mat, mat_b, &mut s)?;
             mesh.name = mname.clone();
             if md.normalize == Some(true) {
@@ -371,10 +338,7 @@ impl Builder<'_> {
             if targets.contains_key(gname) {
                 return Err(self.err(format!("the name '{gname}' is both a mesh and a group")));
             }
-            let id = s.add_group(Group {
-                name: gname.clone(),
-                children: vec![],
-            });
+            let id = s.add_group(Group { name: gname.clone(), children: vec![] });
             targets.insert(gname.clone(), Target::Group(id));
             group_ids.push(id);
         }
@@ -391,35 +355,21 @@ impl Builder<'_> {
             for (k, inst) in gd.instances.iter().enumerate() {
                 let whose = format!("group '{gname}', instance {}", k + 1);
                 let target = known(self, &inst.target, &whose)?;
-                let material = inst
-                    .material
-                    .as_deref()
-                    .map(|n| mat_of(self, n, &whose))
-                    .transpose()?;
+                let material = inst.material.as_deref().map(|n| mat_of(self, n, &whose)).transpose()?;
                 let xform = self.transform(inst, &whose)?;
-                s.groups[gid as usize].children.push(Instance {
-                    target,
-                    xform,
-                    material,
-                });
+                s.groups[gid as usize].children.push(Instance { target, xform, material });
             }
         }
         self.check_cycles(&s, &group_ids)?;
         for (k, inst) in def.instances.iter().enumerate() {
             let whose = format!("instance {}", k + 1);
             let target = known(self, &inst.target, &whose)?;
-            let material = inst
-                .material
-                .as_deref()
-                .map(|n| mat_of(self, n, &whose))
-                .transpose()?;
+            let material = inst.material.as_deref().map(|n| mat_of(self, n, &whose)).transpose()?;
             let xform = self.transform(inst, &whose)?;
             s.instance(target, xform, material);
         }
         if def.instances.is_empty() {
-            return Err(
-                self.err("no [[instances]]: the root group is empty, nothing would be rendered")
-            );
+            return Err(self.err("no [[instances]]: the root group is empty, nothing would be rendered"));
         }
 
         for (k, l) in def.lights.iter().enumerate() {
@@ -429,12 +379,7 @@ impl Builder<'_> {
                     pos: self.vec3(pos, &format!("{whose}: pos"))?,
                     intensity: self.colour(intensity, &format!("{whose}: intensity"))?,
                 },
-                LightDef::Ellipse {
-                    center,
-                    axis_a,
-                    axis_b,
-                    intensity,
-                } => Light::Ellipse {
+                LightDef::Ellipse { center, axis_a, axis_b, intensity } => Light::Ellipse {
                     center: self.vec3(center, &format!("{whose}: center"))?,
                     axis_a: self.vec3(axis_a, &format!("{whose}: axis_a"))?,
                     axis_b: self.vec3(axis_b, &format!("{whose}: axis_b"))?,
@@ -451,43 +396,19 @@ impl Builder<'_> {
                 let cam = Camera {
                     eye,
                     look,
-                    up: c
-                        .up
-                        .map(|u| self.vec3(u, "camera: up"))
-                        .transpose()?
-                        .unwrap_or(Vec3::Y),
-                    fovy: c
-                        .fovy
-                        .map(|v| self.finite(v, "camera: fovy"))
-                        .transpose()?
-                        .unwrap_or(45.0),
-                    aperture: c
-                        .aperture
-                        .map(|v| self.finite(v, "camera: aperture"))
-                        .transpose()?
-                        .unwrap_or(0.0),
-                    focal_dist: c
-                        .focal_dist
-                        .map(|v| self.finite(v, "camera: focal_dist"))
-                        .transpose()?
-                        .unwrap_or((look - eye).length()),
+                    up: c.up.map(|u| self.vec3(u, "camera: up")).transpose()?.unwrap_or(Vec3::Y),
+                    fovy: c.fovy.map(|v| self.finite(v, "camera: fovy")).transpose()?.unwrap_or(45.0),
+                    aperture: c.aperture.map(|v| self.finite(v, "camera: aperture")).transpose()?.unwrap_or(0.0),
+                    focal_dist: c.focal_dist.map(|v| self.finite(v, "camera: focal_dist")).transpose()?.unwrap_or((look - eye).length()),
                 };
                 // Camera::validate's message already starts with "camera:".
-                cam.validate().map_err(|e| {
-                    self.err(
-                        e.to_string()
-                            .trim_start_matches("invalid option: ")
-                            .to_string(),
-                    )
-                })?;
+                cam.validate().map_err(|e| self.err(e.to_string().trim_start_matches("invalid option: ").to_string()))?;
                 cam
             }
             None => {
                 let (lo, hi) = s.bounds().map_err(|e| self.err(e.to_string()))?;
                 if !lo.is_finite() || !hi.is_finite() {
-                    return Err(
-                        self.err("no [camera] and the scene's bounds are empty or not finite")
-                    );
+                    return Err(self.err("no [camera] and the scene's bounds are empty or not finite"));
                 }
                 super::load::frame_bounds(lo, hi, 45.0)
             }
@@ -501,22 +422,14 @@ impl Builder<'_> {
         let unit = |v: Option<f32>, dflt: f32, f: &str, max: f32| -> Result<f32> {
             let Some(v) = v else { return Ok(dflt) };
             if !(v.is_finite() && v >= 0.0 && v <= max) {
-                let range = if max.is_finite() {
-                    format!("0..={max}")
-                } else {
-                    "≥ 0".into()
-                };
+                let range = if max.is_finite() { format!("0..={max}") } else { "≥ 0".into() };
                 return Err(self.err(format!("{} = {v} is out of range ({range})", whose(f))));
             }
             Ok(v)
         };
         let m = Material {
             name: name.to_string(),
-            color: d
-                .color
-                .map(|c| self.colour(c, &whose("color")))
-                .transpose()?
-                .unwrap_or(base.color),
+            color: d.color.map(|c| self.colour(c, &whose("color"))).transpose()?.unwrap_or(base.color),
             kd: unit(d.kd, base.kd, "kd", f32::INFINITY)?,
             ks: unit(d.ks, base.ks, "ks", f32::INFINITY)?,
             shininess: unit(d.shininess, base.shininess, "shininess", f32::INFINITY)?,
@@ -531,14 +444,7 @@ impl Builder<'_> {
         Ok(m)
     }
 
-    fn mesh(
-        &self,
-        name: &str,
-        d: &MeshDef,
-        mat: Option<u32>,
-        mat_b: Option<u32>,
-        s: &mut Scene,
-    ) -> Result<super::Mesh> {
+    fn mesh(&self, name: &str, d: &MeshDef, mat: Option<u32>, mat_b: Option<u32>, s: &mut Scene) -> Result<super::Mesh> {
         let whose = format!("mesh '{name}'");
         let gen = d.generator.as_deref();
         // Which parameters each source accepts (besides material and normalize).
@@ -563,12 +469,12 @@ impl Builder<'_> {
             Some("cube") | Some("quad") => &[],
             Some("checkerboard") => &["n", "size", "material_b"],
             Some("plant") => &["kind", "seed", "material_b"],
-            Some(g) => return Err(self.err(format!("{whose}: unknown generator '{g}' (sphere, icosphere, cube, quad, checkerboard, plant)"))),
+            Some(g) => {
+                return Err(self.err(format!("{whose}: unknown generator '{g}' (sphere, icosphere, cube, quad, checkerboard, plant)")))
+            }
         };
         if let Some(f) = given.iter().find(|f| !allowed.contains(f)) {
-            let src = gen
-                .map(|g| format!("generator '{g}'"))
-                .unwrap_or_else(|| "a mesh file".into());
+            let src = gen.map(|g| format!("generator '{g}'")).unwrap_or_else(|| "a mesh file".into());
             return Err(self.err(format!("{whose}: '{f}' does not apply to {src}")));
         }
         let m = mat.unwrap_or(0);
@@ -580,9 +486,7 @@ impl Builder<'_> {
             Ok(v)
         };
         match (&d.file, gen) {
-            (Some(_), Some(_)) => Err(self.err(format!(
-                "{whose}: give either 'file' or 'generator', not both"
-            ))),
+            (Some(_), Some(_)) => Err(self.err(format!("{whose}: give either 'file' or 'generator', not both"))),
             (None, None) => Err(self.err(format!("{whose}: needs 'file' or 'generator'"))),
             (Some(f), None) => {
                 let p = self.dir.join(f);
@@ -606,11 +510,7 @@ impl Builder<'_> {
                 }
             }
             (None, Some(g)) => Ok(match g {
-                "sphere" => builtin::uv_sphere(
-                    range(d.stacks, 32, 2, 2048, "stacks")?,
-                    range(d.slices, 64, 3, 4096, "slices")?,
-                    m,
-                ),
+                "sphere" => builtin::uv_sphere(range(d.stacks, 32, 2, 2048, "stacks")?, range(d.slices, 64, 3, 4096, "slices")?, m),
                 "icosphere" => builtin::icosphere(range(d.level, 3, 0, 7, "level")?, m),
                 "cube" => builtin::cube_mesh(m),
                 "quad" => builtin::unit_quad(m),
@@ -627,11 +527,7 @@ impl Builder<'_> {
                         "shrub" => builtin::PlantParams::shrub(seed),
                         "herb" => builtin::PlantParams::herb(seed),
                         "fern" => builtin::PlantParams::fern(seed),
-                        k => {
-                            return Err(self.err(format!(
-                                "{whose}: unknown plant kind '{k}' (shrub, herb, fern)"
-                            )))
-                        }
+                        k => return Err(self.err(format!("{whose}: unknown plant kind '{k}' (shrub, herb, fern)"))),
                     };
                     builtin::plant(&p, m, mat_b.unwrap_or(m))
                 }
@@ -642,18 +538,12 @@ impl Builder<'_> {
 
     /// translate · rotate · scale.
     fn transform(&self, d: &InstanceDef, whose: &str) -> Result<Affine3A> {
-        let t = d
-            .translate
-            .map(|v| self.vec3(v, &format!("{whose}: translate")))
-            .transpose()?
-            .unwrap_or(Vec3::ZERO);
+        let t = d.translate.map(|v| self.vec3(v, &format!("{whose}: translate"))).transpose()?.unwrap_or(Vec3::ZERO);
         let r = match &d.rotate {
             None => Quat::IDENTITY,
             Some(RotateDef::Euler(e)) => {
                 let e = self.vec3(*e, &format!("{whose}: rotate"))?;
-                Quat::from_rotation_z(e.z.to_radians())
-                    * Quat::from_rotation_y(e.y.to_radians())
-                    * Quat::from_rotation_x(e.x.to_radians())
+                Quat::from_rotation_z(e.z.to_radians()) * Quat::from_rotation_y(e.y.to_radians()) * Quat::from_rotation_x(e.x.to_radians())
             }
             Some(RotateDef::AxisAngle(a)) => {
                 let axis = self.vec3(a.axis, &format!("{whose}: rotate axis"))?;
@@ -665,15 +555,9 @@ impl Builder<'_> {
                 Quat::from_axis_angle(n, angle.to_radians())
             }
         };
-        let sc = d
-            .scale
-            .map(|v| self.vec3d(v, &format!("{whose}: scale")))
-            .transpose()?
-            .unwrap_or(Vec3::ONE);
+        let sc = d.scale.map(|v| self.vec3d(v, &format!("{whose}: scale"))).transpose()?.unwrap_or(Vec3::ONE);
         if sc.abs().min_element() < 1e-12 {
-            return Err(self.err(format!(
-                "{whose}: scale must be non-zero in every axis, not {sc}"
-            )));
+            return Err(self.err(format!("{whose}: scale must be non-zero in every axis, not {sc}")));
         }
         Ok(Affine3A::from_scale_rotation_translation(sc, r, t))
     }
@@ -709,14 +593,8 @@ impl Builder<'_> {
         for &g in groups {
             let mut stack = Vec::new();
             if let Some(cyc) = visit(s, g, &mut state, &mut stack) {
-                let names: Vec<&str> = cyc
-                    .iter()
-                    .map(|&i| s.groups[i as usize].name.as_str())
-                    .collect();
-                return Err(self.err(format!(
-                    "groups refer to each other in a cycle: {}",
-                    names.join(" -> ")
-                )));
+                let names: Vec<&str> = cyc.iter().map(|&i| s.groups[i as usize].name.as_str()).collect();
+                return Err(self.err(format!("groups refer to each other in a cycle: {}", names.join(" -> "))));
             }
         }
         Ok(())
@@ -829,9 +707,6 @@ target = "g"
         .unwrap();
         assert_eq!(s.materials[0].color, Vec3::splat(0.2));
         let leaves = s.leaf_instances().unwrap();
-        assert_eq!(
-            s.materials[leaves[0].material.unwrap() as usize].name,
-            "red"
-        );
+        assert_eq!(s.materials[leaves[0].material.unwrap() as usize].name, "red");
     }
 }
