@@ -46,6 +46,8 @@ pub struct BvhAccel {
     insts: Vec<TlasInst>,
     inst_ids: Vec<u32>,
     blas: Vec<Blas>,
+    /// Run the AVX2 build of the traversal (detected at run time; see [`BvhAccel::trace`]).
+    avx2: bool,
 }
 
 /// Build quality for the BLAS (obvhs' preset: PLOC + reinsertion, up to 3 triangles a leaf).
@@ -164,6 +166,22 @@ fn slab_mask(node: &CwBvhNode, ray: &obvhs::ray::Ray, idir: Vec3A, orig: Vec3A) 
     tmin.simd_le(tmax).to_bitmask() as u32
 }
 
+fn avx2_available() -> bool {
+    if std::env::var("LODTRACE_BVH_ISA").map(|v| v.eq_ignore_ascii_case("sse2")).unwrap_or(false) {
+        return false;
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("bmi1")
+            && std::arch::is_x86_feature_detected!("bmi2")
+            && std::arch::is_x86_feature_detected!("lzcnt")
+            && std::arch::is_x86_feature_detected!("popcnt")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
 impl BvhAccel {
     pub fn build(scene: &Scene) -> Result<Self> {
         let leaves = scene.leaf_instances()?;
@@ -190,12 +208,42 @@ impl BvhAccel {
         let tlas = obvhs::cwbvh::builder::build_cwbvh(&aabbs, params(), &mut Duration::default());
         let inst_ids = tlas.primitive_indices.clone();
         let insts = inst_ids.iter().map(|&i| TlasInst { inv: leaves[i as usize].inv, blas: leaves[i as usize].mesh }).collect();
-        Ok(BvhAccel { tlas, insts, inst_ids, blas })
+        Ok(BvhAccel { tlas, insts, inst_ids, blas, avx2: avx2_available() })
     }
 
-    /// Closest hit (`ANY = false`) or any hit (`ANY = true`).
+    /// Whether this structure traverses with the AVX2 code path.
+    pub fn uses_avx2(&self) -> bool {
+        self.avx2
+    }
+
+    /// Chooses the code path: `false` forces the baseline build; `true` takes AVX2 only where
+    /// the CPU has it. For comparing the two (they must agree bit for bit).
+    pub fn set_avx2(&mut self, on: bool) {
+        self.avx2 = on && avx2_available();
+    }
+
+    /// Closest hit (`ANY = false`) or any hit (`ANY = true`). The same traversal is compiled
+    /// twice — for the baseline x86-64 target and with AVX2/BMI enabled — and picked at run
+    /// time, as Embree picks its kernels; `LODTRACE_BVH_ISA=sse2` forces the baseline. Both
+    /// give bit-identical results (no FMA contraction: the arithmetic is the same IEEE ops).
     #[inline(always)]
     fn trace<const ANY: bool>(&self, ray: &Ray, c: &mut Counters) -> Option<Hit> {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: `avx2` is set only when the CPU reports AVX2, BMI1/2, LZCNT and POPCNT.
+            return unsafe { self.trace_avx2::<ANY>(ray, c) };
+        }
+        self.trace_impl::<ANY>(ray, c)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn trace_avx2<const ANY: bool>(&self, ray: &Ray, c: &mut Counters) -> Option<Hit> {
+        self.trace_impl::<ANY>(ray, c)
+    }
+
+    #[inline(always)]
+    fn trace_impl<const ANY: bool>(&self, ray: &Ray, c: &mut Counters) -> Option<Hit> {
         if !ray.is_valid() {
             return None;
         }

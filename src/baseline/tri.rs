@@ -43,7 +43,7 @@ impl RayShear {
 
 /// Returns (t, u, v) with u the weight of v1 and v of v2 (Embree's convention), for hits with
 /// tnear ≤ t ≤ tfar.
-#[inline]
+#[inline(always)]
 pub fn intersect_watertight(s: &RayShear, v0: Vec3, v1: Vec3, v2: Vec3, tnear: f32, tfar: f32) -> Option<(f32, f32, f32)> {
     let a = v0 - s.org;
     let b = v1 - s.org;
