@@ -52,6 +52,21 @@ fn node8(c: &mut Criterion) {
             acc
         })
     });
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        g.bench_function("lodtrace_avx2", |b| {
+            b.iter(|| {
+                let mut acc = 0u32;
+                for (r, oct) in &rays {
+                    for n in nodes {
+                        // SAFETY: AVX2 checked above.
+                        acc ^= unsafe { lodtrace::baseline::bvh::intersect_node_avx2(black_box(n), r, *oct) };
+                    }
+                }
+                acc
+            })
+        });
+    }
     g.bench_function("obvhs_sse", |b| {
         b.iter(|| {
             let mut acc = 0u32;
