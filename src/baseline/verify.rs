@@ -323,8 +323,10 @@ pub fn verify_with(scene: &Scene, reference: &dyn Accel, cand: &dyn Accel, n: us
                     // Segments ending 0.1 % before / after the hit; skipped where that margin is
                     // below the precision budget (origin almost on the surface, grazing, border).
                     Some(a)
-                        if !HitGeom::new(scene, &leaves, &ray, &a).uncertain(&a)
-                            && a.t * ray.dir.length() * 1e-3 > HitGeom::new(scene, &leaves, &ray, &a).tol * 10.0 =>
+                        if {
+                            let g = HitGeom::new(scene, &leaves, &ray, &a);
+                            !g.uncertain(&a) && a.t * ray.dir.length() * 1e-3 > g.tol * 10.0
+                        } =>
                     {
                         vec![
                             (Ray::segment(ray.org, ray.dir, ray.tnear, a.t * (1.0 - 1e-3)), false),
