@@ -15,7 +15,7 @@ use lodtrace::baseline::bvh::intersect_node;
 use lodtrace::baseline::tri::{intersect_moller_trumbore, intersect_watertight, RayShear};
 use lodtrace::core::rng::Sampler;
 use lodtrace::core::stats::Counters;
-use obvhs::{aabb::Aabb, BvhBuildParams};
+use obvhs::{aabb::Aabb, cwbvh::node::CwBvhNode, BvhBuildParams};
 
 fn rnd3(s: &mut Sampler) -> Vec3 {
     Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5)
@@ -41,54 +41,30 @@ fn node8(c: &mut Criterion) {
     let nodes = &bvh.nodes[..bvh.nodes.len().min(64)];
     let mut g = c.benchmark_group("node8");
     g.throughput(Throughput::Elements((rays.len() * nodes.len()) as u64));
-    g.bench_function("lodtrace_simd", |b| {
-        b.iter(|| {
-            let mut acc = 0u32;
-            for (r, oct) in &rays {
-                for n in nodes {
-                    acc ^= intersect_node(black_box(n), r, *oct);
-                }
-            }
-            acc
-        })
-    });
+    type NodeTest = fn(&CwBvhNode, &obvhs::ray::Ray, u32) -> u32;
+    let mut kernels: Vec<(&str, NodeTest)> = vec![
+        ("lodtrace_simd", intersect_node),
+        ("obvhs_sse", |n, r, o| n.intersect_ray(r, o)),
+        ("obvhs_scalar", |n, r, o| n.intersect_ray_basic(r, o)),
+    ];
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
-        g.bench_function("lodtrace_avx2", |b| {
+        // SAFETY: AVX2 checked just above.
+        kernels.insert(1, ("lodtrace_avx2", |n, r, o| unsafe { lodtrace::baseline::bvh::intersect_node_avx2(n, r, o) }));
+    }
+    for (name, test) in kernels {
+        g.bench_function(name, |b| {
             b.iter(|| {
                 let mut acc = 0u32;
                 for (r, oct) in &rays {
                     for n in nodes {
-                        // SAFETY: AVX2 checked above.
-                        acc ^= unsafe { lodtrace::baseline::bvh::intersect_node_avx2(black_box(n), r, *oct) };
+                        acc ^= test(black_box(n), r, *oct);
                     }
                 }
                 acc
             })
         });
     }
-    g.bench_function("obvhs_sse", |b| {
-        b.iter(|| {
-            let mut acc = 0u32;
-            for (r, oct) in &rays {
-                for n in nodes {
-                    acc ^= black_box(n).intersect_ray(r, *oct);
-                }
-            }
-            acc
-        })
-    });
-    g.bench_function("obvhs_scalar", |b| {
-        b.iter(|| {
-            let mut acc = 0u32;
-            for (r, oct) in &rays {
-                for n in nodes {
-                    acc ^= black_box(n).intersect_ray_basic(r, *oct);
-                }
-            }
-            acc
-        })
-    });
     g.finish();
 }
 
