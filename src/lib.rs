@@ -18,6 +18,7 @@ pub mod core;
 pub mod error;
 pub mod experiment;
 pub mod film;
+pub mod multires;
 pub mod scene;
 
 pub use error::{Error, Result};

@@ -109,14 +109,14 @@ pub struct RenderOutput {
 }
 
 #[derive(Clone, Copy)]
-struct Tile {
-    x0: u32,
-    y0: u32,
-    x1: u32,
-    y1: u32,
+pub(crate) struct Tile {
+    pub x0: u32,
+    pub y0: u32,
+    pub x1: u32,
+    pub y1: u32,
 }
 
-fn tiles(w: u32, h: u32) -> Vec<Tile> {
+pub(crate) fn tiles(w: u32, h: u32) -> Vec<Tile> {
     let mut v = Vec::new();
     for y0 in (0..h).step_by(TILE as usize) {
         for x0 in (0..w).step_by(TILE as usize) {
@@ -127,7 +127,7 @@ fn tiles(w: u32, h: u32) -> Vec<Tile> {
 }
 
 /// A progress bar that stays hidden for the first second.
-struct Progress {
+pub(crate) struct Progress {
     bar: ProgressBar,
     start: Instant,
     shown: AtomicBool,
@@ -135,13 +135,13 @@ struct Progress {
 }
 
 impl Progress {
-    fn new(len: u64, label: &str, quiet: bool) -> Self {
+    pub(crate) fn new(len: u64, label: &str, quiet: bool) -> Self {
         let bar = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::hidden());
         bar.set_style(ProgressStyle::with_template("{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} tiles, eta {eta}").unwrap());
         bar.set_prefix(label.to_string());
         Progress { bar, start: Instant::now(), shown: AtomicBool::new(false), quiet }
     }
-    fn tick(&self) {
+    pub(crate) fn tick(&self) {
         self.bar.inc(1);
         if !self.quiet
             && !self.shown.load(Ordering::Relaxed)
@@ -151,7 +151,7 @@ impl Progress {
             self.bar.set_draw_target(ProgressDrawTarget::stderr());
         }
     }
-    fn finish(&self) {
+    pub(crate) fn finish(&self) {
         self.bar.finish_and_clear();
     }
 }

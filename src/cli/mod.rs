@@ -115,6 +115,8 @@ pub struct RenderArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    #[command(flatten)]
+    pub multires: crate::multires::MultiresArgs,
 }
 
 pub fn parse_vec3(s: &str) -> Result<glam::Vec3, String> {

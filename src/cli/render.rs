@@ -75,7 +75,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         }
         scene.max_depth = d;
     }
-    let r = run::run(&scene, a.method, a.accel, &opts)?;
+    let r = run::run(&scene, a.method, a.accel, &opts, &a.multires)?;
     io::write_png(&out, &r.out.film)?;
     for (kind, p) in &a.aov {
         match kind.as_str() {
@@ -89,6 +89,9 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     if let Some(p) = &a.stats {
         let json = serde_json::to_string_pretty(&stats).expect("stats serialise");
         io::write_atomic(p, |tmp| std::fs::write(tmp, json.as_bytes()).map_err(|e| Error::io(p, e)))?;
+    }
+    if !r.finished {
+        eprintln!("lodtrace: warning: the time budget ran out; the image is incomplete");
     }
     eprintln!(
         "{}: {} {} {}x{} spp {}: build {:.3} s, render {:.3} s, {:.2} Mrays/s -> {}",

@@ -1,4 +1,5 @@
 //! Shared machinery: random numbers, counters, small math helpers.
+pub mod eigen2;
 pub mod rng;
 pub mod stats;
 

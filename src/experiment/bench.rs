@@ -4,7 +4,9 @@
 //! method, error against the reference) and writes `bench.json`, a plot and the images.
 //!
 //! A method spec is `METHOD[:ACCEL][:key=value...]`, keys: `spp`, `threads`, `packet`,
-//! `fps` (distributed first-pass spp), `vt` (distributed variance threshold), `depth`.
+//! `fps` (distributed first-pass spp), `vt` (distributed variance threshold), `depth`; for
+//! the cone tracers (`multires`, `cone`): `k`, `c` (oversampling), `clamp`, `lod`, `dtol`,
+//! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`.
 //! Examples: `whitted:embree`, `whitted:bvh:threads=1`, `distributed:embree:spp=64`.
 
 use super::run;
@@ -58,6 +60,9 @@ pub struct MethodSpec {
     pub first_pass_spp: u32,
     pub variance_threshold: f32,
     pub max_depth: Option<u32>,
+    /// Cone-tracer options (`multires`, `cone`).
+    #[serde(skip)]
+    pub multires: crate::multires::MultiresArgs,
 }
 
 impl MethodSpec {
@@ -77,6 +82,7 @@ impl MethodSpec {
             first_pass_spp: 2,
             variance_threshold: 0.001,
             max_depth: None,
+            multires: Default::default(),
         };
         for p in parts {
             if let Some((k, v)) = p.split_once('=') {
@@ -90,7 +96,24 @@ impl MethodSpec {
                     "fps" => spec.first_pass_spp = num(v)? as u32,
                     "vt" => spec.variance_threshold = num(v)? as f32,
                     "depth" => spec.max_depth = Some(num(v)? as u32),
-                    _ => return Err(bad(format!("unknown key '{k}' (spp, threads, packet, fps, vt, depth)"))),
+                    "k" => spec.multires.k = num(v)? as u32,
+                    "c" => spec.multires.oversampling = num(v)? as f32,
+                    "clamp" => spec.multires.anisotropy_clamp = num(v)? as f32,
+                    "lod" => spec.multires.lod_scale = num(v)? as f32,
+                    "dtol" => spec.multires.depth_tolerance = num(v)? as f32,
+                    "cs" => spec.multires.cone_scale = num(v)? as f32,
+                    "mip" => spec.multires.no_mipmap = num(v)? == 0.0,
+                    "primary" => spec.multires.primary_only = num(v)? != 0.0,
+                    "budget" => spec.multires.time_budget = Some(num(v)?),
+                    "eigen" => {
+                        spec.multires.eigen = crate::multires::trace::EigenMode::from_str(v, true)
+                            .map_err(|_| bad(format!("eigen={v}: per-box or exact")))?
+                    }
+                    _ => {
+                        return Err(bad(format!(
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen)"
+                        )))
+                    }
                 }
             } else {
                 spec.accel = AccelKind::from_str(p, true).map_err(|_| bad(format!("unknown accel '{p}' (embree, bvh, octree)")))?;
@@ -172,7 +195,7 @@ pub fn run_spec(
     let opts = spec.opts(width, height, threads, quiet);
     let mut best: Option<run::RunResult> = None;
     for _ in 0..repeat.max(1) {
-        let r = run::run(scene, spec.method, spec.accel, &opts)?;
+        let r = run::run(scene, spec.method, spec.accel, &opts, &spec.multires)?;
         if best.as_ref().is_none_or(|b| r.out.seconds < b.out.seconds) {
             best = Some(r);
         }

@@ -5,6 +5,8 @@ use crate::baseline::accel::{self, AccelKind};
 use crate::baseline::render::{render, Integrator, RenderOpts, RenderOutput};
 use crate::baseline::shade::TraceCtx;
 use crate::cli::Method;
+use crate::multires::trace::MultiresScene;
+use crate::multires::MultiresArgs;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 use serde::Serialize;
@@ -15,6 +17,23 @@ pub struct RunResult {
     pub out: RenderOutput,
     pub build_seconds: f64,
     pub accel_bytes: usize,
+    /// False when a time budget stopped the render (the image is incomplete).
+    pub finished: bool,
+    /// The point hierarchy (cone tracers): totals over the unique meshes.
+    pub hierarchy: Option<HierarchyStats>,
+}
+
+/// Build figures of the multi-resolution point hierarchy (Wand & Straßer Table 1).
+#[derive(Serialize, Debug, Clone, Default)]
+pub struct HierarchyStats {
+    pub trees: usize,
+    pub nodes: usize,
+    pub points: usize,
+    pub triangles_stored: usize,
+    pub samples: u64,
+    pub max_depth: u32,
+    pub bytes: usize,
+    pub seconds: f64,
 }
 
 /// The `--stats` JSON (DESIGN.md): at least method, accel, width, height, spp,
@@ -37,23 +56,27 @@ pub struct Stats {
     pub mesh_bytes: usize,
     /// Peak resident memory of the process so far (Linux VmHWM), bytes.
     pub peak_rss_bytes: u64,
+    /// False when `--time-budget` stopped the render before the last tile.
+    pub finished: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hierarchy: Option<HierarchyStats>,
     pub counters: BTreeMap<String, u64>,
 }
 
 fn unsupported(m: Method) -> Error {
     let issue = match m {
-        Method::Multires | Method::Cone => "Wand & Strasser, issue 3",
         Method::Surfel => "Adams et al., issue 4",
         Method::Lod => "Papaioannou et al., issue 5",
         _ => "",
     };
-    Error::Usage(format!("--method {} is not implemented yet ({issue}); available: whitted, distributed", m.name()))
+    Error::Usage(format!("--method {} is not implemented yet ({issue}); available: whitted, distributed, multires, cone", m.name()))
 }
 
-pub fn run(scene: &Scene, method: Method, accel_kind: AccelKind, opts: &RenderOpts) -> Result<RunResult> {
+pub fn run(scene: &Scene, method: Method, accel_kind: AccelKind, opts: &RenderOpts, mr: &MultiresArgs) -> Result<RunResult> {
     let integrator = match method {
         Method::Whitted => Integrator::Whitted,
         Method::Distributed => Integrator::Distributed,
+        Method::Multires | Method::Cone => return run_cone(scene, method, opts, mr),
         m => return Err(unsupported(m)),
     };
     opts.validate()?;
@@ -65,7 +88,30 @@ pub fn run(scene: &Scene, method: Method, accel_kind: AccelKind, opts: &RenderOp
     let cam = scene.camera.frame(opts.width, opts.height);
     let o = RenderOpts { integrator, ..opts.clone() };
     let out = render(&ctx, &cam, &o)?;
-    Ok(RunResult { out, build_seconds, accel_bytes: acc.memory_bytes() })
+    Ok(RunResult { out, build_seconds, accel_bytes: acc.memory_bytes(), finished: true, hierarchy: None })
+}
+
+/// The cone tracers of Wand & Straßer: build the point hierarchies, then trace.
+fn run_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &MultiresArgs) -> Result<RunResult> {
+    let (bp, tp) = mr.params(method == Method::Multires)?;
+    opts.validate()?;
+    tp.validate()?;
+    if opts.spp != 1 {
+        return Err(Error::Usage("the cone tracers shoot one cone per pixel: use --spp 1".into()));
+    }
+    let ms = MultiresScene::build(scene, &bp)?;
+    let mut h = HierarchyStats { trees: ms.trees.len(), seconds: ms.build_seconds, ..Default::default() };
+    for t in &ms.trees {
+        h.nodes += t.stats.nodes;
+        h.points += t.stats.points;
+        h.triangles_stored += t.stats.triangles_stored;
+        h.samples += t.stats.samples;
+        h.max_depth = h.max_depth.max(t.stats.max_depth);
+        h.bytes += t.stats.bytes;
+    }
+    let cam = scene.camera.frame(opts.width, opts.height);
+    let r = crate::multires::render::render(&ms, &tp, &cam, opts)?;
+    Ok(RunResult { out: r.out, build_seconds: ms.build_seconds, accel_bytes: ms.memory_bytes(), finished: r.finished, hierarchy: Some(h) })
 }
 
 impl RunResult {
@@ -88,6 +134,8 @@ impl RunResult {
             accel_bytes: self.accel_bytes,
             mesh_bytes: scene.mesh_bytes(),
             peak_rss_bytes: peak_rss_bytes(),
+            finished: self.finished,
+            hierarchy: self.hierarchy.clone(),
             counters: self.out.counters.to_map(),
         }
     }

@@ -1,0 +1,830 @@
+//! The multi-resolution point hierarchy (Wand & Straßer §3.1–3.2), one per unique mesh
+//! (instances share it).
+//!
+//! Per octree box of side `s` a k³ quantisation grid (voxel side h = s/k) is laid over the box;
+//! random surface samples are drawn uniformly over the box's *active* triangles at
+//! `c` samples per h² of surface (the oversampling factor c, default 100). A triangle whose
+//! samples fall into more than `stay_reps` (3) distinct voxels "obtains more than 3
+//! representative points": it is stored in this box as a triangle and excluded from point
+//! sampling from here on. The other (small) triangles are sampled into points: every voxel
+//! hit by one of their samples gets a representative at the voxel centre. Its material
+//! properties and normal are Gaussian-weighted averages (σ = one voxel side) of the samples
+//! around it; its normal derivatives ∇n are the weighted least-squares fit of the bilinear
+//! function Δn(u,v) = n₀ + u·∂n/∂u + v·∂n/∂v to the samples' normal deviations, measured in
+//! the plane at distance one along the average normal. The small triangles go down into the
+//! child box that holds their centroid, recursively, until every triangle is stored. Leaves
+//! hold only original triangles; inner nodes hold points and the large triangles found there.
+//!
+//! Choices the paper leaves open, and deviations (each a named parameter where it matters):
+//! - Representatives come from all c·A/h² samples, not from a minimal-density subset: with
+//!   c = 100 every voxel the surface crosses with more than ~3% of h² gets one, which is what
+//!   makes the weight sums inside a surface ≥ 1 (see `trace`).
+//! - Triangles go to the child that holds their centroid, so a triangle is stored once; its
+//!   samples may lie a little outside the child's cube, so the grid has a margin of k/2
+//!   voxels on each side (indices 0..2k in 8 bits, k ≤ 64). Node bounding spheres are
+//!   computed from the actual content, so they stay conservative.
+//! - The Gaussian is truncated at 2σ (weights below e⁻² ≈ 13% of the peak are dropped) to
+//!   bound the preprocessing cost; the fit uses the same neighbourhood.
+//! - Zero-area and non-finite triangles are dropped at the start (they have no surface); a
+//!   depth limit (`max_depth`, default 20) stores whatever is left, so nothing recurses forever.
+//! - ∇n is expressed in the canonical tangent frame `onb(n)` of the *quantised* normal, so the
+//!   frame ("stored along with the orientation of the tangential coordinate system") costs no
+//!   storage and build and render agree on it exactly.
+//! - Per-triangle sample counts are stratified (⌊n_t⌋ plus one with probability frac(n_t)),
+//!   seeded by a hash of (seed, node, triangle): the hierarchy is identical for any thread count.
+
+use super::quant::{self, Range8};
+use crate::core::onb;
+use crate::core::rng::{pcg_hash, Sampler};
+use crate::error::{Error, Result};
+use crate::scene::{Material, Mesh};
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use std::cell::RefCell;
+use std::time::Instant;
+
+/// Parameters of the hierarchy (paper defaults).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct BuildParams {
+    /// Quantisation grid resolution per node: k³ voxels (§3.2).
+    pub k: u32,
+    /// Oversampling factor c (§3.2; "typically c = 100").
+    pub c: f32,
+    /// A triangle with more than this many representatives stays in the node (§3.1: "more than 3").
+    pub stay_reps: u32,
+    /// Depth limit of the octree.
+    pub max_depth: u32,
+    pub seed: u32,
+}
+
+impl Default for BuildParams {
+    fn default() -> Self {
+        BuildParams { k: 4, c: 100.0, stay_reps: 3, max_depth: 20, seed: 0 }
+    }
+}
+
+impl BuildParams {
+    pub fn validate(&self) -> Result<()> {
+        if !(2..=64).contains(&self.k) {
+            return Err(Error::Usage(format!("--k {} out of range (2..=64)", self.k)));
+        }
+        if !(self.c.is_finite() && (1.0..=10000.0).contains(&self.c)) {
+            return Err(Error::Usage(format!("--oversampling {} out of range (1..=10000)", self.c)));
+        }
+        if self.stay_reps == 0 || self.stay_reps > 1000 {
+            return Err(Error::Usage(format!("--stay-reps {} out of range (1..=1000)", self.stay_reps)));
+        }
+        if self.max_depth == 0 || self.max_depth > 30 {
+            return Err(Error::Usage(format!("--max-tree-depth {} out of range (1..=30)", self.max_depth)));
+        }
+        Ok(())
+    }
+}
+
+/// Octree nodes, struct-of-arrays. The children of a node are the 8 consecutive entries
+/// from `first_child` (octant order x + 2y + 4z); absent children have radius −∞, so every
+/// cone test against them fails without a branch. The hot fields (the sphere) come first.
+#[derive(Clone, Debug, Default)]
+pub struct NodeSoa {
+    /// Bounding sphere of everything in the subtree (points and triangle vertices).
+    pub cx: Vec<f32>,
+    pub cy: Vec<f32>,
+    pub cz: Vec<f32>,
+    pub r: Vec<f32>,
+    /// Index of the first of 8 children, `NO_CHILD` for a leaf.
+    pub first_child: Vec<u32>,
+    /// Octree depth (root 0): point spacing h = root_side / (k·2^depth).
+    pub depth: Vec<u8>,
+    /// World position of grid index 0 (cube minimum minus the margin).
+    pub grid_lo: Vec<Vec3>,
+    /// Points of this node: `points[pt_start .. pt_start + pt_count]`.
+    pub pt_start: Vec<u32>,
+    pub pt_count: Vec<u32>,
+    /// Triangles stored in this node: `tri_index[tri_start .. tri_start + tri_count]`.
+    pub tri_start: Vec<u32>,
+    pub tri_count: Vec<u32>,
+}
+
+pub const NO_CHILD: u32 = u32::MAX;
+
+impl NodeSoa {
+    pub fn len(&self) -> usize {
+        self.r.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.r.is_empty()
+    }
+    fn push_empty(&mut self) -> u32 {
+        self.cx.push(0.0);
+        self.cy.push(0.0);
+        self.cz.push(0.0);
+        self.r.push(f32::NEG_INFINITY);
+        self.first_child.push(NO_CHILD);
+        self.depth.push(0);
+        self.grid_lo.push(Vec3::ZERO);
+        self.pt_start.push(0);
+        self.pt_count.push(0);
+        self.tri_start.push(0);
+        self.tri_count.push(0);
+        (self.r.len() - 1) as u32
+    }
+    fn bytes(&self) -> usize {
+        self.len() * (4 * 4 + 4 + 1 + 12 + 4 * 4)
+    }
+}
+
+/// Quantised point samples, struct-of-arrays: hot (grid position, normal) and cold
+/// (material, ∇n) fields apart.
+#[derive(Clone, Debug, Default)]
+pub struct PointSoa {
+    /// Voxel index in the node's grid (with margin): the position is
+    /// `grid_lo + (q + 0.5)·h`, exactly.
+    pub qx: Vec<u8>,
+    pub qy: Vec<u8>,
+    pub qz: Vec<u8>,
+    /// Average normal, octahedral 2×16 bit.
+    pub normal: Vec<[u16; 2]>,
+    /// Average colour (square-root 8-bit code over [0, `MatRanges::color_hi`]).
+    pub rgb: Vec<[u8; 3]>,
+    /// kd, ks, shininess, reflect, transmit, ior, roughness (8 bit over `MatRanges`).
+    pub mat: Vec<[u8; 7]>,
+    /// ∂n/∂u and ∂n/∂v in the frame `onb(normal)`, four f16.
+    pub grad: Vec<[u16; 4]>,
+}
+
+impl PointSoa {
+    pub fn len(&self) -> usize {
+        self.qx.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.qx.is_empty()
+    }
+    fn bytes(&self) -> usize {
+        self.len() * (3 + 4 + 3 + 7 + 8)
+    }
+}
+
+/// Ranges of the 8-bit material codes of one hierarchy.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MatRanges {
+    pub color_hi: f32,
+    /// kd, ks, shininess, reflect, transmit, ior, roughness.
+    pub props: [Range8; 7],
+}
+
+/// Decoded material of a point (or the average of a fragment).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PointMat {
+    pub color: Vec3,
+    /// kd, ks, shininess, reflect, transmit, ior, roughness.
+    pub p: [f32; 7],
+}
+
+pub fn mat_props(m: &Material) -> [f32; 7] {
+    [m.kd, m.ks, m.shininess, m.reflect, m.transmit, m.ior, m.roughness]
+}
+
+impl MatRanges {
+    fn of(mats: &[&Material]) -> Self {
+        let mut lo = [f32::INFINITY; 7];
+        let mut hi = [f32::NEG_INFINITY; 7];
+        let mut chi = 0.0f32;
+        for m in mats {
+            chi = chi.max(m.color.max_element());
+            for (i, v) in mat_props(m).into_iter().enumerate() {
+                lo[i] = lo[i].min(v);
+                hi[i] = hi[i].max(v);
+            }
+        }
+        let props = std::array::from_fn(|i| if lo[i] <= hi[i] { Range8::new(lo[i], hi[i]) } else { Range8::new(0.0, 0.0) });
+        MatRanges { color_hi: chi.max(1e-6), props }
+    }
+    pub fn decode(&self, rgb: [u8; 3], mat: [u8; 7]) -> PointMat {
+        PointMat {
+            color: Vec3::new(
+                quant::decode_color(rgb[0], self.color_hi),
+                quant::decode_color(rgb[1], self.color_hi),
+                quant::decode_color(rgb[2], self.color_hi),
+            ),
+            p: std::array::from_fn(|i| self.props[i].decode(mat[i])),
+        }
+    }
+}
+
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct BuildStats {
+    pub nodes: usize,
+    pub points: usize,
+    pub triangles_stored: usize,
+    pub triangles_dropped: usize,
+    pub samples: u64,
+    pub max_depth: u32,
+    pub seconds: f64,
+    pub bytes: usize,
+}
+
+/// The hierarchy of one unique mesh (with one material assignment).
+#[derive(Clone, Debug)]
+pub struct PointTree {
+    pub nodes: NodeSoa,
+    pub points: PointSoa,
+    /// Triangle indices (into the mesh) stored per node.
+    pub tri_index: Vec<u32>,
+    pub root_side: f32,
+    pub k: u32,
+    pub ranges: MatRanges,
+    pub stats: BuildStats,
+}
+
+impl PointTree {
+    /// Point spacing (voxel side) at `depth`.
+    #[inline]
+    pub fn spacing(&self, depth: u8) -> f32 {
+        self.root_side / (self.k as f32 * (1u64 << depth) as f32)
+    }
+    #[inline]
+    pub fn point_pos(&self, node: usize, i: usize) -> Vec3 {
+        let h = self.spacing(self.nodes.depth[node]);
+        let p = &self.points;
+        self.nodes.grid_lo[node] + (Vec3::new(p.qx[i] as f32, p.qy[i] as f32, p.qz[i] as f32) + 0.5) * h
+    }
+    pub fn memory_bytes(&self) -> usize {
+        self.nodes.bytes() + self.points.bytes() + self.tri_index.len() * 4
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Build
+
+struct Ctx<'a> {
+    mesh: &'a Mesh,
+    mats: &'a [&'a Material],
+    area: &'a [f32],
+    p: &'a BuildParams,
+    ranges: &'a MatRanges,
+}
+
+/// A finished point before flattening.
+struct RawPoint {
+    g: [u8; 3],
+    normal: [u16; 2],
+    rgb: [u8; 3],
+    mat: [u8; 7],
+    grad: [u16; 4],
+}
+
+struct BNode {
+    depth: u32,
+    grid_lo: Vec3,
+    points: Vec<RawPoint>,
+    tris: Vec<u32>,
+    children: Vec<(usize, BNode)>,
+    lo: Vec3,
+    hi: Vec3,
+    samples: u64,
+}
+
+struct Sample {
+    p: Vec3,
+    n: Vec3,
+    cell: u32,
+    tri: u32,
+}
+
+/// Per-thread scratch: a dense (2k)³ cell table reused across nodes.
+#[derive(Default)]
+struct Scratch {
+    rep_of_cell: Vec<i32>,
+    cell_start: Vec<u32>,
+}
+
+thread_local! {
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
+}
+
+/// Builds the hierarchy of `mesh`; `mat_of(tri)` gives each triangle's material (the mesh's
+/// own, or an instance's override).
+pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<PointTree> {
+    params.validate()?;
+    let t0 = Instant::now();
+    if mats.len() != mesh.tri_count() {
+        return Err(Error::Accel("point hierarchy: one material per triangle expected".into()));
+    }
+    let area: Vec<f32> = (0..mesh.tri_count())
+        .map(|t| {
+            let [a, b, c] = mesh.tri_verts(t);
+            let ar = 0.5 * (b - a).cross(c - a).length();
+            if ar.is_finite() && a.is_finite() && b.is_finite() && c.is_finite() {
+                ar
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let active: Vec<u32> = (0..mesh.tri_count() as u32).filter(|&t| area[t as usize] > 0.0).collect();
+    let dropped = mesh.tri_count() - active.len();
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for &t in &active {
+        for v in mesh.tri_verts(t as usize) {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+    }
+    let ranges = MatRanges::of(mats);
+    if active.is_empty() {
+        let mut nodes = NodeSoa::default();
+        nodes.push_empty();
+        return Ok(PointTree {
+            nodes,
+            points: PointSoa::default(),
+            tri_index: vec![],
+            root_side: 1.0,
+            k: params.k,
+            ranges,
+            stats: BuildStats { nodes: 1, triangles_dropped: dropped, ..Default::default() },
+        });
+    }
+    let side = (hi - lo).max_element().max(1e-6) * 1.001;
+    let centre = (lo + hi) * 0.5;
+    let cube_lo = centre - Vec3::splat(side * 0.5);
+    let ctx = Ctx { mesh, mats, area: &area, p: params, ranges: &ranges };
+    let root = build_node(&ctx, active, cube_lo, side, 0);
+
+    // Flatten breadth-first so the 8 children of a node are contiguous.
+    let mut nodes = NodeSoa::default();
+    let mut points = PointSoa::default();
+    let mut tri_index = Vec::new();
+    let mut stats = BuildStats { triangles_dropped: dropped, ..Default::default() };
+    let mut queue: std::collections::VecDeque<(u32, BNode)> = Default::default();
+    let r0 = nodes.push_empty();
+    queue.push_back((r0, root));
+    while let Some((id, n)) = queue.pop_front() {
+        let i = id as usize;
+        let c = (n.lo + n.hi) * 0.5;
+        nodes.cx[i] = c.x;
+        nodes.cy[i] = c.y;
+        nodes.cz[i] = c.z;
+        nodes.r[i] = (n.hi - n.lo).length() * 0.5 * (1.0 + 1e-5) + 1e-7 * side;
+        nodes.depth[i] = n.depth as u8;
+        nodes.grid_lo[i] = n.grid_lo;
+        nodes.pt_start[i] = points.len() as u32;
+        nodes.pt_count[i] = n.points.len() as u32;
+        nodes.tri_start[i] = tri_index.len() as u32;
+        nodes.tri_count[i] = n.tris.len() as u32;
+        stats.samples += n.samples;
+        stats.max_depth = stats.max_depth.max(n.depth);
+        stats.triangles_stored += n.tris.len();
+        tri_index.extend_from_slice(&n.tris);
+        for p in &n.points {
+            points.qx.push(p.g[0]);
+            points.qy.push(p.g[1]);
+            points.qz.push(p.g[2]);
+            points.normal.push(p.normal);
+            points.rgb.push(p.rgb);
+            points.mat.push(p.mat);
+            points.grad.push(p.grad);
+        }
+        if !n.children.is_empty() {
+            let first = nodes.len() as u32;
+            for _ in 0..8 {
+                nodes.push_empty();
+            }
+            nodes.first_child[i] = first;
+            for (oct, ch) in n.children {
+                queue.push_back((first + oct as u32, ch));
+            }
+        }
+    }
+    stats.nodes = nodes.len();
+    stats.points = points.len();
+    let mut tree = PointTree { nodes, points, tri_index, root_side: side, k: params.k, ranges, stats };
+    tree.stats.bytes = tree.memory_bytes();
+    tree.stats.seconds = t0.elapsed().as_secs_f64();
+    Ok(tree)
+}
+
+#[inline]
+fn sample_triangle(a: Vec3, b: Vec3, c: Vec3, u: f32, v: f32) -> (f32, f32, f32) {
+    let su = u.sqrt();
+    let w0 = 1.0 - su;
+    let w1 = su * (1.0 - v);
+    let w2 = su * v;
+    let _ = (a, b, c);
+    (w0, w1, w2)
+}
+
+fn build_node(ctx: &Ctx, tris: Vec<u32>, cube_lo: Vec3, side: f32, depth: u32) -> BNode {
+    let k = ctx.p.k as i32;
+    let m = k / 2; // margin
+    let g = 2 * k; // cells per axis
+    let h = side / k as f32;
+    let grid_lo = cube_lo - Vec3::splat(m as f32 * h);
+    let mesh = ctx.mesh;
+    let node_key = pcg_hash(ctx.p.seed ^ pcg_hash(depth ^ pcg_hash(cube_lo.x.to_bits() ^ pcg_hash(cube_lo.y.to_bits() ^ cube_lo.z.to_bits().rotate_left(16)))));
+    let cell_of = |p: Vec3| -> u32 {
+        let q = ((p - grid_lo) / h).floor();
+        let x = (q.x as i32).clamp(0, g - 1);
+        let y = (q.y as i32).clamp(0, g - 1);
+        let z = (q.z as i32).clamp(0, g - 1);
+        ((z * g + y) * g + x) as u32
+    };
+
+    // 1. Samples, c per h² of surface, per triangle stratified.
+    let dens = ctx.p.c / (h * h);
+    let mut samples: Vec<Sample> = Vec::new();
+    let mut big = Vec::new();
+    let mut small = Vec::new();
+    let mut cells_tmp: Vec<u32> = Vec::new();
+    let at_limit = depth >= ctx.p.max_depth;
+    for &t in &tris {
+        let nt = ctx.area[t as usize] * dens;
+        let mut s0 = Sampler::new(node_key, t, 0);
+        let n = nt.floor() as u32 + (s0.next() < nt.fract()) as u32;
+        let n = n.min(1 << 20);
+        let [i0, i1, i2] = mesh.tris[t as usize];
+        let (a, b, c) = (mesh.pos(i0), mesh.pos(i1), mesh.pos(i2));
+        let (na, nb, nc) = (mesh.normal(i0), mesh.normal(i1), mesh.normal(i2));
+        let ng = (b - a).cross(c - a).normalize_or_zero();
+        let start = samples.len();
+        for s in 0..n {
+            let mut r = Sampler::new(node_key, t, s + 1);
+            let (u, v) = r.next2();
+            let (w0, w1, w2) = sample_triangle(a, b, c, u, v);
+            let p = a * w0 + b * w1 + c * w2;
+            let mut nn = (na * w0 + nb * w1 + nc * w2).normalize_or_zero();
+            if nn == Vec3::ZERO || !nn.is_finite() {
+                nn = ng;
+            }
+            samples.push(Sample { p, n: nn, cell: cell_of(p), tri: t });
+        }
+        cells_tmp.clear();
+        cells_tmp.extend(samples[start..].iter().map(|s| s.cell));
+        cells_tmp.sort_unstable();
+        cells_tmp.dedup();
+        if at_limit || cells_tmp.len() as u32 > ctx.p.stay_reps {
+            big.push(t);
+            samples.truncate(start);
+        } else {
+            small.push(t);
+        }
+    }
+    let nsamples = samples.len() as u64;
+
+    let mut node = BNode {
+        depth,
+        grid_lo,
+        points: Vec::new(),
+        tris: big,
+        children: Vec::new(),
+        lo: Vec3::splat(f32::INFINITY),
+        hi: Vec3::splat(f32::NEG_INFINITY),
+        samples: nsamples,
+    };
+    for &t in &node.tris {
+        for v in mesh.tri_verts(t as usize) {
+            node.lo = node.lo.min(v);
+            node.hi = node.hi.max(v);
+        }
+    }
+    if small.is_empty() {
+        return node;
+    }
+
+    // 2. Representatives and Gaussian-weighted averages (gather per representative over the
+    //    samples bucketed by cell).
+    node.points = SCRATCH.with(|sc| {
+        let mut sc = sc.borrow_mut();
+        let ncells = (g * g * g) as usize;
+        if sc.rep_of_cell.len() != ncells {
+            sc.rep_of_cell = vec![-1; ncells];
+            sc.cell_start = vec![0; ncells + 1];
+        }
+        // Counting sort of the samples by cell.
+        let mut counts = std::mem::take(&mut sc.cell_start);
+        counts.iter_mut().for_each(|c| *c = 0);
+        for s in &samples {
+            counts[s.cell as usize + 1] += 1;
+        }
+        for i in 0..ncells {
+            counts[i + 1] += counts[i];
+        }
+        let mut order = vec![0u32; samples.len()];
+        {
+            let mut fill = counts.clone();
+            for (i, s) in samples.iter().enumerate() {
+                order[fill[s.cell as usize] as usize] = i as u32;
+                fill[s.cell as usize] += 1;
+            }
+        }
+        let mut reps: Vec<u32> = (0..ncells as u32).filter(|&c| counts[c as usize + 1] > counts[c as usize]).collect();
+        reps.sort_unstable();
+        let two_s2 = 2.0 * h * h;
+        let cut2 = 4.0 * h * h;
+        let mut out = Vec::with_capacity(reps.len());
+        let mut nbr: Vec<(u32, f32)> = Vec::new();
+        for &cell in &reps {
+            let (cx, cy, cz) = ((cell as i32) % g, (cell as i32 / g) % g, cell as i32 / (g * g));
+            let centre = grid_lo + (Vec3::new(cx as f32, cy as f32, cz as f32) + 0.5) * h;
+            // Gather the samples within 2σ.
+            nbr.clear();
+            for dz in -2..=2 {
+                let z = cz + dz;
+                if z < 0 || z >= g {
+                    continue;
+                }
+                for dy in -2..=2 {
+                    let y = cy + dy;
+                    if y < 0 || y >= g {
+                        continue;
+                    }
+                    for dx in -2..=2 {
+                        let x = cx + dx;
+                        if x < 0 || x >= g {
+                            continue;
+                        }
+                        let c = ((z * g + y) * g + x) as usize;
+                        for &si in &order[counts[c] as usize..counts[c + 1] as usize] {
+                            let d2 = (samples[si as usize].p - centre).length_squared();
+                            if d2 <= cut2 {
+                                nbr.push((si, (-d2 / two_s2).exp()));
+                            }
+                        }
+                    }
+                }
+            }
+            // Weighted averages of material and normal.
+            let (mut wsum, mut col, mut props, mut nsum) = (0.0f32, Vec3::ZERO, [0.0f32; 7], Vec3::ZERO);
+            for &(si, w) in &nbr {
+                let s = &samples[si as usize];
+                let m = ctx.mats[s.tri as usize];
+                wsum += w;
+                col += m.color * w;
+                for (a, v) in props.iter_mut().zip(mat_props(m)) {
+                    *a += v * w;
+                }
+                nsum += s.n * w;
+            }
+            let inv = 1.0 / wsum.max(1e-30);
+            let nav = if nsum.length_squared() > 1e-12 * wsum * wsum { nsum.normalize() } else { samples[nbr[0].0 as usize].n };
+            let ncode = quant::oct_encode(nav);
+            let nq = quant::oct_decode(ncode);
+            // ∇n: weighted least squares of Δn(u,v) = a + u·gu + v·gv in the frame onb(nq).
+            let (tu, tv) = onb(nq);
+            let mut mm = [0.0f64; 6]; // w, wu, wv, wuu, wuv, wvv
+            let mut rhs = [[0.0f64; 2]; 3];
+            for &(si, w) in &nbr {
+                let s = &samples[si as usize];
+                let dn = s.n.dot(nq);
+                if dn <= 0.05 {
+                    continue; // the other side of a thin object: no deviation in this frame
+                }
+                let d = s.p - centre;
+                let (u, v) = ((d.dot(tu) / h) as f64, (d.dot(tv) / h) as f64);
+                let dx = (s.n.dot(tu) / dn) as f64;
+                let dy = (s.n.dot(tv) / dn) as f64;
+                let w = w as f64;
+                mm[0] += w;
+                mm[1] += w * u;
+                mm[2] += w * v;
+                mm[3] += w * u * u;
+                mm[4] += w * u * v;
+                mm[5] += w * v * v;
+                for (row, f) in [(0usize, 1.0), (1, u), (2, v)] {
+                    rhs[row][0] += w * f * dx;
+                    rhs[row][1] += w * f * dy;
+                }
+            }
+            let (gu, gv) = fit_gradient(&mm, &rhs);
+            // (u, v) were in voxel units: divide by h for ∂n per unit length.
+            let (gu, gv) = (gu / h, gv / h);
+            out.push(RawPoint {
+                g: [cx as u8, cy as u8, cz as u8],
+                normal: ncode,
+                rgb: [
+                    quant::encode_color(col.x * inv, ctx.ranges.color_hi),
+                    quant::encode_color(col.y * inv, ctx.ranges.color_hi),
+                    quant::encode_color(col.z * inv, ctx.ranges.color_hi),
+                ],
+                mat: std::array::from_fn(|i| ctx.ranges.props[i].encode(props[i] * inv)),
+                grad: quant::encode_grad(gu, gv),
+            });
+        }
+        sc.cell_start = counts;
+        out
+    });
+    for p in &node.points {
+        let c = grid_lo + (Vec3::new(p.g[0] as f32, p.g[1] as f32, p.g[2] as f32) + 0.5) * h;
+        node.lo = node.lo.min(c);
+        node.hi = node.hi.max(c);
+    }
+    drop(samples);
+
+    // 3. Small triangles go down to the child that holds their centroid.
+    let half = side * 0.5;
+    let mid = cube_lo + Vec3::splat(half);
+    let mut buckets: [Vec<u32>; 8] = Default::default();
+    for &t in &small {
+        let [a, b, c] = mesh.tri_verts(t as usize);
+        let cen = (a + b + c) / 3.0;
+        let o = (cen.x >= mid.x) as usize | ((cen.y >= mid.y) as usize) << 1 | ((cen.z >= mid.z) as usize) << 2;
+        buckets[o].push(t);
+    }
+    let kids: Vec<(usize, BNode)> = buckets
+        .into_par_iter()
+        .enumerate()
+        .filter(|(_, b)| !b.is_empty())
+        .map(|(o, b)| {
+            let lo = cube_lo + Vec3::new((o & 1) as f32, ((o >> 1) & 1) as f32, ((o >> 2) & 1) as f32) * half;
+            (o, build_node(ctx, b, lo, half, depth + 1))
+        })
+        .collect();
+    for (_, ch) in &kids {
+        node.lo = node.lo.min(ch.lo);
+        node.hi = node.hi.max(ch.hi);
+    }
+    node.children = kids;
+    node
+}
+
+/// Solves the 3×3 weighted normal equations of the bilinear fit for the two gradient
+/// columns; a small ridge term keeps the gradient at zero where the samples are colinear.
+fn fit_gradient(mm: &[f64; 6], rhs: &[[f64; 2]; 3]) -> (Vec2, Vec2) {
+    let w = mm[0];
+    if w <= 0.0 {
+        return (Vec2::ZERO, Vec2::ZERO);
+    }
+    let ridge = 1e-3 * w;
+    let a = [[mm[0], mm[1], mm[2]], [mm[1], mm[3] + ridge, mm[4]], [mm[2], mm[4], mm[5] + ridge]];
+    let det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+        + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
+    if !(det.abs() > 1e-18 * w * w * w) {
+        return (Vec2::ZERO, Vec2::ZERO);
+    }
+    let solve = |col: usize| -> [f64; 3] {
+        let b = [rhs[0][col], rhs[1][col], rhs[2][col]];
+        let mut x = [0.0; 3];
+        for (i, xi) in x.iter_mut().enumerate() {
+            let mut m = a;
+            for r in 0..3 {
+                m[r][i] = b[r];
+            }
+            let d = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+                + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+            *xi = d / det;
+        }
+        x
+    };
+    let x = solve(0); // Δn_x = a + u·∂x/∂u + v·∂x/∂v
+    let y = solve(1);
+    let gu = Vec2::new(x[1] as f32, y[1] as f32);
+    let gv = Vec2::new(x[2] as f32, y[2] as f32);
+    if gu.is_finite() && gv.is_finite() {
+        (gu, gv)
+    } else {
+        (Vec2::ZERO, Vec2::ZERO)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::builtin;
+
+    fn tree_of(mesh: &Mesh, p: &BuildParams) -> PointTree {
+        let m = Material::default();
+        let mats: Vec<&Material> = vec![&m; mesh.tri_count()];
+        build(mesh, &mats, p).unwrap()
+    }
+
+    /// Every triangle ends up stored exactly once; every point and triangle vertex is inside
+    /// its node's sphere and inside every ancestor's sphere.
+    #[test]
+    fn triangles_stored_once_and_spheres_conservative() {
+        let mut mesh = builtin::icosphere(3, 0);
+        mesh.compute_normals();
+        let t = tree_of(&mesh, &BuildParams::default());
+        let mut seen = vec![0u32; mesh.tri_count()];
+        for &i in &t.tri_index {
+            seen[i as usize] += 1;
+        }
+        assert!(seen.iter().all(|&c| c == 1), "each triangle stored once");
+        let n = &t.nodes;
+        // parent links
+        let mut parent = vec![u32::MAX; n.len()];
+        for i in 0..n.len() {
+            if n.first_child[i] != NO_CHILD {
+                for c in 0..8 {
+                    parent[n.first_child[i] as usize + c] = i as u32;
+                }
+            }
+        }
+        let inside = |node: usize, p: Vec3| {
+            let c = Vec3::new(n.cx[node], n.cy[node], n.cz[node]);
+            (p - c).length() <= n.r[node] * (1.0 + 1e-5)
+        };
+        for i in 0..n.len() {
+            let mut things = vec![];
+            for j in n.pt_start[i]..n.pt_start[i] + n.pt_count[i] {
+                things.push(t.point_pos(i, j as usize));
+            }
+            for j in n.tri_start[i]..n.tri_start[i] + n.tri_count[i] {
+                things.extend(mesh.tri_verts(t.tri_index[j as usize] as usize));
+            }
+            let mut a = i;
+            loop {
+                for &p in &things {
+                    assert!(inside(a, p), "node {i} content outside ancestor {a}");
+                }
+                if parent[a] == u32::MAX {
+                    break;
+                }
+                a = parent[a] as usize;
+            }
+        }
+        assert!(t.stats.points > 0 && t.stats.max_depth >= 1);
+    }
+
+    /// Points on a sphere: normals point outwards, ∇n ≈ I/R (the sphere's curvature), and
+    /// the points lie within a voxel of the surface.
+    #[test]
+    fn sphere_points_have_outward_normals_and_curvature() {
+        let mut mesh = builtin::uv_sphere(96, 192, 0);
+        mesh.compute_normals();
+        let t = tree_of(&mesh, &BuildParams::default());
+        let mut checked = 0;
+        let mut curv = vec![];
+        for node in 0..t.nodes.len() {
+            let h = t.spacing(t.nodes.depth[node]);
+            for j in t.nodes.pt_start[node]..t.nodes.pt_start[node] + t.nodes.pt_count[node] {
+                let p = t.point_pos(node, j as usize);
+                let n = quant::oct_decode(t.points.normal[j as usize]);
+                assert!((p.length() - 1.0).abs() <= h * 0.9, "point {p} off the unit sphere by more than a voxel (h={h})");
+                if p.length() > 0.5 {
+                    assert!(n.dot(p.normalize()) > 0.8, "normal {n} at {p}");
+                }
+                if h < 0.1 {
+                    let (gu, gv) = quant::decode_grad(t.points.grad[j as usize]);
+                    curv.push((gu.x, gv.y, gu.y, gv.x));
+                }
+                checked += 1;
+            }
+        }
+        assert!(checked > 1000);
+        // Unit sphere: ∂n/∂u = (1, 0), ∂n/∂v = (0, 1) per unit length.
+        let mean = |f: &dyn Fn(&(f32, f32, f32, f32)) -> f32| curv.iter().map(f).sum::<f32>() / curv.len() as f32;
+        assert!((mean(&|c| c.0) - 1.0).abs() < 0.15, "d n_u/du = {}", mean(&|c| c.0));
+        assert!((mean(&|c| c.1) - 1.0).abs() < 0.15, "d n_v/dv = {}", mean(&|c| c.1));
+        assert!(mean(&|c| c.2).abs() < 0.1 && mean(&|c| c.3).abs() < 0.1);
+    }
+
+    #[test]
+    fn plane_points_average_colours_and_are_flat() {
+        let mut s = Scene2::checker();
+        let t = s.tree();
+        let mut grey = 0;
+        for j in 0..t.points.len() {
+            let (gu, gv) = quant::decode_grad(t.points.grad[j]);
+            assert!(gu.length() < 1e-3 && gv.length() < 1e-3, "flat plane has zero ∇n");
+            let m = t.ranges.decode(t.points.rgb[j], t.points.mat[j]);
+            // Black and white squares: coarse points are grey.
+            if m.color.x > 0.2 && m.color.x < 0.8 {
+                grey += 1;
+            }
+        }
+        assert!(grey > 10);
+        s.mesh.tris.clear();
+    }
+
+    struct Scene2 {
+        mesh: Mesh,
+        mats: Vec<Material>,
+    }
+    impl Scene2 {
+        fn checker() -> Self {
+            let mut mesh = builtin::checkerboard(16, 2.0, 0, 1);
+            mesh.compute_normals();
+            Scene2 { mesh, mats: vec![Material::diffuse("w", Vec3::ONE), Material::diffuse("b", Vec3::ZERO)] }
+        }
+        fn tree(&mut self) -> PointTree {
+            let mats: Vec<&Material> = self.mesh.mat.iter().map(|&m| &self.mats[m as usize]).collect();
+            build(&self.mesh, &mats, &BuildParams::default()).unwrap()
+        }
+    }
+
+    #[test]
+    fn degenerate_meshes_do_not_panic() {
+        let mut mesh = Mesh::new("bad");
+        let a = mesh.push_vertex(Vec3::ZERO);
+        let b = mesh.push_vertex(Vec3::X);
+        let c = mesh.push_vertex(Vec3::X * 2.0);
+        let d = mesh.push_vertex(Vec3::NAN);
+        mesh.push_tri(a, b, c, 0);
+        mesh.push_tri(a, b, d, 0);
+        mesh.push_tri(a, a, a, 0);
+        mesh.compute_normals();
+        let t = tree_of(&mesh, &BuildParams::default());
+        assert_eq!(t.stats.triangles_dropped, 3);
+        assert!(BuildParams { k: 1, ..Default::default() }.validate().is_err());
+        assert!(BuildParams { c: f32::NAN, ..Default::default() }.validate().is_err());
+    }
+}

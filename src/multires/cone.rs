@@ -1,0 +1,388 @@
+//! Ray cones (Wand & Straßer §4.1–4.2).
+//!
+//! A cone has a frame (origin s_r, unit direction n_r, tangents u_r, v_r) and a footprint
+//! fp(t) = startDev + t·incrDev (eq. 1), whose columns span the footprint ellipse in (u_r, v_r)
+//! coordinates. The Gaussian filter is exp(−|fp(t)⁻¹(u,v)|²) (eq. 2).
+//!
+//! Representation: we keep the *squared* footprint Σ(t) = Σₖ fpₖ(t)·fpₖ(t)ᵀ = a + b·t + c·t²
+//! (three symmetric 2×2 matrices), because (i) the paper convolves footprints by adding their
+//! squares (shadow cones, §4.2), which is then a plain sum, (ii) the eigen-decomposition of
+//! Σ gives the ellipse axes directly (eq. 3: fp⁻² = Uᵀ diag(λ²) U, with λ = 1/semi-axis), and
+//! (iii) Σ is defined and finite where fp is singular (zero footprint at the origin or at the
+//! focal plane). A cone built from one (startDev, incrDev) pair is exactly the paper's.
+//!
+//! Construction, as in §4.2:
+//! - primary: zero startDev, incrDev = the pixel's extent (the derivative of the DESIGN.md
+//!   camera direction per pixel), scaled by `cone_scale` (1 = the pixel size). Depth of field:
+//!   a second pair with startDev = the lens radius and footprint zero at the focal plane.
+//!   *Deviation:* the paper takes the maximum of the lens and the pixel cone; we add their
+//!   squares (the convolution used for shadow rays), which is smooth, never smaller than the
+//!   maximum and at most √2 larger.
+//! - shadow: the surface footprint shrinking to zero at the light, plus the light's ellipse
+//!   growing from zero at the surface; squares added (§4.2 "Shadow Rays").
+//! - reflected/refracted: startDev = the incoming footprint projected along the ray onto the
+//!   tangent plane and expressed in the outgoing frame; incrDev = the difference between the
+//!   outgoing directions at p + u_fp, p + v_fp (normals from ∇n) and the centre direction.
+//!   The refract-or-total-reflection decision is the centre ray's. Roughness adds a radial
+//!   increment tan(roughness)·I (§6, "Special Effects").
+
+use crate::core::eigen2::{eigen_1, Eigen2, Sym2};
+use crate::core::onb;
+use crate::scene::camera::CameraFrame;
+use glam::{Affine3A, Mat3, Vec2, Vec3};
+
+/// A 2×2 footprint matrix by columns (each a footprint axis in the cone's (u, v) coordinates).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Fp {
+    pub c0: Vec2,
+    pub c1: Vec2,
+}
+
+impl Fp {
+    pub const ZERO: Fp = Fp { c0: Vec2::ZERO, c1: Vec2::ZERO };
+    pub fn diag(s: f32) -> Fp {
+        Fp { c0: Vec2::new(s, 0.0), c1: Vec2::new(0.0, s) }
+    }
+    pub fn scale(self, k: f32) -> Fp {
+        Fp { c0: self.c0 * k, c1: self.c1 * k }
+    }
+}
+
+/// M·Nᵀ + N·Mᵀ of two footprint matrices (symmetric).
+fn sym_prod(m: Fp, n: Fp) -> Sym2 {
+    Sym2 {
+        a: 2.0 * (m.c0.x * n.c0.x + m.c1.x * n.c1.x),
+        b: m.c0.x * n.c0.y + m.c1.x * n.c1.y + n.c0.x * m.c0.y + n.c1.x * m.c1.y,
+        c: 2.0 * (m.c0.y * n.c0.y + m.c1.y * n.c1.y),
+    }
+}
+
+fn sq(m: Fp) -> Sym2 {
+    Sym2 { a: m.c0.x * m.c0.x + m.c1.x * m.c1.x, b: m.c0.x * m.c0.y + m.c1.x * m.c1.y, c: m.c0.y * m.c0.y + m.c1.y * m.c1.y }
+}
+
+/// T·S·Tᵀ for T given by rows (t0, t1).
+fn congruence(s: Sym2, t0: Vec2, t1: Vec2) -> Sym2 {
+    let q = |x: Vec2, y: Vec2| x.x * (s.a * y.x + s.b * y.y) + x.y * (s.b * y.x + s.c * y.y);
+    Sym2 { a: q(t0, t0), b: q(t0, t1), c: q(t1, t1) }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cone {
+    pub org: Vec3,
+    pub dir: Vec3,
+    pub u: Vec3,
+    pub v: Vec3,
+    /// Σ(t) = a + b·t + c·t².
+    pub a: Sym2,
+    pub b: Sym2,
+    pub c: Sym2,
+    pub tmin: f32,
+    pub tmax: f32,
+}
+
+impl Cone {
+    /// A cone along unit `dir` with the given (startDev, incrDev) pairs, whose squares add.
+    pub fn new(org: Vec3, dir: Vec3, pairs: &[(Fp, Fp)]) -> Cone {
+        let (u, v) = onb(dir);
+        let mut c = Cone { org, dir, u, v, a: Sym2::default(), b: Sym2::default(), c: Sym2::default(), tmin: 0.0, tmax: f32::INFINITY };
+        for &(s, i) in pairs {
+            c.a = c.a.add(sq(s));
+            c.b = c.b.add(sym_prod(s, i));
+            c.c = c.c.add(sq(i));
+        }
+        c
+    }
+    /// Footprint matrix columns from 3-D vectors (perpendicular to `dir`) in this frame.
+    pub fn fp_of(&self, a: Vec3, b: Vec3) -> Fp {
+        Fp { c0: Vec2::new(a.dot(self.u), a.dot(self.v)), c1: Vec2::new(b.dot(self.u), b.dot(self.v)) }
+    }
+    /// Adds the square of another (startDev, incrDev) pair (convolution, §4.2).
+    pub fn add_pair(&mut self, s: Fp, i: Fp) {
+        self.a = self.a.add(sq(s));
+        self.b = self.b.add(sym_prod(s, i));
+        self.c = self.c.add(sq(i));
+    }
+    /// Σ(t), the squared footprint at parameter t.
+    #[inline]
+    pub fn sigma(&self, t: f32) -> Sym2 {
+        Sym2 {
+            a: self.a.a + t * (self.b.a + t * self.c.a),
+            b: self.a.b + t * (self.b.b + t * self.c.b),
+            c: self.a.c + t * (self.b.c + t * self.c.c),
+        }
+    }
+    /// Ray coordinates (x, y, t) of a point.
+    #[inline]
+    pub fn coords(&self, p: Vec3) -> Vec3 {
+        let d = p - self.org;
+        Vec3::new(d.dot(self.u), d.dot(self.v), d.dot(self.dir))
+    }
+    /// The footprint ellipse at t as two world-space semi-axis vectors (major, minor).
+    pub fn footprint_vectors(&self, t: f32, clamp: f32, floor: f32) -> (Vec3, Vec3, Eigen2) {
+        let e = eigen_1(self.sigma(t), clamp, floor);
+        let e1 = self.u * e.cos + self.v * e.sin;
+        let e2 = self.v * e.cos - self.u * e.sin;
+        (e1 * e.s1, e2 * e.s2, e)
+    }
+    /// The footprint at t, (f0, f1), and the direction differentials of the rays through
+    /// its two axis ends, (d0, d1): the growth rate of each semi-axis, ds/dt = eᵀΣ'(t)e/(2s)
+    /// (first-order eigenvalue perturbation), along that axis. For a one-pair cone without
+    /// shear this is exactly incrDev applied to the axis.
+    pub fn footprint_and_spread(&self, t: f32, clamp: f32, floor: f32) -> [Vec3; 4] {
+        let (f0, f1, e) = self.footprint_vectors(t, clamp, floor);
+        let d = Sym2 { a: self.b.a + 2.0 * t * self.c.a, b: self.b.b + 2.0 * t * self.c.b, c: self.b.c + 2.0 * t * self.c.c };
+        let along = |c: f32, s: f32| d.a * c * c + 2.0 * d.b * c * s + d.c * s * s;
+        let ds1 = along(e.cos, e.sin) / (2.0 * e.s1);
+        let ds2 = along(-e.sin, e.cos) / (2.0 * e.s2);
+        [f0, f1, f0 * (ds1 / e.s1), f1 * (ds2 / e.s2)]
+    }
+
+    /// The primary cone through pixel (i, j) (its centre, as the DESIGN.md camera).
+    pub fn primary(cam: &CameraFrame, i: u32, j: u32, cone_scale: f32) -> Cone {
+        let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
+        let x = (2.0 * px / cam.width as f32 - 1.0) * cam.aspect * cam.s;
+        let y = (1.0 - 2.0 * py / cam.height as f32) * cam.s;
+        let d_un = cam.f + x * cam.r + y * cam.u;
+        let len = d_un.length();
+        let dir = d_un / len;
+        // d(dir)/d(pixel) = (dD − dir·(dir·dD)) / |D|
+        let dd = |v: Vec3| (v - dir * dir.dot(v)) / len;
+        let ix = dd(cam.r * (2.0 * cam.aspect * cam.s / cam.width as f32)) * cone_scale;
+        let iy = dd(cam.u * (-2.0 * cam.s / cam.height as f32)) * cone_scale;
+        let mut c = Cone::new(cam.eye, dir, &[]);
+        let incr = c.fp_of(ix, iy);
+        c.add_pair(Fp::ZERO, incr);
+        if cam.aperture > 0.0 {
+            // Lens: radius `aperture` at t = 0, zero at the focal plane.
+            let t_focus = cam.focal_dist / dir.dot(cam.f).max(1e-3);
+            let s = c.fp_of(cam.r * cam.aperture, cam.u * cam.aperture);
+            c.add_pair(s, s.scale(-1.0 / t_focus));
+        }
+        c
+    }
+
+    /// The cone in an instance's object space (`inv` maps world to object). Object-space t
+    /// is `scale`·(world t); the footprint is carried over by the linear part, projected onto
+    /// the new frame (exact for similarity transforms).
+    pub fn to_object(&self, inv: &Affine3A) -> (Cone, f32) {
+        let l = Mat3::from(inv.matrix3);
+        let d = l * self.dir;
+        let sc = d.length();
+        let dir = d / sc;
+        let org = inv.transform_point3(self.org);
+        let (u, v) = onb(dir);
+        let lu = l * self.u;
+        let lv = l * self.v;
+        let t0 = Vec2::new(lu.dot(u), lv.dot(u));
+        let t1 = Vec2::new(lu.dot(v), lv.dot(v));
+        let a = congruence(self.a, t0, t1);
+        let b = congruence(self.b, t0, t1);
+        let c = congruence(self.c, t0, t1);
+        let inv_s = 1.0 / sc;
+        (
+            Cone {
+                org,
+                dir,
+                u,
+                v,
+                a,
+                b: b.scale(inv_s),
+                c: c.scale(inv_s * inv_s),
+                tmin: self.tmin * sc,
+                tmax: if self.tmax.is_finite() { self.tmax * sc } else { f32::INFINITY },
+            },
+            sc,
+        )
+    }
+}
+
+/// Projects a footprint vector `f` (perpendicular to `dir`) along `dir` onto the plane with
+/// unit normal `n`; the stretch is limited to 20× (grazing incidence).
+#[inline]
+pub fn project_on_plane(f: Vec3, dir: Vec3, n: Vec3) -> Vec3 {
+    let dn = dir.dot(n);
+    let dn = if dn.abs() < 0.05 { 0.05f32.copysign(dn) } else { dn };
+    f - dir * (f.dot(n) / dn)
+}
+
+#[inline]
+pub fn reflect(d: Vec3, n: Vec3) -> Vec3 {
+    d - n * (2.0 * d.dot(n))
+}
+
+/// Refraction of unit `d` at unit `n` (facing against d) with η = n₁/n₂; None on total
+/// internal reflection.
+#[inline]
+pub fn refract(d: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
+    let cos_i = -d.dot(n);
+    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+    if k < 0.0 {
+        None
+    } else {
+        Some((d * eta + n * (eta * cos_i - k.sqrt())).normalize())
+    }
+}
+
+/// What leaves a surface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Outgoing {
+    Reflect,
+    /// Refraction with η = n₁/n₂.
+    Refract(f32),
+}
+
+/// The reflected or refracted cone at surface point `p` with unit normal `n` (facing the
+/// incoming ray), shape operator `w` (n(p+δ) ≈ normalize(n + w·δ), from ∇n), for an incoming
+/// cone with direction `dir` whose footprint at the hit is `fs = [f0, f1, d0, d1]` (world
+/// semi-axes and the direction differentials of the rays through them, see
+/// [`Cone::footprint_and_spread`]). Returns None on total internal reflection of the centre
+/// ray (the caller reflects instead).
+pub fn secondary(p: Vec3, dir: Vec3, n: Vec3, w: &Mat3, fs: [Vec3; 4], out: Outgoing, roughness: f32) -> Option<Cone> {
+    let bend = |d: Vec3, nn: Vec3| -> Option<Vec3> {
+        match out {
+            Outgoing::Reflect => Some(reflect(d, nn)),
+            Outgoing::Refract(eta) => refract(d, nn, eta),
+        }
+    };
+    let r = bend(dir, n)?;
+    let g0 = project_on_plane(fs[0], dir, n);
+    let g1 = project_on_plane(fs[1], dir, n);
+    let mut c = Cone::new(p, r, &[]);
+    let start = c.fp_of(g0, g1);
+    // The ray through p + g arrives with direction dir + dd and meets the normal there.
+    let dir_at = |g: Vec3, dd: Vec3| -> Vec3 {
+        let nn = (n + *w * g).normalize_or_zero();
+        let di = (dir + dd).normalize_or_zero();
+        if nn == Vec3::ZERO || di == Vec3::ZERO || !nn.is_finite() || !di.is_finite() {
+            return r;
+        }
+        bend(di, nn).unwrap_or(r)
+    };
+    let o0 = dir_at(g0, fs[2]) - r;
+    let o1 = dir_at(g1, fs[3]) - r;
+    let incr = c.fp_of(o0 - r * r.dot(o0), o1 - r * r.dot(o1));
+    c.add_pair(start, incr);
+    if roughness > 0.0 {
+        c.add_pair(Fp::ZERO, Fp::diag(roughness.min(1.4).tan()));
+    }
+    Some(c)
+}
+
+/// The shadow cone from surface point `p` towards a light at `light_pos` (distance `dist`):
+/// the surface footprint `(f0, f1)` shrinking to zero at the light, plus the light ellipse
+/// `(axis_a, axis_b)` (zero for a point light) growing from zero at the surface.
+pub fn shadow(p: Vec3, n: Vec3, f0: Vec3, f1: Vec3, light_pos: Vec3, axis_a: Vec3, axis_b: Vec3) -> (Cone, f32) {
+    let to = light_pos - p;
+    let dist = to.length();
+    let dir = to / dist;
+    let mut c = Cone::new(p, dir, &[]);
+    let s = c.fp_of(project_on_plane(f0, dir, n), project_on_plane(f1, dir, n));
+    c.add_pair(s, s.scale(-1.0 / dist));
+    if axis_a != Vec3::ZERO || axis_b != Vec3::ZERO {
+        let l = c.fp_of(axis_a - dir * dir.dot(axis_a), axis_b - dir * dir.dot(axis_b));
+        c.add_pair(Fp::ZERO, l.scale(1.0 / dist));
+    }
+    (c, dist)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Camera;
+
+    /// Test of the issue: a primary cone's footprint equals the pixel size at distance t.
+    #[test]
+    fn primary_footprint_is_the_pixel() {
+        let cam = Camera { eye: Vec3::ZERO, look: Vec3::new(0.0, 0.0, -1.0), up: Vec3::Y, fovy: 60.0, ..Default::default() };
+        let fr = cam.frame(200, 100);
+        for (i, j) in [(100, 50), (0, 0), (199, 99), (37, 80)] {
+            let c = Cone::primary(&fr, i, j, 1.0);
+            for t in [0.5f32, 3.0, 40.0] {
+                // Pixel neighbours' directions at distance t, projected on the plane ⟂ dir.
+                let d0 = fr.pixel_center_dir(i, j);
+                let p0 = d0 * t;
+                let px = fr.dir_at(i as f32 + 1.5, j as f32 + 0.5);
+                let py = fr.dir_at(i as f32 + 0.5, j as f32 + 1.5);
+                // Point on the neighbour ray at the same distance along d0.
+                let qx = px * (t / px.dot(d0));
+                let qy = py * (t / py.dot(d0));
+                // The ellipse spanned by the two pixel steps (they are skewed off-axis).
+                let fp = c.fp_of(qx - p0, qy - p0);
+                let want = eigen_1(sq(fp), 1e-9, 1e-30);
+                let e = eigen_1(c.sigma(t), 1e-9, 1e-30);
+                let (mx, mn) = (want.s1, want.s2);
+                assert!((e.s1 - mx).abs() < 0.03 * mx, "major {} vs pixel {mx} at ({i},{j}) t={t}", e.s1);
+                assert!((e.s2 - mn).abs() < 0.03 * mn, "minor {} vs pixel {mn}", e.s2);
+            }
+            assert!((c.dir - fr.pixel_center_dir(i, j)).length() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn depth_of_field_cone_is_narrowest_at_focus() {
+        let cam = Camera { eye: Vec3::ZERO, look: Vec3::new(0.0, 0.0, -1.0), up: Vec3::Y, fovy: 40.0, aperture: 0.1, focal_dist: 5.0 };
+        let fr = cam.frame(64, 64);
+        let c = Cone::primary(&fr, 32, 32, 1.0);
+        let size = |t: f32| eigen_1(c.sigma(t), 1e-9, 1e-30).s1;
+        let pixel_only = Cone::primary(&Camera { aperture: 0.0, ..cam.clone() }.frame(64, 64), 32, 32, 1.0);
+        assert!(size(5.0) < size(2.0) && size(5.0) < size(9.0));
+        // At focus only the pixel cone remains.
+        assert!((size(5.0) - eigen_1(pixel_only.sigma(5.0), 1e-9, 1e-30).s1).abs() < 1e-3);
+        assert!((size(0.0) - 0.1).abs() < 1e-3);
+    }
+
+    #[test]
+    fn mirror_plane_keeps_the_spread_and_sphere_widens_it() {
+        // A cone hits a flat mirror head-on: the reflected cone continues with the same
+        // growth rate (as if it went on through the mirror image).
+        let dir = Vec3::new(0.0, 0.0, -1.0);
+        let n = Vec3::Z;
+        let incoming = Cone::new(Vec3::new(0.0, 0.0, 10.0), dir, &[(Fp::ZERO, Fp::diag(0.01))]);
+        let fs = incoming.footprint_and_spread(10.0, 1e-9, 1e-30);
+        let flat = secondary(Vec3::ZERO, dir, n, &Mat3::ZERO, fs, Outgoing::Reflect, 0.0).unwrap();
+        assert!((flat.dir - Vec3::Z).length() < 1e-6);
+        let s = |c: &Cone, t: f32| eigen_1(c.sigma(t), 1e-9, 1e-30).s1;
+        assert!((s(&flat, 5.0) - s(&incoming, 15.0)).abs() < 1e-4, "{} vs {}", s(&flat, 5.0), s(&incoming, 15.0));
+        // Convex mirror (unit sphere: w = I on the tangent plane) spreads it more.
+        let w = Mat3::from_diagonal(Vec3::new(1.0, 1.0, 0.0));
+        let convex = secondary(Vec3::ZERO, dir, n, &w, fs, Outgoing::Reflect, 0.0).unwrap();
+        assert!(s(&convex, 5.0) > 2.0 * s(&flat, 5.0));
+        // Roughness widens it further.
+        let rough = secondary(Vec3::ZERO, dir, n, &Mat3::ZERO, fs, Outgoing::Reflect, 0.1).unwrap();
+        let want = (s(&flat, 5.0).powi(2) + (5.0 * 0.1f32.tan()).powi(2)).sqrt();
+        assert!((s(&rough, 5.0) - want).abs() < 1e-3, "roughness adds in quadrature");
+    }
+
+    #[test]
+    fn total_internal_reflection_by_centre_ray() {
+        let dir = Vec3::new(1.0, -0.2, 0.0).normalize();
+        let n = Vec3::Y;
+        let fs = [Vec3::X * 0.01, Vec3::Z * 0.01, Vec3::ZERO, Vec3::ZERO];
+        assert!(secondary(Vec3::ZERO, dir, n, &Mat3::ZERO, fs, Outgoing::Refract(1.5), 0.0).is_none());
+        assert!(secondary(Vec3::ZERO, dir, n, &Mat3::ZERO, fs, Outgoing::Refract(1.0 / 1.5), 0.0).is_some());
+    }
+
+    #[test]
+    fn object_space_cone_has_the_same_footprint() {
+        let c = Cone::new(Vec3::new(1.0, 2.0, 3.0), Vec3::new(0.3, -0.4, 0.5).normalize(), &[(Fp::diag(0.02), Fp::diag(0.01))]);
+        let xf = Affine3A::from_scale_rotation_translation(Vec3::splat(2.0), glam::Quat::from_rotation_y(0.7), Vec3::new(5.0, 0.0, 1.0));
+        let inv = xf.inverse();
+        let (o, sc) = c.to_object(&inv);
+        assert!((sc - 0.5).abs() < 1e-5);
+        let t = 7.0;
+        let w = eigen_1(c.sigma(t), 1e-9, 1e-30);
+        let ob = eigen_1(o.sigma(t * sc), 1e-9, 1e-30);
+        assert!((ob.s1 - w.s1 * 0.5).abs() < 1e-4 && (ob.s2 - w.s2 * 0.5).abs() < 1e-4);
+    }
+
+    #[test]
+    fn shadow_cone_ends_at_the_light_ellipse() {
+        let (c, d) = shadow(Vec3::ZERO, Vec3::Y, Vec3::X * 0.05, Vec3::Z * 0.05, Vec3::new(0.0, 4.0, 0.0), Vec3::X, Vec3::Z * 0.5);
+        assert!((d - 4.0).abs() < 1e-6);
+        let e = eigen_1(c.sigma(4.0), 1e-9, 1e-30);
+        assert!((e.s1 - 1.0).abs() < 1e-4 && (e.s2 - 0.5).abs() < 1e-4);
+        let e0 = eigen_1(c.sigma(0.0), 1e-9, 1e-30);
+        assert!((e0.s1 - 0.05).abs() < 1e-4);
+    }
+}

@@ -1,0 +1,1189 @@
+//! Multi-resolution cone tracing (Wand & Straßer §4.3–§5): traversal of the point
+//! hierarchies of all instances with ray cones, ray–point and anti-aliased ray–triangle
+//! intersections, the A-buffer, compositing and the recursive shading with shadow,
+//! reflected and refracted cones.
+//!
+//! Traversal (§5.1). Instances sit in a binary sphere tree (TLAS); each unique mesh has its
+//! octree ([`super::build`]). Nodes are visited front to back from a min-heap keyed by the
+//! nearest depth of their sphere, so the A-buffer can finalise fragments and terminate the
+//! ray at alpha 1. At each node: (1) the triangles stored there are tested; (2) the minimum
+//! footprint (minor semi-axis after the anisotropy clamp) at the node's depth is compared
+//! with the point spacing h; (3) when λ·σ_min ≥ h (λ = `lod_scale`) the node's points are
+//! intersected — with the mipmap blend of §5.1: weight x = log2(λ·σ_min/h) ∈ [0,1] for this
+//! level and 1 − x for the children's points and triangles, one level deeper — otherwise
+//! the children are tested (one cone against the 8 child spheres in one f32x8 step) and
+//! queued. Classic cone tracing (`--method cone`) skips step 2–3 and always descends.
+//!
+//! Tests.
+//! - Node (§4.6): the sphere centre is projected into the principal axes of the footprint
+//!   at its depth; the ellipse's extents (over the sphere's depth range, enlarged by the
+//!   anisotropy clamp, × the cut-off radius) plus the radius bound a rectangle test. It is
+//!   conservative for every point and triangle weight ≥ 2% (tested).
+//! - Point (§4.3): ray coordinates (x, y, t), Σ(t), q = the Gaussian's exponent in the
+//!   principal axes, cut at 2% (q ≤ ln 50). The weight is exp(−q) times the point's share of
+//!   the footprint, h²·|cos θ| / (π·s₁·s₂·(1−e^{−ln50})): a surface sampled at spacing h then
+//!   sums to ≥ 1 inside (the voxels crossed by a surface are at least 1/h² per unit area),
+//!   which is the paper's "take into account the orientation and spacing of the sample
+//!   points". With `eigen = per-box` (§5.2, the paper's renders) the node's decomposition
+//!   serves all its points; with `exact` every point gets its own, 8 at a time.
+//! - Triangle (§4.5): the vertices are mapped into the footprint coordinates (unit Gaussian)
+//!   of their own depth (exact) or the node's (per-box); d = distance from the origin to the
+//!   2-D triangle; weight = exp(−(d − 0.5)²), taken as 1 for d ≤ 0.5, cut at 2%. Attributes
+//!   are those of the closest point of the triangle.
+//!
+//! Compositing (§4.4): see [`super::abuffer`]. Shading is Phong with the same radiometry as
+//! the conventional tracers (`baseline::shade`); light visibility is 1 − the alpha of the
+//! shadow cone. Secondary cones start at the fragment's mean position; self-intersection is
+//! avoided, as in the paper, by a minimum distance from the outgoing cone's footprint size
+//! and angle.
+
+use super::abuffer::{ABuffer, Elem, Frag};
+use super::build::{mat_props, BuildParams, PointTree, NO_CHILD};
+use super::cone::{self, Cone, Outgoing};
+use super::quant;
+use crate::core::eigen2::{eigen_1, eigen_x8, Eigen2, Sym2};
+use crate::core::onb;
+use crate::core::stats::{Counter, Counters};
+use crate::error::{Error, Result};
+use crate::scene::{Light, Scene};
+use glam::{Affine3A, Mat3, Vec3};
+use rayon::prelude::*;
+use std::collections::BinaryHeap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+use wide::f32x8;
+
+/// Gaussian cut-off (§4.4 footnote: weights below 2% are clipped): q ≤ ln 50.
+pub const Q_CUT: f32 = 3.912_023;
+/// Radius (in footprint units) beyond which no point (√ln50 ≈ 1.98) and no triangle
+/// (0.5 + √ln50 ≈ 2.48) reaches 2%: the node test's cut-off.
+pub const R_CUT: f32 = 2.48;
+/// Mass of the unit Gaussian inside the cut-off, 1 − e^{−ln 50} = 0.98.
+const MASS_IN_CUT: f32 = 0.98;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EigenMode {
+    /// One decomposition per octree box for all its tests (§5.2; the paper's renders).
+    PerBox,
+    /// A decomposition for every point and triangle vertex at its own depth.
+    Exact,
+}
+
+/// Tracer parameters (paper defaults where the paper gives one).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct TraceParams {
+    /// Anisotropy limit: minor ≥ clamp · major (§5.1: "typically 1/4–1/16").
+    pub clamp: f32,
+    /// Level of detail: points are used when λ·σ_min ≥ h.
+    pub lod_scale: f32,
+    /// Mipmap blend one level down (§5.1).
+    pub mipmap: bool,
+    /// Depth tolerance of a point sample, in point spacings (§4.4).
+    pub depth_tol: f32,
+    pub eigen: EigenMode,
+    /// false: classic cone tracing, triangles only (`--method cone`).
+    pub points: bool,
+    /// Primary footprint in pixels (1 = the pixel's extent, §4.2).
+    pub cone_scale: f32,
+    /// A-buffer capacity.
+    pub max_fragments: usize,
+    /// Secondary cones below this contribution to the pixel are not traced.
+    pub min_importance: f32,
+    /// Trace primary cones only (local shading without shadows and secondary cones).
+    pub primary_only: bool,
+    /// Stop the render after this many seconds (the frame is then reported as unfinished).
+    pub time_budget: Option<f64>,
+}
+
+impl Default for TraceParams {
+    fn default() -> Self {
+        TraceParams {
+            clamp: 0.125,
+            lod_scale: 2.0,
+            mipmap: true,
+            depth_tol: 1.0,
+            eigen: EigenMode::PerBox,
+            points: true,
+            cone_scale: 1.0,
+            max_fragments: 16,
+            min_importance: 1e-3,
+            primary_only: false,
+            time_budget: None,
+        }
+    }
+}
+
+impl TraceParams {
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::Usage(m));
+        if !(self.clamp > 0.0 && self.clamp <= 1.0) {
+            return bad(format!("--anisotropy-clamp {} out of range (0, 1]", self.clamp));
+        }
+        if !(self.lod_scale.is_finite() && self.lod_scale >= 0.25 && self.lod_scale <= 64.0) {
+            return bad(format!("--lod-scale {} out of range [0.25, 64]", self.lod_scale));
+        }
+        if !(self.depth_tol.is_finite() && self.depth_tol > 0.0 && self.depth_tol <= 100.0) {
+            return bad(format!("--depth-tolerance {} out of range (0, 100]", self.depth_tol));
+        }
+        if !(self.cone_scale.is_finite() && self.cone_scale > 0.0 && self.cone_scale <= 16.0) {
+            return bad(format!("--cone-scale {} out of range (0, 16]", self.cone_scale));
+        }
+        if self.max_fragments < 2 || self.max_fragments > 256 {
+            return bad(format!("--max-fragments {} out of range [2, 256]", self.max_fragments));
+        }
+        if !(self.min_importance >= 0.0 && self.min_importance < 1.0) {
+            return bad(format!("--min-importance {} out of range [0, 1)", self.min_importance));
+        }
+        if let Some(b) = self.time_budget {
+            if !(b > 0.0 && b.is_finite()) {
+                return bad(format!("--time-budget {b} must be a positive number of seconds"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A leaf instance as the cone tracer sees it.
+#[derive(Clone, Debug)]
+pub struct MLeaf {
+    pub tree: u32,
+    pub mesh: u32,
+    pub xform: Affine3A,
+    pub inv: Affine3A,
+    pub normal_mat: Mat3,
+    pub material: Option<u32>,
+}
+
+/// Binary sphere tree over the leaf instances. Node i's children are `child[i]` and
+/// `child[i] + 1`; a leaf has `child[i] = LEAF | instance`.
+#[derive(Clone, Debug, Default)]
+pub struct Tlas {
+    pub cx: Vec<f32>,
+    pub cy: Vec<f32>,
+    pub cz: Vec<f32>,
+    pub r: Vec<f32>,
+    pub child: Vec<u32>,
+}
+const LEAF: u32 = 1 << 31;
+
+impl Tlas {
+    fn build(spheres: &[(Vec3, f32)]) -> Tlas {
+        let mut t = Tlas::default();
+        if spheres.is_empty() {
+            return t;
+        }
+        let mut idx: Vec<u32> = (0..spheres.len() as u32).collect();
+        t.push(Vec3::ZERO, f32::NEG_INFINITY, 0);
+        t.build_rec(0, &mut idx, spheres);
+        t
+    }
+    fn push(&mut self, c: Vec3, r: f32, child: u32) -> usize {
+        self.cx.push(c.x);
+        self.cy.push(c.y);
+        self.cz.push(c.z);
+        self.r.push(r);
+        self.child.push(child);
+        self.r.len() - 1
+    }
+    fn build_rec(&mut self, node: usize, idx: &mut [u32], s: &[(Vec3, f32)]) {
+        // Bounding sphere of the spheres: AABB centre, max distance.
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for &i in idx.iter() {
+            let (c, r) = s[i as usize];
+            lo = lo.min(c - Vec3::splat(r));
+            hi = hi.max(c + Vec3::splat(r));
+        }
+        let centre = (lo + hi) * 0.5;
+        let rad = idx.iter().map(|&i| (s[i as usize].0 - centre).length() + s[i as usize].1).fold(0.0f32, f32::max);
+        self.cx[node] = centre.x;
+        self.cy[node] = centre.y;
+        self.cz[node] = centre.z;
+        self.r[node] = rad * (1.0 + 1e-6);
+        if idx.len() == 1 {
+            self.child[node] = LEAF | idx[0];
+            return;
+        }
+        let ext = hi - lo;
+        let axis = if ext.x >= ext.y && ext.x >= ext.z {
+            0
+        } else if ext.y >= ext.z {
+            1
+        } else {
+            2
+        };
+        idx.sort_unstable_by(|&a, &b| s[a as usize].0[axis].total_cmp(&s[b as usize].0[axis]));
+        let mid = idx.len() / 2;
+        let first = self.push(Vec3::ZERO, 0.0, 0);
+        self.push(Vec3::ZERO, 0.0, 0);
+        self.child[node] = first as u32;
+        let (a, b) = idx.split_at_mut(mid);
+        self.build_rec(first, a, s);
+        self.build_rec(first + 1, b, s);
+    }
+}
+
+/// Everything the cone tracer needs, built once per scene.
+pub struct MultiresScene<'a> {
+    pub scene: &'a Scene,
+    pub trees: Vec<PointTree>,
+    pub leaves: Vec<MLeaf>,
+    pub tlas: Tlas,
+    pub build_seconds: f64,
+}
+
+impl<'a> MultiresScene<'a> {
+    /// Builds one hierarchy per (unique mesh, material override) in parallel.
+    pub fn build(scene: &'a Scene, bp: &BuildParams) -> Result<Self> {
+        bp.validate()?;
+        let t0 = Instant::now();
+        let leaves = scene.leaf_instances()?;
+        let mut keys: Vec<(u32, Option<u32>)> = leaves.iter().map(|l| (l.mesh, l.material)).collect();
+        keys.sort_unstable();
+        keys.dedup();
+        let trees: Vec<PointTree> = keys
+            .par_iter()
+            .map(|&(m, ov)| {
+                let mesh = &scene.meshes[m as usize];
+                let mats: Vec<&crate::scene::Material> =
+                    (0..mesh.tri_count()).map(|t| &scene.materials[ov.unwrap_or(mesh.mat[t]) as usize]).collect();
+                super::build::build(mesh, &mats, bp)
+            })
+            .collect::<Result<_>>()?;
+        let mut mleaves = Vec::with_capacity(leaves.len());
+        let mut spheres = Vec::with_capacity(leaves.len());
+        for l in &leaves {
+            let tree = keys.binary_search(&(l.mesh, l.material)).expect("key") as u32;
+            let t = &trees[tree as usize];
+            let c = l.xform.transform_point3(Vec3::new(t.nodes.cx[0], t.nodes.cy[0], t.nodes.cz[0]));
+            let m = Mat3::from(l.xform.matrix3);
+            let smax = m.x_axis.length().max(m.y_axis.length()).max(m.z_axis.length()) * 3f32.sqrt();
+            let smax = if m.x_axis.dot(m.y_axis).abs() < 1e-4 * smax * smax && m.x_axis.dot(m.z_axis).abs() < 1e-4 * smax * smax {
+                m.x_axis.length().max(m.y_axis.length()).max(m.z_axis.length())
+            } else {
+                smax
+            };
+            spheres.push((c, t.nodes.r[0] * smax));
+            mleaves.push(MLeaf {
+                tree,
+                mesh: l.mesh,
+                xform: l.xform,
+                inv: l.inv,
+                normal_mat: Mat3::from(l.normal_mat),
+                material: l.material,
+            });
+        }
+        let tlas = Tlas::build(&spheres);
+        Ok(MultiresScene { scene, trees, leaves: mleaves, tlas, build_seconds: t0.elapsed().as_secs_f64() })
+    }
+
+    pub fn memory_bytes(&self) -> usize {
+        self.trees.iter().map(|t| t.memory_bytes()).sum::<usize>() + self.leaves.len() * 160 + self.tlas.r.len() * 20
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Kernels (scalar references beside the packet versions).
+
+/// Result of testing one cone against up to 8 spheres: the passing lanes and their depths.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NodeHits {
+    pub mask: u8,
+    pub t_near: [f32; 8],
+    pub t_centre: [f32; 8],
+}
+
+/// Conservative extents of the footprint along the node's principal axes over [t_lo, t_hi].
+#[inline]
+fn ext2(e: &Eigen2, s_lo: Sym2, s_hi: Sym2, clamp: f32) -> (f32, f32) {
+    let along = |s: Sym2, c: f32, sn: f32| s.a * c * c + 2.0 * s.b * c * sn + s.c * sn * sn;
+    let iso = clamp * clamp * (s_lo.a + s_lo.c).max(s_hi.a + s_hi.c);
+    let e1 = along(s_lo, e.cos, e.sin).max(along(s_hi, e.cos, e.sin)) + iso;
+    let e2 = along(s_lo, -e.sin, e.cos).max(along(s_hi, -e.sin, e.cos)) + iso;
+    (e1.max(0.0).sqrt(), e2.max(0.0).sqrt())
+}
+
+/// Scalar reference of the node test (§4.6).
+pub fn node_test_1(cone: &Cone, cx: &[f32], cy: &[f32], cz: &[f32], r: &[f32], clamp: f32, floor: f32) -> NodeHits {
+    let mut out = NodeHits { mask: 0, t_near: [f32::INFINITY; 8], t_centre: [0.0; 8] };
+    for l in 0..cx.len().min(8) {
+        let rr = r[l];
+        if !(rr >= 0.0) {
+            continue;
+        }
+        let p = cone.coords(Vec3::new(cx[l], cy[l], cz[l]));
+        let t_lo = (p.z - rr).max(cone.tmin).max(0.0);
+        let t_hi = (p.z + rr).max(0.0);
+        if !(p.z + rr >= cone.tmin && p.z - rr <= cone.tmax) {
+            continue;
+        }
+        let e = eigen_1(cone.sigma(p.z.max(0.0)), 1.0e-9, floor);
+        let (x1, x2) = ext2(&e, cone.sigma(t_lo), cone.sigma(t_hi), clamp);
+        let (x1, x2) = (x1.max(floor), x2.max(floor));
+        let a = e.cos * p.x + e.sin * p.y;
+        let b = -e.sin * p.x + e.cos * p.y;
+        if a.abs() <= R_CUT * x1 + rr && b.abs() <= R_CUT * x2 + rr {
+            out.mask |= 1 << l;
+            out.t_near[l] = p.z - rr;
+            out.t_centre[l] = p.z;
+        }
+    }
+    out
+}
+
+/// One cone against the 8 child spheres in one f32x8 step (same result as [`node_test_1`]).
+pub fn node_test_x8(cone: &Cone, cx: &[f32; 8], cy: &[f32; 8], cz: &[f32; 8], r: &[f32; 8], clamp: f32, floor: f32) -> NodeHits {
+    let (cxv, cyv, czv, rv) = (f32x8::from(*cx), f32x8::from(*cy), f32x8::from(*cz), f32x8::from(*r));
+    let dx = cxv - f32x8::splat(cone.org.x);
+    let dy = cyv - f32x8::splat(cone.org.y);
+    let dz = czv - f32x8::splat(cone.org.z);
+    let dot = |v: Vec3| dx * f32x8::splat(v.x) + dy * f32x8::splat(v.y) + dz * f32x8::splat(v.z);
+    let x = dot(cone.u);
+    let y = dot(cone.v);
+    let t = dot(cone.dir);
+    let zero = f32x8::splat(0.0);
+    let tmin = f32x8::splat(cone.tmin);
+    let t_lo = (t - rv).max(tmin).max(zero);
+    let t_hi = (t + rv).max(zero);
+    let tc = t.max(zero);
+    let sig = |tt: f32x8| {
+        let (a, b, c) = (&cone.a, &cone.b, &cone.c);
+        (
+            f32x8::splat(a.a) + tt * (f32x8::splat(b.a) + tt * f32x8::splat(c.a)),
+            f32x8::splat(a.b) + tt * (f32x8::splat(b.b) + tt * f32x8::splat(c.b)),
+            f32x8::splat(a.c) + tt * (f32x8::splat(b.c) + tt * f32x8::splat(c.c)),
+        )
+    };
+    let (sa, sb, sc) = sig(tc);
+    let e = eigen_x8(sa, sb, sc, 1.0e-9, floor);
+    let (la, lb, lc) = sig(t_lo);
+    let (ha, hb, hc) = sig(t_hi);
+    let along = |a: f32x8, b: f32x8, c: f32x8, co: f32x8, sn: f32x8| a * co * co + f32x8::splat(2.0) * b * co * sn + c * sn * sn;
+    let iso = f32x8::splat(clamp * clamp) * (la + lc).max(ha + hc);
+    let e1 = along(la, lb, lc, e.cos, e.sin).max(along(ha, hb, hc, e.cos, e.sin)) + iso;
+    let e2 = along(la, lb, lc, -e.sin, e.cos).max(along(ha, hb, hc, -e.sin, e.cos)) + iso;
+    let fl = f32x8::splat(floor);
+    let x1 = e1.max(zero).sqrt().max(fl);
+    let x2 = e2.max(zero).sqrt().max(fl);
+    let a = e.cos * x + e.sin * y;
+    let b = e.cos * y - e.sin * x;
+    let rc = f32x8::splat(R_CUT);
+    let ok = a.abs().simd_le(rc * x1 + rv)
+        & b.abs().simd_le(rc * x2 + rv)
+        & (t + rv).simd_ge(tmin)
+        & (t - rv).simd_le(f32x8::splat(cone.tmax))
+        & rv.simd_ge(zero);
+    let mask = ok.to_bitmask() as u8;
+    let tn = (t - rv).to_array();
+    let tcs = t.to_array();
+    let mut out = NodeHits { mask, t_near: [f32::INFINITY; 8], t_centre: [0.0; 8] };
+    for l in 0..8 {
+        if mask & (1 << l) != 0 {
+            out.t_near[l] = tn[l];
+            out.t_centre[l] = tcs[l];
+        }
+    }
+    out
+}
+
+/// Per-point quantities of a node's point block in ray coordinates.
+pub struct PointBlock<'t> {
+    pub qx: &'t [u8],
+    pub qy: &'t [u8],
+    pub qz: &'t [u8],
+    /// x = x0 + qx·ax.x + qy·ax.y + qz·ax.z, likewise y, t.
+    pub x0: f32,
+    pub y0: f32,
+    pub t0: f32,
+    pub ax: Vec3,
+    pub ay: Vec3,
+    pub at: Vec3,
+}
+
+impl<'t> PointBlock<'t> {
+    pub fn new(tree: &'t PointTree, node: usize, cone: &Cone) -> Self {
+        let h = tree.spacing(tree.nodes.depth[node]);
+        let s = tree.nodes.pt_start[node] as usize;
+        let n = tree.nodes.pt_count[node] as usize;
+        let base = tree.nodes.grid_lo[node] + Vec3::splat(0.5 * h) - cone.org;
+        let p = &tree.points;
+        PointBlock {
+            qx: &p.qx[s..s + n],
+            qy: &p.qy[s..s + n],
+            qz: &p.qz[s..s + n],
+            x0: base.dot(cone.u),
+            y0: base.dot(cone.v),
+            t0: base.dot(cone.dir),
+            ax: cone.u * h,
+            ay: cone.v * h,
+            at: cone.dir * h,
+        }
+    }
+    #[inline]
+    pub fn coords(&self, i: usize) -> Vec3 {
+        let q = Vec3::new(self.qx[i] as f32, self.qy[i] as f32, self.qz[i] as f32);
+        Vec3::new(self.x0 + q.dot(Vec3::new(self.ax.x, self.ax.y, self.ax.z)), self.y0 + q.dot(self.ay), self.t0 + q.dot(self.at))
+    }
+}
+
+/// Gaussian exponent q of a point at ray coordinates p with the footprint `e` (scalar).
+#[inline]
+pub fn point_q_1(e: &Eigen2, x: f32, y: f32) -> f32 {
+    let a = e.cos * x + e.sin * y;
+    let b = e.cos * y - e.sin * x;
+    a * a / (e.s1 * e.s1) + b * b / (e.s2 * e.s2)
+}
+
+/// Scalar reference of the point test: for every point, q (or +∞ when rejected) and the
+/// footprint it was measured with.
+pub fn point_q_ref(cone: &Cone, blk: &PointBlock, boxe: Option<&Eigen2>, clamp: f32, floor: f32, out: &mut Vec<(f32, Eigen2)>) {
+    out.clear();
+    for i in 0..blk.qx.len() {
+        let p = blk.coords(i);
+        let e = match boxe {
+            Some(e) => *e,
+            None => eigen_1(cone.sigma(p.z.max(0.0)), clamp, floor),
+        };
+        let q = if p.z >= cone.tmin && p.z <= cone.tmax { point_q_1(&e, p.x, p.y) } else { f32::INFINITY };
+        out.push((q, e));
+    }
+}
+
+/// Packet version: 8 points per step; exact mode runs the eigen-decompositions 8-wide.
+/// Calls `hit(i, q, e)` for every point with q ≤ Q_CUT.
+#[inline]
+pub fn point_q_x8(cone: &Cone, blk: &PointBlock, boxe: Option<&Eigen2>, clamp: f32, floor: f32, mut hit: impl FnMut(usize, Vec3, f32, Eigen2)) {
+    let n = blk.qx.len();
+    let load = |s: &[u8], i: usize| -> f32x8 {
+        let mut a = [0.0f32; 8];
+        for l in 0..8 {
+            a[l] = s.get(i + l).copied().unwrap_or(0) as f32;
+        }
+        f32x8::from(a)
+    };
+    let qcut = f32x8::splat(Q_CUT);
+    let (tmin, tmax) = (f32x8::splat(cone.tmin), f32x8::splat(cone.tmax));
+    let mut i = 0;
+    while i < n {
+        let (qx, qy, qz) = (load(blk.qx, i), load(blk.qy, i), load(blk.qz, i));
+        let lin = |o: f32, a: Vec3| f32x8::splat(o) + qx * f32x8::splat(a.x) + qy * f32x8::splat(a.y) + qz * f32x8::splat(a.z);
+        let x = lin(blk.x0, blk.ax);
+        let y = lin(blk.y0, blk.ay);
+        let t = lin(blk.t0, blk.at);
+        let (co, sn, s1, s2) = match boxe {
+            Some(e) => (f32x8::splat(e.cos), f32x8::splat(e.sin), f32x8::splat(e.s1), f32x8::splat(e.s2)),
+            None => {
+                let tt = t.max(f32x8::splat(0.0));
+                let (a, b, c) = (&cone.a, &cone.b, &cone.c);
+                let sa = f32x8::splat(a.a) + tt * (f32x8::splat(b.a) + tt * f32x8::splat(c.a));
+                let sb = f32x8::splat(a.b) + tt * (f32x8::splat(b.b) + tt * f32x8::splat(c.b));
+                let sc = f32x8::splat(a.c) + tt * (f32x8::splat(b.c) + tt * f32x8::splat(c.c));
+                let e = eigen_x8(sa, sb, sc, clamp, floor);
+                (e.cos, e.sin, e.s1, e.s2)
+            }
+        };
+        let a = co * x + sn * y;
+        let b = co * y - sn * x;
+        let q = a * a / (s1 * s1) + b * b / (s2 * s2);
+        let ok = q.simd_le(qcut) & t.simd_ge(tmin) & t.simd_le(tmax);
+        let mut m = ok.to_bitmask() as u32;
+        if n - i < 8 {
+            m &= (1u32 << (n - i)) - 1;
+        }
+        if m != 0 {
+            let (xa, ya, ta, qa) = (x.to_array(), y.to_array(), t.to_array(), q.to_array());
+            let (ca, sa, s1a, s2a) = (co.to_array(), sn.to_array(), s1.to_array(), s2.to_array());
+            while m != 0 {
+                let l = m.trailing_zeros() as usize;
+                m &= m - 1;
+                hit(i + l, Vec3::new(xa[l], ya[l], ta[l]), qa[l], Eigen2 { cos: ca[l], sin: sa[l], s1: s1a[l], s2: s2a[l] });
+            }
+        }
+        i += 8;
+    }
+}
+
+/// Anti-aliased ray–triangle test (§4.5) in footprint coordinates. `pv` are the vertices'
+/// ray coordinates, `ev` their footprints. Returns (weight, barycentrics of the closest
+/// point (b1, b2), depth) or None below the cut-off.
+pub fn triangle_weight(pv: [Vec3; 3], ev: [Eigen2; 3]) -> Option<(f32, f32, f32, f32)> {
+    let q: [glam::Vec2; 3] = std::array::from_fn(|i| {
+        let e = &ev[i];
+        let (x, y) = (pv[i].x, pv[i].y);
+        glam::Vec2::new((e.cos * x + e.sin * y) / e.s1, (e.cos * y - e.sin * x) / e.s2)
+    });
+    // Quick reject: the triangle's 2-D bounds miss the cut-off disc.
+    let lo = q[0].min(q[1]).min(q[2]);
+    let hi = q[0].max(q[1]).max(q[2]);
+    if lo.x > R_CUT || lo.y > R_CUT || hi.x < -R_CUT || hi.y < -R_CUT || !(lo.x <= hi.x) {
+        return None;
+    }
+    // Closest point of the 2-D triangle to the origin, with barycentrics.
+    let (d, b1, b2) = closest_to_origin(q[0], q[1], q[2]);
+    if !d.is_finite() {
+        return None;
+    }
+    let w = if d <= 0.5 { 1.0 } else { (-(d - 0.5) * (d - 0.5)).exp() };
+    if w < 0.02 {
+        return None;
+    }
+    let t = pv[0].z * (1.0 - b1 - b2) + pv[1].z * b1 + pv[2].z * b2;
+    Some((w, b1, b2, t))
+}
+
+/// Distance from the origin to triangle (a, b, c) in 2-D and the barycentrics (of b, c) of
+/// the closest point.
+fn closest_to_origin(a: glam::Vec2, b: glam::Vec2, c: glam::Vec2) -> (f32, f32, f32) {
+    let area = (b - a).perp_dot(c - a);
+    if area.abs() > 1e-12 {
+        let w0 = b.perp_dot(c) / area;
+        let w1 = c.perp_dot(a) / area;
+        let w2 = a.perp_dot(b) / area;
+        if w0 >= 0.0 && w1 >= 0.0 && w2 >= 0.0 {
+            return (0.0, w1, w2);
+        }
+    }
+    let seg = |p: glam::Vec2, q: glam::Vec2| -> (f32, f32) {
+        let d = q - p;
+        let l2 = d.length_squared();
+        let s = if l2 > 0.0 { (-p.dot(d) / l2).clamp(0.0, 1.0) } else { 0.0 };
+        ((p + d * s).length(), s)
+    };
+    let (dab, sab) = seg(a, b);
+    let (dbc, sbc) = seg(b, c);
+    let (dca, sca) = seg(c, a);
+    if dab <= dbc && dab <= dca {
+        (dab, sab, 0.0)
+    } else if dbc <= dca {
+        (dbc, 1.0 - sbc, sbc)
+    } else {
+        (dca, 0.0, 1.0 - sca)
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Traversal
+
+#[derive(Clone, Copy)]
+struct Entry {
+    t: f32,
+    /// TLAS node, or octree node of instance slot `slot`.
+    node: u32,
+    slot: u32,
+    blend: f32,
+    kind: u8,
+}
+const K_TLAS: u8 = 0;
+const K_OCT: u8 = 1;
+/// An octree node reached by the mipmap step: points and triangles only, no descent.
+const K_TERMINAL: u8 = 2;
+
+impl PartialEq for Entry {
+    fn eq(&self, o: &Self) -> bool {
+        self.t == o.t
+    }
+}
+impl Eq for Entry {}
+impl PartialOrd for Entry {
+    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for Entry {
+    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+        o.t.total_cmp(&self.t) // min-heap
+    }
+}
+
+struct Local {
+    cone: Cone,
+    /// object t = scale · world t
+    scale: f32,
+    leaf: u32,
+}
+
+/// Per-thread scratch of the traversal.
+pub struct Scratch {
+    heap: BinaryHeap<Entry>,
+    locals: Vec<Local>,
+}
+
+impl Default for Scratch {
+    fn default() -> Self {
+        Scratch { heap: BinaryHeap::with_capacity(256), locals: Vec::with_capacity(64) }
+    }
+}
+
+/// What the traversal collects.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub enum Collect {
+    /// Attributes for shading.
+    Shade,
+    /// Weights only (shadow cones).
+    Alpha,
+}
+
+pub struct Tracer<'s, 'a> {
+    pub ms: &'s MultiresScene<'a>,
+    pub p: &'s TraceParams,
+    /// Floor of the footprint semi-axes (world units): keeps zero footprints finite.
+    pub floor: f32,
+    pub abort: &'s AtomicBool,
+    pub deadline: Option<Instant>,
+}
+
+impl<'s, 'a> Tracer<'s, 'a> {
+    /// Traverses the scene with `cone` (world space), filling `ab`.
+    pub fn traverse(&self, cone: &Cone, ab: &mut ABuffer, mode: Collect, sc: &mut Scratch, c: &mut Counters) {
+        let tl = &self.ms.tlas;
+        if tl.r.is_empty() {
+            return;
+        }
+        sc.heap.clear();
+        sc.locals.clear();
+        let clamp = self.p.clamp;
+        let floor = self.floor;
+        let root = node_test_1(cone, &tl.cx[..1], &tl.cy[..1], &tl.cz[..1], &tl.r[..1], clamp, floor);
+        c.inc(Counter::instance_tests);
+        if root.mask & 1 == 0 {
+            return;
+        }
+        sc.heap.push(Entry { t: root.t_near[0], node: 0, slot: 0, blend: 1.0, kind: K_TLAS });
+        let mut steps = 0u32;
+        while let Some(e) = sc.heap.pop() {
+            if ab.opaque_before(e.t) {
+                break;
+            }
+            steps += 1;
+            if steps & 1023 == 0 && self.past_deadline() {
+                break;
+            }
+            if e.kind == K_TLAS {
+                let ch = tl.child[e.node as usize];
+                if ch & LEAF != 0 {
+                    let li = ch & !LEAF;
+                    let leaf = &self.ms.leaves[li as usize];
+                    let (lc, s) = cone.to_object(&leaf.inv);
+                    let tree = &self.ms.trees[leaf.tree as usize];
+                    let lf = floor * s;
+                    let h = node_test_1(&lc, &tree.nodes.cx[..1], &tree.nodes.cy[..1], &tree.nodes.cz[..1], &tree.nodes.r[..1], clamp, lf);
+                    c.inc(Counter::node_tests);
+                    if h.mask & 1 != 0 {
+                        sc.locals.push(Local { cone: lc, scale: s, leaf: li });
+                        let slot = (sc.locals.len() - 1) as u32;
+                        sc.heap.push(Entry { t: h.t_near[0] / s, node: 0, slot, blend: 1.0, kind: K_OCT });
+                    }
+                } else {
+                    let f = ch as usize;
+                    let h = node_test_1(cone, &tl.cx[f..f + 2], &tl.cy[f..f + 2], &tl.cz[f..f + 2], &tl.r[f..f + 2], clamp, floor);
+                    c.add(Counter::instance_tests, 2);
+                    for l in 0..2 {
+                        if h.mask & (1 << l) != 0 {
+                            sc.heap.push(Entry { t: h.t_near[l], node: (f + l) as u32, slot: 0, blend: 1.0, kind: K_TLAS });
+                        }
+                    }
+                }
+                continue;
+            }
+            self.visit(e, ab, mode, sc, c);
+        }
+    }
+
+    fn past_deadline(&self) -> bool {
+        if self.abort.load(Ordering::Relaxed) {
+            return true;
+        }
+        if let Some(d) = self.deadline {
+            if Instant::now() > d {
+                self.abort.store(true, Ordering::Relaxed);
+                return true;
+            }
+        }
+        false
+    }
+
+    /// One octree node (§5.1 steps 1–5).
+    fn visit(&self, e: Entry, ab: &mut ABuffer, mode: Collect, sc: &mut Scratch, c: &mut Counters) {
+        let (lc, s, li) = {
+            let l = &sc.locals[e.slot as usize];
+            (l.cone, l.scale, l.leaf)
+        };
+        let leaf = &self.ms.leaves[li as usize];
+        let tree = &self.ms.trees[leaf.tree as usize];
+        let n = e.node as usize;
+        let nodes = &tree.nodes;
+        let clamp = self.p.clamp;
+        let lf = self.floor * s;
+        let tc = lc.coords(Vec3::new(nodes.cx[n], nodes.cy[n], nodes.cz[n])).z.max(0.0);
+        let boxe = eigen_1(lc.sigma(tc), clamp, lf);
+        c.inc(Counter::eigen_decompositions);
+        // 3. Triangles stored here.
+        let tcount = nodes.tri_count[n] as usize;
+        if tcount > 0 {
+            let ts = nodes.tri_start[n] as usize;
+            c.add(Counter::triangle_tests, tcount as u64);
+            for &tri in &tree.tri_index[ts..ts + tcount] {
+                self.test_triangle(&lc, s, li, tri, &boxe, e.blend, ab, mode, c);
+            }
+        }
+        let h = tree.spacing(nodes.depth[n]);
+        let has_children = nodes.first_child[n] != NO_CHILD;
+        let npts = nodes.pt_count[n] as usize;
+        if e.kind == K_TERMINAL {
+            if npts > 0 {
+                self.test_points(&lc, s, li, tree, n, &boxe, e.blend, ab, mode, c);
+            }
+            return;
+        }
+        // 4. Level of detail: the minor semi-axis (after the clamp) against the spacing.
+        let smin = boxe.s2;
+        if self.p.points && npts > 0 && self.p.lod_scale * smin >= h {
+            let x = if has_children && self.p.mipmap { ((self.p.lod_scale * smin / h).log2()).clamp(0.0, 1.0) } else { 1.0 };
+            if x > 0.0 {
+                self.test_points(&lc, s, li, tree, n, &boxe, e.blend * x, ab, mode, c);
+            }
+            if x < 1.0 && has_children {
+                self.push_children(&lc, s, e.slot, tree, n, e.blend * (1.0 - x), K_TERMINAL, sc, c);
+            }
+            return;
+        }
+        if has_children {
+            self.push_children(&lc, s, e.slot, tree, n, e.blend, K_OCT, sc, c);
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn push_children(&self, lc: &Cone, s: f32, slot: u32, tree: &PointTree, n: usize, blend: f32, kind: u8, sc: &mut Scratch, c: &mut Counters) {
+        let f = tree.nodes.first_child[n] as usize;
+        let arr = |v: &Vec<f32>| -> [f32; 8] { v[f..f + 8].try_into().expect("8 children") };
+        let h = node_test_x8(lc, &arr(&tree.nodes.cx), &arr(&tree.nodes.cy), &arr(&tree.nodes.cz), &arr(&tree.nodes.r), self.p.clamp, self.floor * s);
+        c.add(Counter::node_tests, 8);
+        c.add(Counter::eigen_decompositions, 8);
+        let mut m = h.mask as u32;
+        while m != 0 {
+            let l = m.trailing_zeros() as usize;
+            m &= m - 1;
+            sc.heap.push(Entry { t: h.t_near[l] / s, node: (f + l) as u32, slot, blend, kind });
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn test_points(&self, lc: &Cone, s: f32, li: u32, tree: &PointTree, n: usize, boxe: &Eigen2, blend: f32, ab: &mut ABuffer, mode: Collect, c: &mut Counters) {
+        let blk = PointBlock::new(tree, n, lc);
+        let h = tree.spacing(tree.nodes.depth[n]);
+        let start = tree.nodes.pt_start[n] as usize;
+        let npts = tree.nodes.pt_count[n] as usize;
+        c.add(Counter::surfel_tests, npts as u64);
+        let exact = self.p.eigen == EigenMode::Exact;
+        if exact {
+            c.add(Counter::eigen_decompositions, npts as u64);
+        }
+        let leaf = &self.ms.leaves[li as usize];
+        let inv_s = 1.0 / s;
+        let share = h * h / (std::f32::consts::PI * MASS_IN_CUT);
+        let pts = &tree.points;
+        point_q_x8(lc, &blk, if exact { None } else { Some(boxe) }, self.p.clamp, self.floor * s, |i, p, q, e| {
+            let j = start + i;
+            let n_obj = quant::oct_decode(pts.normal[j]);
+            let cos = n_obj.dot(lc.dir).abs();
+            let w = (-q).exp() * blend * share * cos / (e.s1 * e.s2);
+            if !(w > 0.0) {
+                return;
+            }
+            let t = p.z * inv_s;
+            let dz = self.p.depth_tol * h * inv_s;
+            let mut f = Frag { z0: t - dz, z1: t + dz, w, wt: w * t, best_w: w, ..Default::default() };
+            if mode == Collect::Shade {
+                let m = tree.ranges.decode(pts.rgb[j], pts.mat[j]);
+                f.col = m.color * w;
+                f.props = m.p.map(|v| v * w);
+                f.n = (leaf.normal_mat * n_obj).normalize_or_zero() * w;
+                f.best = Elem::Point { leaf: li, node: n as u32, idx: j as u32 };
+            }
+            ab.insert(f);
+        });
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn test_triangle(&self, lc: &Cone, s: f32, li: u32, tri: u32, boxe: &Eigen2, blend: f32, ab: &mut ABuffer, mode: Collect, c: &mut Counters) {
+        let leaf = &self.ms.leaves[li as usize];
+        let mesh = &self.ms.scene.meshes[leaf.mesh as usize];
+        let [i0, i1, i2] = mesh.tris[tri as usize];
+        let pv = [lc.coords(mesh.pos(i0)), lc.coords(mesh.pos(i1)), lc.coords(mesh.pos(i2))];
+        let ev = if self.p.eigen == EigenMode::Exact {
+            c.add(Counter::eigen_decompositions, 3);
+            let lf = self.floor * s;
+            pv.map(|p| eigen_1(lc.sigma(p.z.max(lc.tmin).max(0.0)), self.p.clamp, lf))
+        } else {
+            [*boxe; 3]
+        };
+        let Some((w, b1, b2, t)) = triangle_weight(pv, ev) else { return };
+        if !(t >= lc.tmin && t <= lc.tmax) {
+            return;
+        }
+        let w = w * blend;
+        let inv_s = 1.0 / s;
+        // Depth tolerance: how far the triangle's plane spans in depth across the footprint.
+        let [a, b, cc] = [mesh.pos(i0), mesh.pos(i1), mesh.pos(i2)];
+        let ng = (b - a).cross(cc - a).normalize_or_zero();
+        let cos = ng.dot(lc.dir).abs().max(0.05);
+        let tan = (1.0 - cos * cos).max(0.0).sqrt() / cos;
+        let e_hit = if self.p.eigen == EigenMode::Exact { ev[0] } else { *boxe };
+        let dz = (R_CUT * e_hit.s1 * tan.min(8.0)).max(1e-5 * (1.0 + t.abs())) * inv_s;
+        let tw = t * inv_s;
+        let mut f = Frag { z0: tw - dz, z1: tw + dz, w, wt: w * tw, best_w: w, ..Default::default() };
+        if mode == Collect::Shade {
+            let mat = &self.ms.scene.materials[leaf.material.unwrap_or(mesh.mat[tri as usize]) as usize];
+            let b0 = 1.0 - b1 - b2;
+            let mut nn = mesh.normal(i0) * b0 + mesh.normal(i1) * b1 + mesh.normal(i2) * b2;
+            if !(nn.length_squared() > 0.0) {
+                nn = ng;
+            }
+            f.col = mat.color * w;
+            f.props = mat_props(mat).map(|v| v * w);
+            f.n = (leaf.normal_mat * nn).normalize_or_zero() * w;
+            f.best = Elem::Tri { leaf: li, tri, b1, b2 };
+        }
+        ab.insert(f);
+    }
+
+    /// World-space shape operator W (n(p+δ) ≈ normalize(n + W·δ)) of a fragment's best
+    /// element, from the point's ∇n or the triangle's vertex normals.
+    pub fn shape_operator(&self, best: Elem) -> Mat3 {
+        let (li, w_obj) = match best {
+            Elem::None => return Mat3::ZERO,
+            Elem::Point { leaf, idx, .. } => {
+                let tree = &self.ms.trees[self.ms.leaves[leaf as usize].tree as usize];
+                let n = quant::oct_decode(tree.points.normal[idx as usize]);
+                let (tu, tv) = onb(n);
+                let (gu, gv) = quant::decode_grad(tree.points.grad[idx as usize]);
+                let du = tu * gu.x + tv * gu.y;
+                let dv = tu * gv.x + tv * gv.y;
+                // W·δ = du·(tu·δ) + dv·(tv·δ)
+                (leaf, outer(du, tu) + outer(dv, tv))
+            }
+            Elem::Tri { leaf, tri, .. } => {
+                let mesh = &self.ms.scene.meshes[self.ms.leaves[leaf as usize].mesh as usize];
+                let [i0, i1, i2] = mesh.tris[tri as usize];
+                let (p0, p1, p2) = (mesh.pos(i0), mesh.pos(i1), mesh.pos(i2));
+                let (e1, e2) = (p1 - p0, p2 - p0);
+                let ng = e1.cross(e2);
+                let m = Mat3::from_cols(e1, e2, ng);
+                if m.determinant().abs() < 1e-30 {
+                    return Mat3::ZERO;
+                }
+                let (n0, n1, n2) = (mesh.normal(i0), mesh.normal(i1), mesh.normal(i2));
+                (leaf, Mat3::from_cols(n1 - n0, n2 - n0, Vec3::ZERO) * m.inverse())
+            }
+        };
+        let l = &self.ms.leaves[li as usize];
+        let w = l.normal_mat * w_obj * Mat3::from(l.inv.matrix3);
+        if w.is_finite() {
+            w
+        } else {
+            Mat3::ZERO
+        }
+    }
+}
+
+fn outer(a: Vec3, b: Vec3) -> Mat3 {
+    Mat3::from_cols(a * b.x, a * b.y, a * b.z)
+}
+
+// ---------------------------------------------------------------------------------------
+// Shading
+
+/// The result of one cone: colour, alpha and the first surface (depth, normal) for AOVs.
+pub struct ConeResult {
+    pub color: Vec3,
+    pub alpha: f32,
+    pub depth: f32,
+    pub normal: Vec3,
+}
+
+pub struct ShadeScratch {
+    pub trav: Scratch,
+    /// One A-buffer per recursion level.
+    pub bufs: Vec<ABuffer>,
+}
+
+impl ShadeScratch {
+    pub fn new(cap: usize, depth: u32) -> Self {
+        ShadeScratch { trav: Scratch::default(), bufs: (0..depth as usize + 2).map(|_| ABuffer::new(cap)).collect() }
+    }
+}
+
+impl<'s, 'a> Tracer<'s, 'a> {
+    /// Radiance along a cone, composited from its A-buffer (§4.4).
+    pub fn radiance(&self, cone: &Cone, depth: u32, importance: f32, ss: &mut ShadeScratch, c: &mut Counters) -> ConeResult {
+        let mut ab = std::mem::replace(&mut ss.bufs[depth as usize], ABuffer::new(0));
+        ab.clear();
+        ab.cap = self.p.max_fragments;
+        self.traverse(cone, &mut ab, Collect::Shade, &mut ss.trav, c);
+        c.add(Counter::fragments_merged, ab.merges);
+        let scene = self.ms.scene;
+        let mut res = ConeResult { color: Vec3::ZERO, alpha: 0.0, depth: f32::INFINITY, normal: Vec3::ZERO };
+        let mut acc = 0.0f32;
+        for f in &ab.frags {
+            let k = (1.0 - acc) * f.alpha();
+            if res.depth.is_infinite() && f.w >= 0.5 {
+                res.depth = f.t();
+                res.normal = f.n.normalize_or_zero();
+            }
+            if k > 1e-4 {
+                res.color += self.shade(cone, f, depth, importance * k, ss, c) * k;
+            }
+            acc += k;
+            if acc >= super::abuffer::OPAQUE {
+                break;
+            }
+        }
+        res.alpha = acc;
+        res.color += scene.background * (1.0 - acc);
+        ss.bufs[depth as usize] = ab;
+        res
+    }
+
+    fn shade(&self, cone: &Cone, f: &Frag, depth: u32, importance: f32, ss: &mut ShadeScratch, c: &mut Counters) -> Vec3 {
+        let scene = self.ms.scene;
+        let inv = 1.0 / f.w;
+        let color = f.col * inv;
+        let [kd, ks, shininess, reflect, transmit, ior, roughness] = f.props.map(|v| v * inv);
+        let t = f.t();
+        let p = cone.org + cone.dir * t;
+        let mut n = f.n.normalize_or_zero();
+        if n == Vec3::ZERO {
+            n = -cone.dir;
+        }
+        let mut w = self.shape_operator(f.best);
+        let front = n.dot(cone.dir) < 0.0;
+        if !front {
+            n = -n;
+            w = -w;
+        }
+        let fs = cone.footprint_and_spread(t, self.p.clamp, self.floor);
+        let (f0, f1) = (fs[0], fs[1]);
+        let g0 = cone::project_on_plane(f0, cone.dir, n);
+        let g1 = cone::project_on_plane(f1, cone.dir, n);
+        let gmax = g0.length().max(g1.length());
+        let half_depth = 0.5 * (f.z1 - f.z0);
+        let eps = 1e-4 * (1.0 + p.abs().max_element());
+        // Minimum distance of outgoing cones: clear of the surface's own footprint.
+        let t_self = |d: Vec3| -> f32 {
+            let sin_el = d.dot(n).abs().max(0.05);
+            let cos_el = (1.0 - sin_el * sin_el).max(0.0).sqrt();
+            (R_CUT * gmax * cos_el + half_depth) / sin_el.max(0.2) + eps
+        };
+        let v = -cone.dir;
+        let mut l = scene.ambient * color * kd;
+        if !self.p.primary_only || depth > 0 || true {
+            for light in &scene.lights {
+                let (lp, ax_a, ax_b) = match light {
+                    Light::Point { pos, .. } => (*pos, Vec3::ZERO, Vec3::ZERO),
+                    Light::Ellipse { center, axis_a, axis_b, .. } => (*center, *axis_a, *axis_b),
+                };
+                let to_l = lp - p;
+                let d2 = to_l.length_squared();
+                if !(d2 > 0.0) {
+                    continue;
+                }
+                let ldir = to_l / d2.sqrt();
+                let cos = n.dot(ldir);
+                if cos <= 0.0 {
+                    continue;
+                }
+                let vis = if self.p.primary_only {
+                    1.0
+                } else {
+                    let (mut sh, dist) = cone::shadow(p, n, f0, f1, lp, ax_a, ax_b);
+                    sh.tmin = t_self(ldir);
+                    sh.tmax = dist * (1.0 - 1e-4);
+                    if sh.tmin >= sh.tmax {
+                        1.0
+                    } else {
+                        c.inc(Counter::rays_shadow);
+                        let mut ab = std::mem::replace(&mut ss.bufs[depth as usize + 1], ABuffer::new(0));
+                        ab.clear();
+                        ab.cap = self.p.max_fragments;
+                        self.traverse(&sh, &mut ab, Collect::Alpha, &mut ss.trav, c);
+                        c.add(Counter::fragments_merged, ab.merges);
+                        let a = ab.alpha();
+                        ss.bufs[depth as usize + 1] = ab;
+                        1.0 - a
+                    }
+                };
+                if vis <= 0.0 {
+                    continue;
+                }
+                let e = light.intensity() * (cos / d2) * vis;
+                let mut fr = color * (kd / std::f32::consts::PI);
+                if ks > 0.0 {
+                    let r = (2.0 * n.dot(ldir)) * n - ldir;
+                    let ca = r.dot(v).max(0.0);
+                    fr += Vec3::splat(ks * (shininess + 2.0) / std::f32::consts::TAU * ca.powf(shininess));
+                }
+                l += fr * e;
+            }
+        }
+        if self.p.primary_only || depth >= scene.max_depth || self.abort.load(Ordering::Relaxed) {
+            return l;
+        }
+        let mut reflect_w = reflect;
+        if transmit > 0.0 {
+            let eta = if front { 1.0 / ior.max(1e-3) } else { ior };
+            match cone::secondary(p, cone.dir, n, &w, fs, Outgoing::Refract(eta), 0.0) {
+                Some(mut rc) => {
+                    if importance * transmit > self.p.min_importance {
+                        rc.tmin = t_self(rc.dir);
+                        c.inc(Counter::rays_refract);
+                        let r = self.radiance(&rc, depth + 1, importance * transmit, ss, c);
+                        l += r.color * color * transmit;
+                    }
+                }
+                None => reflect_w += transmit, // total internal reflection (centre ray decides)
+            }
+        }
+        if reflect_w > 0.0 && importance * reflect_w > self.p.min_importance {
+            if let Some(mut rc) = cone::secondary(p, cone.dir, n, &w, fs, Outgoing::Reflect, roughness) {
+                rc.tmin = t_self(rc.dir);
+                c.inc(Counter::rays_reflect);
+                let r = self.radiance(&rc, depth + 1, importance * reflect_w, ss, c);
+                l += r.color * reflect_w;
+            }
+        }
+        l
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::rng::Sampler;
+
+    fn rnd_cone(s: &mut Sampler) -> Cone {
+        let dir = Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5).normalize();
+        let k = 10f32.powf(s.next() * 4.0 - 4.0);
+        let fp = cone::Fp { c0: glam::Vec2::new(s.next(), s.next() - 0.5) * k, c1: glam::Vec2::new(s.next() - 0.5, s.next()) * k * s.next() };
+        let fs = cone::Fp { c0: glam::Vec2::new(s.next(), 0.0) * k, c1: glam::Vec2::new(0.0, s.next()) * k };
+        let mut c = Cone::new(Vec3::new(s.next(), s.next(), s.next()), dir, &[(fs, fp)]);
+        c.tmin = s.next() * 0.5;
+        c
+    }
+
+    #[test]
+    fn node_test_x8_matches_scalar() {
+        let mut s = Sampler::new(7, 0, 0);
+        for _ in 0..2000 {
+            let cone = rnd_cone(&mut s);
+            let mut cx = [0.0; 8];
+            let mut cy = [0.0; 8];
+            let mut cz = [0.0; 8];
+            let mut r = [0.0; 8];
+            for l in 0..8 {
+                let t = s.next() * 20.0 - 2.0;
+                let off = Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * s.next() * 3.0;
+                let p = cone.org + cone.dir * t + off;
+                cx[l] = p.x;
+                cy[l] = p.y;
+                cz[l] = p.z;
+                r[l] = if s.next() < 0.1 { f32::NEG_INFINITY } else { s.next() * 0.5 };
+            }
+            let a = node_test_1(&cone, &cx, &cy, &cz, &r, 0.125, 1e-7);
+            let b = node_test_x8(&cone, &cx, &cy, &cz, &r, 0.125, 1e-7);
+            // Lanes may only differ where the test is within rounding of its boundary.
+            let diff = a.mask ^ b.mask;
+            assert!(diff.count_ones() <= 1, "scalar {:08b} vs x8 {:08b}", a.mask, b.mask);
+            for l in 0..8 {
+                if a.mask & b.mask & (1 << l) != 0 {
+                    assert!((a.t_near[l] - b.t_near[l]).abs() <= 1e-4 * (1.0 + a.t_near[l].abs()));
+                }
+            }
+        }
+    }
+
+    /// The node test is conservative: every point with weight ≥ 2% (q ≤ Q_CUT, any eigen
+    /// mode) inside a sphere passes that sphere's test.
+    #[test]
+    fn node_test_is_conservative_for_points() {
+        let mut s = Sampler::new(9, 0, 0);
+        let mut inside = 0;
+        for _ in 0..20000 {
+            let cone = rnd_cone(&mut s);
+            let t = s.next() * 10.0;
+            let r = s.next() * 0.3;
+            let c = cone.org + cone.dir * t + (cone.u * (s.next() - 0.5) + cone.v * (s.next() - 0.5)) * (s.next() * 0.5);
+            let off = Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5).normalize_or_zero() * r * s.next();
+            let p = cone.coords(c + off);
+            if !(p.z >= cone.tmin) {
+                continue;
+            }
+            let e = eigen_1(cone.sigma(p.z), 0.125, 1e-7);
+            if point_q_1(&e, p.x, p.y) <= Q_CUT {
+                inside += 1;
+                let h = node_test_1(&cone, &[c.x], &[c.y], &[c.z], &[r], 0.125, 1e-7);
+                assert_eq!(h.mask, 1, "point with weight >= 2% outside the node's cone test");
+            }
+        }
+        assert!(inside > 100, "the test exercised too few hits ({inside})");
+    }
+
+    #[test]
+    fn point_kernel_x8_matches_scalar() {
+        use super::super::build::{build, BuildParams};
+        let mut mesh = crate::scene::builtin::icosphere(3, 0);
+        mesh.compute_normals();
+        let m = crate::scene::Material::default();
+        let mats = vec![&m; mesh.tri_count()];
+        let tree = build(&mesh, &mats, &BuildParams::default()).unwrap();
+        let mut s = Sampler::new(3, 0, 0);
+        let mut refv = Vec::new();
+        let mut total = 0;
+        for _ in 0..300 {
+            let mut cone = rnd_cone(&mut s);
+            cone.org = Vec3::new(s.next() - 0.5, s.next() - 0.5, 4.0);
+            cone.dir = (Vec3::new(s.next() - 0.5, s.next() - 0.5, 0.0) * 0.5 - cone.org).normalize();
+            let (u, v) = onb(cone.dir);
+            cone.u = u;
+            cone.v = v;
+            for node in 0..tree.nodes.len() {
+                if tree.nodes.pt_count[node] == 0 {
+                    continue;
+                }
+                let blk = PointBlock::new(&tree, node, &cone);
+                let be = eigen_1(cone.sigma(2.0), 0.125, 1e-7);
+                for boxe in [Some(&be), None] {
+                    point_q_ref(&cone, &blk, boxe, 0.125, 1e-7, &mut refv);
+                    let mut got = vec![f32::INFINITY; refv.len()];
+                    point_q_x8(&cone, &blk, boxe, 0.125, 1e-7, |i, _, q, _| got[i] = q);
+                    for (i, (q, _)) in refv.iter().enumerate() {
+                        let expect_hit = *q <= Q_CUT;
+                        let hit = got[i] <= Q_CUT;
+                        if expect_hit != hit {
+                            assert!((q - Q_CUT).abs() < 1e-3 * Q_CUT, "lane disagreement at q={q} vs {}", got[i]);
+                        } else if hit {
+                            total += 1;
+                            assert!((q - got[i]).abs() <= 1e-3 * (1.0 + q), "{q} vs {}", got[i]);
+                        }
+                    }
+                }
+            }
+        }
+        assert!(total > 100, "too few point hits exercised: {total}");
+    }
+
+    #[test]
+    fn triangle_weight_inside_edge_and_far() {
+        let e = Eigen2 { cos: 1.0, sin: 0.0, s1: 1.0, s2: 1.0 };
+        let tri = |o: Vec3| [Vec3::new(-1.0, -1.0, 5.0) + o, Vec3::new(1.0, -1.0, 5.0) + o, Vec3::new(0.0, 1.0, 5.0) + o];
+        let (w, _, _, t) = triangle_weight(tri(Vec3::ZERO), [e; 3]).unwrap();
+        assert_eq!(w, 1.0);
+        assert!((t - 5.0).abs() < 1e-6);
+        // Edge at distance 1.5 from the axis: exp(-(1.5-0.5)²) = e^-1.
+        let (w, _, _, _) = triangle_weight(tri(Vec3::new(0.0, 2.5, 0.0)), [e; 3]).unwrap();
+        assert!((w - (-1.0f32).exp()).abs() < 1e-5, "{w}");
+        assert!(triangle_weight(tri(Vec3::new(0.0, 5.0, 0.0)), [e; 3]).is_none());
+        // Degenerate (colinear) triangles and NaN do not panic.
+        let _ = triangle_weight([Vec3::ZERO, Vec3::X, Vec3::X * 2.0], [e; 3]);
+        assert!(triangle_weight([Vec3::NAN; 3], [e; 3]).is_none());
+    }
+}
