@@ -3,7 +3,7 @@
 //! K = 8, closest hit and occlusion, over two-level instancing (see `scene` docs).
 
 use crate::core::stats::Counters;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::scene::Scene;
 use glam::Vec3;
 
@@ -95,15 +95,13 @@ pub trait Accel: Sync + Send {
 }
 
 /// Builds the requested back-end for a validated scene.
-pub fn build(kind: AccelKind, scene: &Scene) -> Result<Box<dyn Accel>> {
+pub fn build<'a>(kind: AccelKind, scene: &'a Scene) -> Result<Box<dyn Accel + 'a>> {
     match kind {
         AccelKind::Bvh => Ok(Box::new(super::bvh::BvhAccel::build(scene)?)),
         #[cfg(feature = "embree")]
         AccelKind::Embree => Ok(Box::new(super::embree::EmbreeAccel::build(scene)?)),
         #[cfg(not(feature = "embree"))]
-        AccelKind::Embree => Err(Error::Usage("this build has no Embree (cargo feature 'embree' is off); use --accel bvh".into())),
-        AccelKind::Octree => {
-            Err(Error::Usage("--accel octree needs the multires octree (not built yet); use --accel bvh or embree".into()))
-        }
+        AccelKind::Embree => Err(crate::error::Error::Usage("this build has no Embree (cargo feature 'embree' is off); use --accel bvh".into())),
+        AccelKind::Octree => Ok(Box::new(crate::multires::octree_accel::OctreeAccel::build(scene)?)),
     }
 }

@@ -6,12 +6,14 @@
 //! - [`cone`]: ray cones, footprints and their construction for every ray kind (§4.1–4.2);
 //! - [`abuffer`]: fragments, merging and alpha compositing (§4.4);
 //! - [`trace`]: the intersection tests (§4.3, 4.5, 4.6), the traversal (§5.1–5.2) and shading;
-//! - [`render`]: the image loop of `--method multires` and `--method cone`.
+//! - [`render`]: the image loop of `--method multires` and `--method cone`;
+//! - [`octree_accel`]: `--accel octree`, the conventional tracer on the same octree (§6).
 //!
 //! Each paper parameter is a named option with the paper's default ([`MultiresArgs`]).
 pub mod abuffer;
 pub mod build;
 pub mod cone;
+pub mod octree_accel;
 pub mod quant;
 pub mod render;
 pub mod trace;
