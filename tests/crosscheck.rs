@@ -93,7 +93,7 @@ fn verify_catches_broken_intersectors() {
     assert_eq!(verify_with(&s, &reference, &good, 5_000, 3).unwrap().mismatches(), 0);
 }
 
-fn backends(s: &Scene) -> Vec<Box<dyn Accel>> {
+fn backends(s: &Scene) -> Vec<Box<dyn Accel + '_>> {
     vec![
         accel::build(AccelKind::Bvh, s).unwrap(),
         accel::build(AccelKind::Embree, s).unwrap(),

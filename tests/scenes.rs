@@ -1,11 +1,14 @@
-//! Scene tests: the `complex` paper scene (triangle counts, instancing kept), the
-//! `instanced` test scene, TOML scene files (the example loads, errors name the file), and
+//! Scene tests: the `complex` paper scene (triangle counts, instancing kept), the `effects`
+//! paper scene (Fig. 8: area light, lens, three roughnesses), the `instanced` test scene, TOML scene files (the example loads, errors name the file), and
 //! bad input through the `lodtrace` binary (exit 2, one error line, no output file).
 
 use glam::Vec3;
+use lodtrace::baseline::accel::{self, AccelKind};
+use lodtrace::baseline::render::{render, Integrator, RenderOpts};
+use lodtrace::baseline::shade::TraceCtx;
 use lodtrace::error::Error;
 use lodtrace::scene::builtin::{self, PlantParams};
-use lodtrace::scene::{load, Scene, Target};
+use lodtrace::scene::{load, Light, Material, Scene, Target};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -155,6 +158,77 @@ fn plants_are_deterministic_branching_meshes() {
         assert_eq!(a.clone().remove_degenerate(), 0, "degenerate triangles");
         let (blo, bhi) = a.bounds();
         assert!(blo.y >= -1e-6 && bhi.y > 0.4 && bhi.y < 3.0, "{blo} {bhi}");
+    }
+}
+
+// ---------------------------------------------------------------- effects
+
+#[test]
+fn effects_scene_has_soft_shadows_depth_of_field_and_three_roughnesses() {
+    let mut s = builtin::get("effects").unwrap();
+    s.validate().unwrap();
+    assert!(builtin::BUILTINS.iter().any(|b| b.name == "effects"));
+    let (inst, uniq) = s.triangle_counts().unwrap();
+    assert!((5_000..=50_000).contains(&inst) && uniq < inst, "{inst} {uniq}");
+    // Soft shadows: one elliptical area light, large (semi-axes over a unit), truly elliptical.
+    let ellipses: Vec<(Vec3, Vec3)> = s
+        .lights
+        .iter()
+        .filter_map(|l| match l {
+            Light::Ellipse { axis_a, axis_b, .. } => Some((*axis_a, *axis_b)),
+            Light::Point { .. } => None,
+        })
+        .collect();
+    assert_eq!(ellipses.len(), 1, "{:?}", s.lights);
+    let (a, b) = ellipses[0];
+    assert!(a.length() > 1.0 && b.length() > 1.0, "{a} {b}");
+    assert!(a.cross(b).length() > 0.99 * a.length() * b.length(), "axes not perpendicular: {a} {b}");
+    assert!((a.length() - b.length()).abs() > 0.1, "a disk, not an ellipse: {a} {b}");
+    // Blurry reflections: three mirror materials, identical but for roughness ≈ 0.03, 0.1, 0.25.
+    let mirrors: Vec<(u32, &Material)> =
+        s.materials.iter().enumerate().filter(|(_, m)| m.reflect > 0.5).map(|(i, m)| (i as u32, m)).collect();
+    assert_eq!(mirrors.len(), 3, "{:?}", s.materials.iter().map(|m| &m.name).collect::<Vec<_>>());
+    let rough: Vec<f32> = mirrors.iter().map(|(_, m)| m.roughness).collect();
+    for (r, want) in rough.iter().zip([0.03, 0.1, 0.25]) {
+        assert!((r - want).abs() < 0.3 * want, "roughness {rough:?}");
+    }
+    let bare = |m: &Material| Material { name: String::new(), roughness: 0.0, ..m.clone() };
+    assert!(mirrors.iter().all(|(_, m)| bare(m) == bare(mirrors[0].1)), "the mirrors differ in more than roughness");
+    // Depth of field: a lens focused on the mirrors (one instance each, the same mesh, side by
+    // side in the focal plane, the middle one at the focal distance), with objects well in
+    // front of and well behind the focal plane.
+    let cam = &s.camera;
+    assert!(cam.aperture > 0.0 && cam.focal_dist > 0.0);
+    let f = (cam.look - cam.eye).normalize();
+    let depth = |p: Vec3| (p - cam.eye).dot(f);
+    let leaves = s.leaf_instances().unwrap();
+    let centres: Vec<Vec3> = mirrors
+        .iter()
+        .map(|(i, _)| {
+            let l: Vec<_> = leaves.iter().filter(|l| l.material == Some(*i)).collect();
+            assert_eq!(l.len(), 1, "material {i}");
+            assert_eq!(l[0].mesh, leaves.iter().find(|l| l.material == Some(mirrors[0].0)).unwrap().mesh);
+            Vec3::from(l[0].xform.translation)
+        })
+        .collect();
+    for c in &centres {
+        assert!((depth(*c) - cam.focal_dist).abs() < 0.5, "mirror at depth {} vs focus {}", depth(*c), cam.focal_dist);
+    }
+    assert!((depth(centres[1]) - cam.focal_dist).abs() < 0.05);
+    assert!(centres[0].x < centres[1].x && centres[1].x < centres[2].x);
+    let depths: Vec<f32> = leaves.iter().map(|l| depth(Vec3::from(l.xform.translation))).collect();
+    assert!(depths.iter().any(|&d| d > 0.0 && d < 0.7 * cam.focal_dist), "nothing near: {depths:?}");
+    assert!(depths.iter().any(|&d| d > 1.5 * cam.focal_dist), "nothing far: {depths:?}");
+    // Renders: a small Whitted image and a small distributed one (lens, light and glossy cones
+    // sampled), finite, neither black nor blown out.
+    let acc = accel::build(AccelKind::Bvh, &s).unwrap();
+    let ctx = TraceCtx { scene: &s, leaves: &leaves, accel: acc.as_ref(), max_depth: s.max_depth };
+    for (integrator, spp) in [(Integrator::Whitted, 1), (Integrator::Distributed, 4)] {
+        let opts = RenderOpts { integrator, width: 32, height: 32, spp, variance_threshold: 0.0, ..Default::default() };
+        let film = render(&ctx, &s.camera.frame(32, 32), &opts).unwrap().film;
+        assert!(film.color.iter().all(|c| c.is_finite() && c.min_element() >= 0.0), "{integrator:?}: NaN, inf or negative");
+        let mean = film.color.iter().map(|c| c.clamp(Vec3::ZERO, Vec3::ONE).dot(Vec3::splat(1.0 / 3.0))).sum::<f32>() / 1024.0;
+        assert!((0.1..0.8).contains(&mean), "{integrator:?}: mean {mean}");
     }
 }
 

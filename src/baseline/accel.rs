@@ -101,7 +101,9 @@ pub fn build<'a>(kind: AccelKind, scene: &'a Scene) -> Result<Box<dyn Accel + 'a
         #[cfg(feature = "embree")]
         AccelKind::Embree => Ok(Box::new(super::embree::EmbreeAccel::build(scene)?)),
         #[cfg(not(feature = "embree"))]
-        AccelKind::Embree => Err(crate::error::Error::Usage("this build has no Embree (cargo feature 'embree' is off); use --accel bvh".into())),
+        AccelKind::Embree => {
+            Err(crate::error::Error::Usage("this build has no Embree (cargo feature 'embree' is off); use --accel bvh".into()))
+        }
         AccelKind::Octree => Ok(Box::new(crate::multires::octree_accel::OctreeAccel::build(scene)?)),
     }
 }

@@ -9,14 +9,16 @@
 //! Σ⁻¹ = Uᵀ diag(1/s₁², 1/s₂²) U with U = [e₁ e₂]ᵀ: the paper's λᵢ of eq. 3 are our 1/sᵢ.
 //! The Gaussian exponent of eq. 2 is [`Eigen2::q`].
 //!
-//! **Algorithm.** m = (a+c)/2, d = √(((a−c)/2)² + b²), λ₁ = m + d, λ₂ = max(m − d, 0). The
-//! eigenvector of λ₁ is the longer of (λ₁ − c, b) and (b, λ₁ − a) (both are exact
-//! eigenvectors; the longer one has squared norm ≥ 2d², so it is well conditioned), normalised.
-//! If it is shorter than 10⁻⁶·λ₁ (isotropic to rounding: d ≲ 7·10⁻⁷ λ₁) the axis is (1, 0).
-//! To stay finite over the whole f32 range, Σ is first scaled by 2⁻⁸⁰ when its largest entry
-//! exceeds 2⁶⁰ (or by 2⁸⁰ when it is below 2⁻⁶⁰) and the semi-axes are scaled back by 2⁴⁰
-//! (2⁻⁴⁰); powers of two, so this changes no rounding. (Plain f32 squares would only reach
-//! entries up to ~1.8·10¹⁹.)
+//! **Algorithm.** m = (a+c)/2, h = (a−c)/2, d = √(h² + b²), λ₁ = m + d, λ₂ = max(m − d, 0)
+//! (rounding can make m − d slightly negative; an indefinite Σ with a + c ≥ 0 also gets
+//! λ₂ = 0). The eigenvector of λ₁ is the longer of (λ₁ − c, b) = (d + h, b) and
+//! (b, λ₁ − a) = (b, d − h): the first if h ≥ 0, else the second; its long component is formed
+//! as d + |h| (no cancellation) and its squared norm 2d(d + |h|) ≥ 2d², so it is well
+//! conditioned. It is normalised, unless its length is ≤ 10⁻⁶·λ₁ (isotropic to rounding:
+//! d ≲ 5–7·10⁻⁷ λ₁), in which case the axis is (1, 0). To stay finite over the whole f32 range,
+//! Σ is first scaled by 2⁻⁸⁰ when its largest entry exceeds 2⁶⁰ (by 2⁸⁰ when it is below
+//! 2⁻⁶⁰) and the semi-axes are scaled back by 2⁴⁰ (2⁻⁴⁰): powers of two, so no extra rounding
+//! unless a much smaller entry underflows. (Unscaled, h² + b² overflows for entries ≳ 1.3·10¹⁹.)
 //!
 //! **Clamp and floor (§5.1).** The paper bounds the minimum eigenvalue to a fraction
 //! (1/4–1/16) of the maximum. We apply the fraction `clamp` ∈ (0, 1] to the *semi-axes*
@@ -36,11 +38,37 @@
 //! compiler never contracts to FMA), and [`eigen_soa`] decomposes a struct-of-arrays batch,
 //! choosing AVX2 once at run time (scalar with the `scalar` feature).
 //!
-//! **Measured** (`CARGO_TARGET_DIR=/work/target-eigen cargo bench --bench eigen`, 4096 random
-//! Σ, 2-core AMD EPYC VM, no target-cpu flags), elements/s:
-//! BENCH-FIGURES
+//! **Measured** (`CARGO_TARGET_DIR=/work/target-eigen cargo bench --bench eigen`: 4096 random
+//! Σ = F Fᵀ stored SoA, clamp 1/8, outputs written to four Vecs; 2-vCPU AMD EPYC (Zen 3) VM,
+//! no target-cpu flags), million footprints/s and the ratio to the scalar reference. Other
+//! jobs kept the load average at ≈ 4 on the 2 vCPUs throughout, so criterion's wall-clock
+//! figures are depressed and noisy; the second column is a stand-alone copy of these kernels
+//! timed as the best of 30 batches of 200 runs, which filters out part of that interference.
 //!
-//! Tried: see BENCH-TRIED
+//! | kernel                          | criterion (median) | stand-alone, best of 30 |
+//! |---------------------------------|--------------------|-------------------------|
+//! | `eigen_1` (scalar)              |  34.7              |  43.5                   |
+//! | `eigen_x4` (SSE2)               | 159   (4.6×)       | 265   (6.1×)            |
+//! | `eigen_x8` (2 × SSE2)           | 216   (6.2×)       | 330   (7.6×)            |
+//! | `eigen_soa` → `eigen_x8_avx2`   | 338   (9.7×)       | 570   (13×)             |
+//!
+//! The packets beat their lane count. Most likely the scalar loop is latency-bound (this VM
+//! has no hardware counters to confirm it): each element is a dependent chain
+//! sqrt → add → mul → add → sqrt → div → mul of ~50 cycles, close to what one element costs
+//! (23 ns ≈ 56 cycles at the nominal 2.45 GHz), and the out-of-order window overlaps little of
+//! the next element; a packet pays that latency once per 4 or 8 lanes. It is not the
+//! data-dependent h ≥ 0 branch: a branch-free (bit-mask) scalar select measured the same.
+//!
+//! Tried (stand-alone timings per 4096 footprints):
+//! - choosing the eigenvector by comparing the squared norms (λ₁ − c)² + b² ≥ b² + (λ₁ − a)²
+//!   and a mask of |x| ≤ f32::MAX tests, as first written: `eigen_x8` 16.0 µs; the sign of h
+//!   and the x − x finiteness mask: 12.3 µs (kept);
+//! - the `wide` f32x8 code inlined into an AVX2 function (VEX-encoded, still 2 × 128 bit):
+//!   12.0 µs, no gain, hence the 256-bit intrinsics version (7.2 µs);
+//! - `_mm256_rsqrt_ps` + one Newton–Raphson step instead of sqrt and div in the AVX2 version:
+//!   8.0–9.2 µs against 7.1–8.5 µs, no gain and no longer bit-identical (rejected);
+//! - `eigen_soa` copying each chunk with a run-time length: 12 µs (memcpy calls); fixed-size
+//!   chunks and one zero-padded tail packet: 7.8 µs (kept).
 
 use wide::{f32x4, f32x8};
 
@@ -52,6 +80,8 @@ pub struct Sym2 {
 }
 
 impl Sym2 {
+    /// Entry-wise sum.
+    #[allow(clippy::should_implement_trait)]
     #[inline]
     pub fn add(self, o: Sym2) -> Sym2 {
         Sym2 { a: self.a + o.a, b: self.b + o.b, c: self.c + o.c }
@@ -147,12 +177,11 @@ pub fn eigen_1(m: Sym2, clamp: f32, floor: f32) -> Eigen2 {
     let d = (h * h + b * b).sqrt();
     let l1 = mean + d;
     let l2 = (mean - d).max(0.0);
-    // Eigenvector of l1: the longer of (l1 − c, b) and (b, l1 − a).
-    let (v1x, v2y) = (l1 - c, l1 - a);
-    let n1 = v1x * v1x + b * b;
-    let n2 = b * b + v2y * v2y;
-    let (vx, vy) = if n1 >= n2 { (v1x, b) } else { (b, v2y) };
-    let nn = n1.max(n2);
+    // Eigenvector of l1: (l1 − c, b) = (d + h, b) if a ≥ c, else (b, l1 − a) = (b, d − h): the
+    // longer of the two, with its long component d + |h| formed without cancellation.
+    let p = d + h.abs();
+    let (vx, vy) = if h >= 0.0 { (p, b) } else { (b, p) };
+    let nn = p * p + b * b;
     let (cos, sin) = if nn > (ISO * (l1 * l1)).max(f32::MIN_POSITIVE) {
         let inv = 1.0 / nn.sqrt();
         (vx * inv, vy * inv)
@@ -171,13 +200,12 @@ macro_rules! eigen_wide {
         pub fn $name(a: $v, b: $v, c: $v, clamp: f32, floor: f32) -> $out {
             let zero = $v::splat(0.0);
             let one = $v::splat(1.0);
-            // Lanes with a non-finite entry (NaN compares false) or a negative trace become the
-            // zero matrix, which yields the floor circle below, as in `eigen_1`.
-            let max = $v::splat(f32::MAX);
-            let (aa, ba, ca) = (a.abs(), b.abs(), c.abs());
-            let ok = aa.simd_le(max) & ba.simd_le(max) & ca.simd_le(max) & (a + c).simd_ge(zero);
-            let (a, b, c, aa, ba, ca) = (a & ok, b & ok, c & ok, aa & ok, ba & ok, ca & ok);
-            let t = aa.fast_max(ba).fast_max(ca);
+            // Finite entries and a non-negative trace: x − x is +0 for finite x and NaN for ±∞
+            // and NaN, and NaN compares false. Other lanes become the zero matrix, which yields
+            // the floor circle below, as in `eigen_1`.
+            let ok = ((a + c) + ((a - a) + (b - b) + (c - c))).simd_ge(zero);
+            let (a, b, c) = (a & ok, b & ok, c & ok);
+            let t = a.abs().fast_max(b.abs()).fast_max(c.abs());
             let big = t.simd_gt($v::splat(BIG));
             let tiny = t.simd_lt($v::splat(TINY));
             let (a, b, c, ks) = if (big | tiny).any() {
@@ -192,13 +220,11 @@ macro_rules! eigen_wide {
             let d = (h * h + b * b).sqrt();
             let l1 = mean + d;
             let l2 = (mean - d).fast_max(zero);
-            let (v1x, v2y) = (l1 - c, l1 - a);
-            let n1 = v1x * v1x + b * b;
-            let n2 = b * b + v2y * v2y;
-            let pick1 = n1.simd_ge(n2);
-            let vx = pick1.select(v1x, b);
-            let vy = pick1.select(b, v2y);
-            let nn = pick1.select(n1, n2);
+            let p = d + h.abs();
+            let hpos = h.simd_ge(zero);
+            let vx = hpos.select(p, b);
+            let vy = hpos.select(b, p);
+            let nn = p * p + b * b;
             let aniso = nn.simd_gt(($v::splat(ISO) * (l1 * l1)).fast_max($v::splat(f32::MIN_POSITIVE)));
             let inv = one / aniso.select(nn, one).sqrt();
             let cos = aniso.select(vx * inv, one);
@@ -230,14 +256,11 @@ pub unsafe fn eigen_x8_avx2(a: f32x8, b: f32x8, c: f32x8, clamp: f32, floor: f32
     let sel = |m: __m256, t: __m256, f: __m256| _mm256_blendv_ps(f, t, m);
     let (zero, one) = (_mm256_setzero_ps(), set(1.0));
     let abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(i32::MAX));
-    let max = set(f32::MAX);
-    let (aa, ba, ca) = (_mm256_and_ps(a, abs_mask), _mm256_and_ps(b, abs_mask), _mm256_and_ps(c, abs_mask));
-    let ok = _mm256_and_ps(
-        _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(aa, max), _mm256_cmp_ps::<_CMP_LE_OQ>(ba, max)),
-        _mm256_and_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(ca, max), _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_add_ps(a, c), zero)),
-    );
+    let abs = |x: __m256| _mm256_and_ps(x, abs_mask);
+    let zz = _mm256_add_ps(_mm256_add_ps(_mm256_sub_ps(a, a), _mm256_sub_ps(b, b)), _mm256_sub_ps(c, c));
+    let ok = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_add_ps(_mm256_add_ps(a, c), zz), zero);
     let (mut a, mut b, mut c) = (_mm256_and_ps(a, ok), _mm256_and_ps(b, ok), _mm256_and_ps(c, ok));
-    let t = _mm256_and_ps(_mm256_max_ps(_mm256_max_ps(aa, ba), ca), ok);
+    let t = _mm256_max_ps(_mm256_max_ps(abs(a), abs(b)), abs(c));
     let big = _mm256_cmp_ps::<_CMP_GT_OQ>(t, set(BIG));
     let tiny = _mm256_cmp_ps::<_CMP_LT_OQ>(t, set(TINY));
     let mut ks = one;
@@ -253,13 +276,11 @@ pub unsafe fn eigen_x8_avx2(a: f32x8, b: f32x8, c: f32x8, clamp: f32, floor: f32
     let d = _mm256_sqrt_ps(_mm256_add_ps(_mm256_mul_ps(h, h), bb));
     let l1 = _mm256_add_ps(mean, d);
     let l2 = _mm256_max_ps(_mm256_sub_ps(mean, d), zero);
-    let (v1x, v2y) = (_mm256_sub_ps(l1, c), _mm256_sub_ps(l1, a));
-    let n1 = _mm256_add_ps(_mm256_mul_ps(v1x, v1x), bb);
-    let n2 = _mm256_add_ps(bb, _mm256_mul_ps(v2y, v2y));
-    let pick1 = _mm256_cmp_ps::<_CMP_GE_OQ>(n1, n2);
-    let vx = sel(pick1, v1x, b);
-    let vy = sel(pick1, b, v2y);
-    let nn = sel(pick1, n1, n2);
+    let p = _mm256_add_ps(d, abs(h));
+    let hpos = _mm256_cmp_ps::<_CMP_GE_OQ>(h, zero);
+    let vx = sel(hpos, p, b);
+    let vy = sel(hpos, b, p);
+    let nn = _mm256_add_ps(_mm256_mul_ps(p, p), bb);
     let tol = _mm256_max_ps(_mm256_mul_ps(set(ISO), _mm256_mul_ps(l1, l1)), set(f32::MIN_POSITIVE));
     let aniso = _mm256_cmp_ps::<_CMP_GT_OQ>(nn, tol);
     let inv = _mm256_div_ps(one, _mm256_sqrt_ps(sel(aniso, nn, one)));
@@ -328,24 +349,24 @@ fn soa_with(
     f: impl Fn(f32x8, f32x8, f32x8, f32, f32) -> Eigen2x8,
 ) {
     let n = a.len();
-    let mut i = 0;
-    while i < n {
-        let m = (n - i).min(8);
-        let load = |s: &[f32]| {
-            if m == 8 {
-                f32x8::from(&s[i..i + 8])
-            } else {
-                let mut t = [0.0f32; 8];
-                t[..m].copy_from_slice(&s[i..n]);
-                f32x8::from(t)
-            }
-        };
-        let e = f(load(a), load(b), load(c), clamp, floor);
+    let mut store = |i: usize, m: usize, e: Eigen2x8| {
         out.cos[i..i + m].copy_from_slice(&e.cos.to_array()[..m]);
         out.sin[i..i + m].copy_from_slice(&e.sin.to_array()[..m]);
         out.s1[i..i + m].copy_from_slice(&e.s1.to_array()[..m]);
         out.s2[i..i + m].copy_from_slice(&e.s2.to_array()[..m]);
-        i += m;
+    };
+    let full = n - n % 8;
+    for i in (0..full).step_by(8) {
+        let v = |s: &[f32]| f32x8::from(<[f32; 8]>::try_from(&s[i..i + 8]).unwrap());
+        store(i, 8, f(v(a), v(b), v(c), clamp, floor));
+    }
+    if full < n {
+        let v = |s: &[f32]| {
+            let mut t = [0.0f32; 8];
+            t[..n - full].copy_from_slice(&s[full..]);
+            f32x8::from(t)
+        };
+        store(full, n - full, f(v(a), v(b), v(c), clamp, floor));
     }
 }
 
@@ -547,7 +568,7 @@ mod tests {
             ms.push(from_f([r.next() - 0.5, r.next() - 0.5, r.next() - 0.5, r.next() - 0.5].map(|x| x * s)));
         }
         let n = ms.len();
-        assert!(n % 8 != 0);
+        assert!(!n.is_multiple_of(8));
         let (a, b, c): (Vec<f32>, Vec<f32>, Vec<f32>) =
             (ms.iter().map(|m| m.a).collect(), ms.iter().map(|m| m.b).collect(), ms.iter().map(|m| m.c).collect());
         let (mut co, mut si, mut s1, mut s2) = (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);

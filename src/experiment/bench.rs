@@ -6,7 +6,7 @@
 //! A method spec is `METHOD[:ACCEL][:key=value...]`, keys: `spp`, `threads`, `packet`,
 //! `fps` (distributed first-pass spp), `vt` (distributed variance threshold), `depth`; for
 //! the cone tracers (`multires`, `cone`): `k`, `c` (oversampling), `clamp`, `lod`, `dtol`,
-//! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`.
+//! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage`.
 //! Examples: `whitted:embree`, `whitted:bvh:threads=1`, `distributed:embree:spp=64`.
 
 use super::run;
@@ -105,13 +105,17 @@ impl MethodSpec {
                     "mip" => spec.multires.no_mipmap = num(v)? == 0.0,
                     "primary" => spec.multires.primary_only = num(v)? != 0.0,
                     "budget" => spec.multires.time_budget = Some(num(v)?),
+                    "tri" => {
+                        spec.multires.tri_weight = crate::multires::trace::TriWeight::from_str(v, true)
+                            .map_err(|_| bad(format!("tri={v}: paper or coverage")))?
+                    }
                     "eigen" => {
                         spec.multires.eigen = crate::multires::trace::EigenMode::from_str(v, true)
                             .map_err(|_| bad(format!("eigen={v}: per-box or exact")))?
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen, tri)"
                         )))
                     }
                 }

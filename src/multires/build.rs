@@ -420,7 +420,9 @@ fn build_node(ctx: &Ctx, tris: Vec<u32>, cube_lo: Vec3, side: f32, depth: u32) -
     let h = side / k as f32;
     let grid_lo = cube_lo - Vec3::splat(m as f32 * h);
     let mesh = ctx.mesh;
-    let node_key = pcg_hash(ctx.p.seed ^ pcg_hash(depth ^ pcg_hash(cube_lo.x.to_bits() ^ pcg_hash(cube_lo.y.to_bits() ^ cube_lo.z.to_bits().rotate_left(16)))));
+    let node_key = pcg_hash(
+        ctx.p.seed ^ pcg_hash(depth ^ pcg_hash(cube_lo.x.to_bits() ^ pcg_hash(cube_lo.y.to_bits() ^ cube_lo.z.to_bits().rotate_left(16)))),
+    );
     let cell_of = |p: Vec3| -> u32 {
         let q = ((p - grid_lo) / h).floor();
         let x = (q.x as i32).clamp(0, g - 1);

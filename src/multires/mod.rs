@@ -45,8 +45,14 @@ pub struct MultiresArgs {
     /// Eigen-decomposition once per octree box (paper §5.2) or exactly per point/vertex.
     #[arg(long, value_enum, default_value = "per-box")]
     pub eigen: EigenMode,
-    /// Primary cone footprint in pixels (1 = the pixel's extent).
-    #[arg(long, default_value_t = 1.0)]
+    /// Ray–triangle weight: the paper's exp(−(d−0.5)²) or the exact Gaussian edge coverage
+    /// (default: on a black/white checkerboard, 96², RMSE against 256 spp 0.015 vs 0.070 with
+    /// the paper's formula at cone scale 0.5; 0.046 vs 0.106 at cone scale 1).
+    #[arg(long, value_enum, default_value = "coverage")]
+    pub tri_weight: trace::TriWeight,
+    /// Primary cone footprint in pixels (1 = the pixel's extent, the paper's wording). The
+    /// default 0.5 is close to 0.41, where the Gaussian's variance equals a box pixel's.
+    #[arg(long, default_value_t = 0.5)]
     pub cone_scale: f32,
     /// Disable the mipmap blend one level down.
     #[arg(long)]
@@ -70,6 +76,7 @@ impl Default for MultiresArgs {
             lod_scale: t.lod_scale,
             depth_tolerance: t.depth_tol,
             eigen: t.eigen,
+            tri_weight: t.tri_weight,
             cone_scale: t.cone_scale,
             no_mipmap: !t.mipmap,
             primary_only: t.primary_only,
@@ -86,6 +93,7 @@ impl MultiresArgs {
             lod_scale: self.lod_scale,
             depth_tol: self.depth_tolerance,
             eigen: self.eigen,
+            tri_weight: self.tri_weight,
             cone_scale: self.cone_scale,
             mipmap: !self.no_mipmap,
             primary_only: self.primary_only,

@@ -147,7 +147,8 @@ impl OctreeAccel<'_> {
                 }
                 let f = f as usize;
                 c.add(Counter::node_tests, 8);
-                let (mut m, ts) = spheres_x8(o, d, tnear, tfar, &nodes.cx[f..f + 8], &nodes.cy[f..f + 8], &nodes.cz[f..f + 8], &nodes.r[f..f + 8]);
+                let (mut m, ts) =
+                    spheres_x8(o, d, tnear, tfar, &nodes.cx[f..f + 8], &nodes.cy[f..f + 8], &nodes.cz[f..f + 8], &nodes.r[f..f + 8]);
                 // Push far to near so the nearest child is popped first.
                 let mut kids = [(0.0f32, 0u32); 8];
                 let mut k = 0;

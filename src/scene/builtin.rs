@@ -37,7 +37,7 @@ pub struct BuiltinInfo {
 
 pub const BUILTINS: &[BuiltinInfo] = &[
     BuiltinInfo { name: "spheres", about: "Wand & Strasser Fig. 6: reflective and refractive sphere on a geometric checkerboard (~7,400 triangles)" },
-    BuiltinInfo { name: "effects", about: "Wand & Strasser Fig. 8: soft shadows (elliptical light), depth of field, blurry reflections at three roughnesses (~14,000 triangles)" },
+    BuiltinInfo { name: "effects", about: "Wand & Strasser Fig. 8: soft shadows from an elliptical light, depth of field, blurry reflections at three roughnesses (~14,000 triangles)" },
     BuiltinInfo { name: "complex", about: "Wand & Strasser Fig. 7: specular cows, glass bunnies, procedural plants on a huge geometric checkerboard (~8.7M instanced / ~110k unique triangles; needs tools/setup)" },
     BuiltinInfo { name: "instanced", about: "test: nested instance groups with rotations, non-uniform scales and material overrides (~5,000 triangles)" },
     BuiltinInfo { name: "plane", about: "test: a diffuse square lit by one point light (known-answer shading)" },
@@ -616,23 +616,24 @@ pub fn spheres() -> Scene {
     s
 }
 
-/// Wand & Straßer Fig. 8 ("Special Effects"): one scene for the three effects of the figure.
-/// - Soft shadows (Fig. 8a/b): one elliptical area light (axes 1.8 × 1.1) above and to the
-///   left-back; the spheres' shadows fall toward the camera with penumbrae about a unit wide.
-/// - Depth of field (Fig. 8c): a thin lens (`aperture` 0.22) focused on the middle sphere;
-///   a cube and an icosphere in the foreground and a row of pillars far behind are out of focus.
-/// - Blurry reflections (Fig. 8d): three identical mirror spheres side by side at the focal
-///   distance, roughness (glossy cone half-angle) 0.03, 0.1 and 0.25 radians from left to
-///   right. They reflect the checkerboard, the foreground objects and a row of coloured panels
+/// Wand & Straßer Fig. 8 ("Special Effects", 512×512): one scene for the three effects.
+/// - Soft shadows (Fig. 8a/b): one elliptical area light (semi-axes 2.8 × 1.7) high at the
+///   back left; the spheres' shadows fall toward the front right, with penumbrae about one
+///   board cell wide. The dark cells are a mid grey (0.15) so the shadows read on both colours.
+/// - Depth of field (Fig. 8c): a thin lens (`aperture` 0.22) focused on the middle sphere's
+///   centre; a cube and an icosphere in the foreground and a row of pillars far behind blur.
+/// - Blurry reflections (Fig. 8d): three mirror spheres, identical but for the roughness
+///   (glossy cone half-angle) 0.03, 0.1 and 0.25 radians from left to right, side by side in
+///   the focal plane. They reflect the checkerboard and a wall of one-unit coloured stripes
 ///   behind the camera (outside the view), so the blur shows on sharp coloured edges.
 ///
-/// All geometry, no textures, about 7,000 unique and 14,000 instanced triangles. The Whitted
-/// integrator ignores all three effects (light centre, pinhole, perfect mirrors); the
-/// distributed one samples them, the multiresolution tracer widens its cones for them.
+/// All geometry, no textures: 14,068 triangles (6,784 unique). The Whitted integrator shows
+/// none of the effects (light centre, pinhole, perfect mirrors); the distributed one samples
+/// them, the multiresolution tracer widens its cones for them.
 pub fn effects() -> Scene {
     let mut s = Scene::empty("effects");
     s.materials[0] = Material::diffuse("white", Vec3::splat(0.8));
-    let black = s.add_material(Material::diffuse("black", Vec3::splat(0.05)));
+    let black = s.add_material(Material::diffuse("black", Vec3::splat(0.15)));
     let chrome = |name: &str, roughness: f32| Material {
         name: name.into(),
         color: Vec3::splat(0.85),
@@ -648,7 +649,7 @@ pub fn effects() -> Scene {
         s.add_material(chrome("mirror 0.1", 0.1)),
         s.add_material(chrome("mirror 0.25", 0.25)),
     ];
-    let plastic = |name: &str, color: Vec3| Material { name: name.into(), color, kd: 0.9, ks: 0.3, shininess: 40.0, ..Default::default() };
+    let plastic = |name: &str, color: Vec3| Material { name: name.into(), color, kd: 0.9, ks: 0.05, shininess: 40.0, ..Default::default() };
     let colors = [
         s.add_material(plastic("red", Vec3::new(0.8, 0.08, 0.06))),
         s.add_material(plastic("orange", Vec3::new(0.9, 0.45, 0.05))),
@@ -663,24 +664,24 @@ pub fn effects() -> Scene {
     let board = s.add_mesh(checkerboard(32, 32.0, 0, black));
     s.instance(Target::Mesh(board), Affine3A::from_translation(Vec3::new(0.0, 0.0, -8.0)), None);
 
-    // Three mirror spheres (radius 0.8) side by side at the focal distance.
+    // Three mirror spheres (radius 0.75) side by side in the focal plane.
     let sphere = s.add_mesh(uv_sphere(43, 41, 0));
     for (k, &m) in mirrors.iter().enumerate() {
-        let x = 1.9 * (k as f32 - 1.0);
+        let x = 2.2 * (k as f32 - 1.0);
         s.instance(
             Target::Mesh(sphere),
-            Affine3A::from_scale_rotation_translation(Vec3::splat(0.8), Quat::IDENTITY, Vec3::new(x, 0.8, 0.0)),
+            Affine3A::from_scale_rotation_translation(Vec3::splat(0.75), Quat::IDENTITY, Vec3::new(x, 0.75, 0.0)),
             Some(m),
         );
     }
 
-    // Foreground (near, blurred): a tilted red cube and a blue icosphere.
+    // Foreground (near, blurred): a red cube and a blue icosphere.
     let cube = s.add_mesh(cube_mesh(0));
     let ico = s.add_mesh(icosphere(3, 0));
-    s.instance(Target::Mesh(cube), srt(Vec3::splat(0.3), 0.6, Vec3::new(-1.1, 0.3, 4.0)), Some(red));
+    s.instance(Target::Mesh(cube), srt(Vec3::splat(0.3), 0.6, Vec3::new(-1.1, 0.3, 3.3)), Some(red));
     s.instance(
         Target::Mesh(ico),
-        Affine3A::from_scale_rotation_translation(Vec3::splat(0.35), Quat::IDENTITY, Vec3::new(1.2, 0.35, 3.6)),
+        Affine3A::from_scale_rotation_translation(Vec3::splat(0.35), Quat::IDENTITY, Vec3::new(1.2, 0.35, 3.3)),
         Some(blue),
     );
 
@@ -690,20 +691,22 @@ pub fn effects() -> Scene {
         s.instance(Target::Mesh(cube), srt(Vec3::new(0.3, 1.1, 0.3), 0.4, Vec3::new(x, 1.1, -8.0 - 0.7 * (k % 2) as f32)), Some(m));
     }
 
-    // Behind the camera (seen only in the mirrors): coloured panels for sharp edges to blur.
-    for k in 0..9 {
-        let x = -8.0 + 2.0 * k as f32;
-        s.instance(Target::Mesh(cube), srt(Vec3::new(0.6, 2.0, 0.1), 0.0, Vec3::new(x, 2.0, 12.0)), Some(colors[k % colors.len()]));
+    // Behind the camera (seen only in the mirrors): a wall of coloured stripes, sharp edges
+    // for the glossy cones to blur.
+    for k in 0..28 {
+        let x = -13.5 + k as f32;
+        s.instance(Target::Mesh(cube), srt(Vec3::new(0.5, 4.0, 0.1), 0.0, Vec3::new(x, 4.0, 11.5)), Some(colors[k % colors.len()]));
     }
 
-    let eye = Vec3::new(0.0, 2.6, 8.0);
-    let look = Vec3::new(0.0, 0.8, 0.0);
+    let eye = Vec3::new(0.0, 4.2, 8.2);
+    let look = Vec3::new(0.0, 0.75, 0.0); // the middle sphere's centre
     s.camera = Camera { eye, look, up: Vec3::Y, fovy: 45.0, aperture: 0.22, focal_dist: (look - eye).length() };
+    // High at the back left: the shadows fall toward the front right, long and soft.
     s.lights.push(Light::Ellipse {
-        center: Vec3::new(-3.0, 7.0, -2.0),
-        axis_a: Vec3::new(1.8, 0.0, 0.0),
-        axis_b: Vec3::new(0.0, 0.0, 1.1),
-        intensity: Vec3::splat(140.0),
+        center: Vec3::new(-7.0, 9.0, -6.0),
+        axis_a: Vec3::new(2.8, 0.0, 0.0),
+        axis_b: Vec3::new(0.0, 0.0, 1.7),
+        intensity: Vec3::splat(360.0),
     });
     s.background = Vec3::new(0.45, 0.55, 0.75);
     s.ambient = Vec3::splat(0.08);

@@ -1,0 +1,225 @@
+//! Wand & Straßer cone tracers: the issue's tests. Known answers (an opaque plane composites
+//! to alpha 1 and its exact colour), the weight-sum invariant of the point hierarchy,
+//! anti-aliasing against a 256-spp reference, silhouettes against Embree's, degenerate input,
+//! and packet width 1 vs 8 of the conventional tracer on the same octree.
+
+use glam::{Affine3A, Vec3};
+use lodtrace::baseline::accel::{self, AccelKind};
+use lodtrace::baseline::render::{render, Integrator, RenderOpts};
+use lodtrace::baseline::shade::TraceCtx;
+use lodtrace::core::stats::Counters;
+use lodtrace::film::Film;
+use lodtrace::multires::abuffer::ABuffer;
+use lodtrace::multires::build::BuildParams;
+use lodtrace::multires::cone::Cone;
+use lodtrace::multires::render::render as cone_render;
+use lodtrace::multires::trace::{Collect, MultiresScene, Scratch, ShadeScratch, TraceParams, Tracer};
+use lodtrace::scene::{builtin, Camera, Light, Material, Mesh, Scene, Target};
+use std::sync::atomic::AtomicBool;
+
+fn reference_accel() -> AccelKind {
+    if cfg!(feature = "embree") {
+        AccelKind::Embree
+    } else {
+        AccelKind::Bvh
+    }
+}
+
+fn conventional(scene: &Scene, kind: AccelKind, opts: &RenderOpts) -> Film {
+    let leaves = scene.leaf_instances().unwrap();
+    let acc = accel::build(kind, scene).unwrap();
+    let ctx = TraceCtx { scene, leaves: &leaves, accel: acc.as_ref(), max_depth: scene.max_depth };
+    render(&ctx, &scene.camera.frame(opts.width, opts.height), opts).unwrap().film
+}
+
+fn cones(scene: &Scene, tp: &TraceParams, w: u32, h: u32) -> Film {
+    let ms = MultiresScene::build(scene, &BuildParams::default()).unwrap();
+    let opts = RenderOpts { width: w, height: h, ..Default::default() };
+    cone_render(&ms, tp, &scene.camera.frame(w, h), &opts).unwrap().out.film
+}
+
+fn rmse(a: &Film, b: &Film) -> f64 {
+    let s: f64 = a.color.iter().zip(&b.color).map(|(x, y)| (*x - *y).length_squared() as f64 / 3.0).sum();
+    (s / a.color.len() as f64).sqrt()
+}
+
+/// A 2×2 square in z = 0 facing +z, of colour `col`, seen head-on from z = `dist`.
+fn square_scene(col: Vec3, dist: f32) -> Scene {
+    let mut s = Scene::empty("square");
+    s.materials[0] = Material::diffuse("c", col);
+    // A finely tessellated square (so that the hierarchy has point levels), one colour.
+    let id = s.add_mesh(builtin::checkerboard(64, 2.0, 0, 0));
+    s.instance(Target::Mesh(id), Affine3A::from_rotation_x(std::f32::consts::FRAC_PI_2), None);
+    s.camera = Camera { eye: Vec3::new(0.0, 0.0, dist), look: Vec3::ZERO, up: Vec3::Y, fovy: 30.0, aperture: 0.0, focal_dist: dist };
+    s.lights.push(Light::Point { pos: Vec3::new(0.0, 0.0, dist), intensity: Vec3::splat(dist * dist) });
+    s.ambient = Vec3::ZERO;
+    s.background = Vec3::ZERO;
+    s.validate().unwrap();
+    s
+}
+
+/// Issue test: an opaque plane seen head-on composites to alpha 1 and to its exact colour,
+/// both where the leaves' triangles are used (close) and where points are (far).
+#[test]
+fn opaque_plane_head_on_is_opaque_and_exact() {
+    for (dist, cone_scale) in [(4.0f32, 0.5f32), (4.0, 8.0)] {
+        let scene = square_scene(Vec3::new(0.8, 0.4, 0.2), dist);
+        let ms = MultiresScene::build(&scene, &BuildParams::default()).unwrap();
+        let tp = TraceParams { cone_scale, ..Default::default() };
+        let abort = AtomicBool::new(false);
+        let tr = Tracer { ms: &ms, p: &tp, floor: 1e-7, abort: &abort, deadline: None };
+        let cam = scene.camera.frame(64, 64);
+        let mut ss = ShadeScratch::new(16, scene.max_depth);
+        let mut c = Counters::default();
+        // Expected: albedo/π · I·cosθ/d² with I = d² (light at the eye): albedo/π.
+        let expect = Vec3::new(0.8, 0.4, 0.2) / std::f32::consts::PI;
+        for (i, j) in [(32, 32), (28, 35), (36, 30)] {
+            let r = tr.radiance(&Cone::primary(&cam, i, j, cone_scale), 0, 1.0, &mut ss, &mut c);
+            assert!(r.alpha >= 0.999, "alpha {} at ({i},{j}), cone scale {cone_scale}", r.alpha);
+            // Triangles (close): exact up to 3%. Points (far) sit at their voxel centres, up to
+            // h/2 off the plane, which shifts the light distance: 10%.
+            let tol = if cone_scale > 1.0 { 0.10 } else { 0.03 };
+            let err = (r.color - expect).abs().max_element() / expect.max_element();
+            assert!(err < tol, "colour {} vs {expect} at ({i},{j}), cone scale {cone_scale}", r.color);
+        }
+        if cone_scale > 1.0 {
+            assert!(c.get(lodtrace::core::stats::Counter::surfel_tests) > 0, "the far case must use points");
+        }
+    }
+}
+
+/// Issue test: weight sums ≥ 1 inside a surface at the point levels (spheres and tilted
+/// planes, many footprint sizes), up to the Monte-Carlo noise of the prefiltering.
+#[test]
+fn point_weight_sums_cover_the_surface() {
+    let mut scene = Scene::empty("ball");
+    let mut m = builtin::uv_sphere(64, 128, 0);
+    m.compute_normals();
+    let id = scene.add_mesh(m);
+    scene.instance(Target::Mesh(id), Affine3A::IDENTITY, None);
+    scene.camera = Camera { eye: Vec3::new(0.3, 0.2, 6.0), look: Vec3::ZERO, up: Vec3::Y, fovy: 30.0, aperture: 0.0, focal_dist: 6.0 };
+    scene.validate().unwrap();
+    let ms = MultiresScene::build(&scene, &BuildParams::default()).unwrap();
+    let abort = AtomicBool::new(false);
+    let cam = scene.camera.frame(64, 64);
+    let mut sc = Scratch::default();
+    let mut c = Counters::default();
+    let mut sums = vec![];
+    for cone_scale in [3.0f32, 6.0, 12.0] {
+        let tp = TraceParams { cone_scale, ..Default::default() };
+        let tr = Tracer { ms: &ms, p: &tp, floor: 1e-7, abort: &abort, deadline: None };
+        // Pixels well inside the sphere's disc (radius ≈ 15 pixels around the centre).
+        for (i, j) in [(32, 32), (28, 30), (36, 34), (30, 36), (34, 27)] {
+            let mut ab = ABuffer::new(16);
+            tr.traverse(&Cone::primary(&cam, i, j, cone_scale), &mut ab, Collect::Alpha, &mut sc, &mut c);
+            sums.push(ab.frags.first().map(|f| f.w).unwrap_or(0.0));
+        }
+    }
+    assert!(c.get(lodtrace::core::stats::Counter::surfel_tests) > 0);
+    let min = sums.iter().cloned().fold(f32::INFINITY, f32::min);
+    let mean = sums.iter().sum::<f32>() / sums.len() as f32;
+    assert!(mean >= 1.0, "mean weight sum {mean} < 1 ({sums:?})");
+    assert!(min >= 0.9, "a weight sum of {min} inside the surface ({sums:?})");
+}
+
+/// A black-and-white checkerboard seen at a grazing angle: high-contrast edges everywhere.
+fn edge_scene() -> Scene {
+    let mut s = Scene::empty("edges");
+    s.materials[0] = Material::diffuse("white", Vec3::splat(0.9));
+    let b = s.add_material(Material::diffuse("black", Vec3::splat(0.02)));
+    let id = s.add_mesh(builtin::checkerboard(24, 12.0, 0, b));
+    s.instance(Target::Mesh(id), Affine3A::IDENTITY, None);
+    s.camera =
+        Camera { eye: Vec3::new(0.0, 1.2, 6.0), look: Vec3::new(0.0, 0.0, -2.0), up: Vec3::Y, fovy: 40.0, aperture: 0.0, focal_dist: 6.0 };
+    s.lights.push(Light::Point { pos: Vec3::new(0.0, 8.0, 4.0), intensity: Vec3::splat(80.0) });
+    s.ambient = Vec3::splat(0.2);
+    s.validate().unwrap();
+    s
+}
+
+/// Issue test: on a high-contrast edge image the multires image is closer to a 256-spp
+/// reference than the 1-spp image.
+#[test]
+fn multires_is_closer_to_the_reference_than_one_sample() {
+    let scene = edge_scene();
+    let (w, h) = (48, 48);
+    let reference = conventional(&scene, reference_accel(), &RenderOpts { width: w, height: h, spp: 256, ..Default::default() });
+    let one = conventional(&scene, reference_accel(), &RenderOpts { width: w, height: h, ..Default::default() });
+    let mr = cones(&scene, &TraceParams::default(), w, h);
+    let (e1, em) = (rmse(&one, &reference), rmse(&mr, &reference));
+    assert!(em < 0.8 * e1, "multires RMSE {em} vs 1 spp {e1}");
+    assert!(mr.color.iter().all(|c| c.is_finite()));
+}
+
+/// Issue test: a mesh seen through `cone` and `multires` at close range (leaves reached)
+/// matches Embree's silhouette: coverage ≥ 50% exactly where Embree's pixel-centre ray hits,
+/// except in pixels next to the silhouette.
+#[test]
+fn close_up_silhouette_matches_the_reference() {
+    let mut scene = Scene::empty("bunny-ish");
+    let mut m = builtin::icosphere(3, 0);
+    m.compute_normals();
+    let id = scene.add_mesh(m);
+    scene.instance(Target::Mesh(id), Affine3A::from_scale(Vec3::new(1.0, 0.6, 0.8)), None);
+    scene.camera = Camera { eye: Vec3::new(0.4, 0.3, 3.0), look: Vec3::ZERO, up: Vec3::Y, fovy: 45.0, aperture: 0.0, focal_dist: 3.0 };
+    scene.lights.push(Light::Point { pos: Vec3::new(2.0, 3.0, 4.0), intensity: Vec3::splat(30.0) });
+    scene.validate().unwrap();
+    let (w, h) = (48, 48);
+    let reference = conventional(&scene, reference_accel(), &RenderOpts { width: w, height: h, ..Default::default() });
+    for points in [true, false] {
+        let tp = TraceParams { points, ..Default::default() };
+        let film = cones(&scene, &tp, w, h);
+        let hit = |f: &Film, i: i32, j: i32| f.depth[(j as u32 * w + i as u32) as usize].is_finite();
+        let mut bad = 0;
+        for j in 0..h as i32 {
+            for i in 0..w as i32 {
+                if hit(&film, i, j) == hit(&reference, i, j) {
+                    continue;
+                }
+                // Next to the reference silhouette?
+                let mut edge = false;
+                for (di, dj) in [(-1, 0), (1, 0), (0, -1), (0, 1)] {
+                    let (x, y) = (i + di, j + dj);
+                    if x >= 0 && y >= 0 && x < w as i32 && y < h as i32 && hit(&reference, x, y) != hit(&reference, i, j) {
+                        edge = true;
+                    }
+                }
+                if !edge {
+                    bad += 1;
+                }
+            }
+        }
+        assert_eq!(bad, 0, "points={points}: {bad} pixels disagree with the reference away from the silhouette");
+    }
+}
+
+/// Degenerate input: zero-area and NaN triangles, a zero footprint (cone scale tiny), no panic
+/// and no NaN pixel; the conventional tracer on the octree agrees at packet widths 1 and 8.
+#[test]
+fn degenerate_geometry_and_octree_packets() {
+    let mut scene = edge_scene();
+    let mut bad = Mesh::new("bad");
+    let a = bad.push_vertex(Vec3::new(0.0, 0.5, 0.0));
+    let b = bad.push_vertex(Vec3::new(1.0, 0.5, 0.0));
+    let c = bad.push_vertex(Vec3::new(2.0, 0.5, 0.0));
+    let d = bad.push_vertex(Vec3::new(0.5, 1.0, 0.0));
+    bad.push_tri(a, b, c, 0); // colinear
+    bad.push_tri(a, a, d, 0); // repeated vertex
+    bad.push_tri(a, b, d, 0); // a real one
+    bad.compute_normals();
+    let id = scene.add_mesh(bad);
+    scene.instance(Target::Mesh(id), Affine3A::IDENTITY, None);
+    scene.validate().unwrap();
+    for tp in [
+        TraceParams::default(),
+        TraceParams { cone_scale: 1e-6, ..Default::default() },
+        TraceParams { points: false, ..Default::default() },
+    ] {
+        let f = cones(&scene, &tp, 24, 24);
+        assert!(f.color.iter().all(|c| c.is_finite()), "NaN pixel");
+    }
+    let one = conventional(&scene, AccelKind::Octree, &RenderOpts { width: 24, height: 24, packet: 1, ..Default::default() });
+    let eight = conventional(&scene, AccelKind::Octree, &RenderOpts { width: 24, height: 24, packet: 8, ..Default::default() });
+    assert_eq!(one.color, eight.color);
+    let _ = Integrator::Whitted;
+}
