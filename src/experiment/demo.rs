@@ -36,11 +36,18 @@ fn jobs(quick: bool) -> Vec<Job> {
     m.push(format!("whitted:{a0}:threads=1"));
     m.push(format!("distributed:{a0}:spp=6"));
     m.push(format!("distributed:{a0}:spp=27"));
+    // Wand & Straßer: the same-code-basis baseline (conventional tracer on the octree) and
+    // the multi-resolution cone tracer.
+    m.push("whitted:octree".into());
+    m.push("multires".into());
     let methods = m.join(",");
+    let fx = format!("whitted:{a0},multires,distributed:{a0}:spp=27");
     let (sw, sh, cw, ch, sref, cref) = if quick { (256, 256, 320, 240, 66, 27) } else { (512, 512, 640, 480, 258, 102) };
     vec![
         Job { scene: "spheres", width: sw, height: sh, methods: methods.clone(), reference: format!("distributed:{a0}:spp={sref}:vt=0") },
         Job { scene: "complex", width: cw, height: ch, methods, reference: format!("distributed:{a0}:spp={cref}:vt=0") },
+        // Fig. 8: soft shadows, depth of field, blurry reflections at three roughnesses.
+        Job { scene: "effects", width: sw, height: sh, methods: fx, reference: format!("distributed:{a0}:spp={sref}:vt=0") },
     ]
 }
 

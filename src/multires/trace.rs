@@ -931,26 +931,30 @@ impl<'s, 'a> Tracer<'s, 'a> {
             (w, b1, b2, t, ev[0])
         } else {
             // Per-box (§5.2): the node's eigen-decomposition gives the principal axes for
-            // all its triangles; the extents along those fixed axes are evaluated at each
-            // vertex's depth (two quadratic forms, no decomposition). *Deviation:* the paper
-            // reuses the box's footprint size too; for the large triangles stored high in the
-            // tree (a checkerboard spanning the whole depth range) that blurs near parts and
-            // aliases far ones, so only the axes are shared.
+            // all its triangles; the extents along those fixed axes are evaluated once per
+            // triangle, at the depth where the axis meets its plane (clamped to the
+            // triangle's depth range): two quadratic forms, no decomposition. *Deviation:*
+            // the paper reuses the box's footprint size too; for the large triangles stored
+            // high in the tree (a checkerboard spanning the whole depth range) that blurs
+            // near parts and aliases far ones. One scale per triangle keeps the map affine,
+            // so the 2-D triangle is not distorted (per-vertex scales are: they made
+            // floors shadow themselves).
             let (co, sn) = (boxe.cos, boxe.sin);
             let a1 = lc.u * co + lc.v * sn;
             let a2 = lc.v * co - lc.u * sn;
             let lf = self.floor * s;
             let clamp = self.p.clamp;
-            let mut tv = [0.0f32; 3];
-            let q = std::array::from_fn::<glam::Vec2, 3, _>(|i| {
-                let d = pw[i] - lc.org;
-                let t = d.dot(lc.dir);
-                tv[i] = t;
-                let sg = lc.sigma(t.max(lc.tmin).max(0.0));
-                let e1 = (sg.a * co * co + 2.0 * sg.b * co * sn + sg.c * sn * sn).max(0.0).sqrt().max(lf);
-                let e2 = (sg.a * sn * sn - 2.0 * sg.b * co * sn + sg.c * co * co).max(0.0).sqrt().max(clamp * e1).max(lf);
-                glam::Vec2::new(d.dot(a1) / e1, d.dot(a2) / e2)
-            });
+            let dv = pw.map(|p| p - lc.org);
+            let tv = dv.map(|d| d.dot(lc.dir));
+            let ng = (pw[1] - pw[0]).cross(pw[2] - pw[0]);
+            let den = ng.dot(lc.dir);
+            let (tlo, thi) = (tv[0].min(tv[1]).min(tv[2]), tv[0].max(tv[1]).max(tv[2]));
+            let t_plane = if den.abs() > 1e-12 * ng.length() { dv[0].dot(ng) / den } else { (tlo + thi) * 0.5 };
+            let t_ref = if t_plane.is_finite() { t_plane.clamp(tlo, thi) } else { tlo };
+            let sg = lc.sigma(t_ref.max(lc.tmin).max(0.0));
+            let e1 = (sg.a * co * co + 2.0 * sg.b * co * sn + sg.c * sn * sn).max(0.0).sqrt().max(lf);
+            let e2 = (sg.a * sn * sn - 2.0 * sg.b * co * sn + sg.c * co * co).max(0.0).sqrt().max(clamp * e1).max(lf);
+            let q = dv.map(|d| glam::Vec2::new(d.dot(a1) / e1, d.dot(a2) / e2));
             let lo = q[0].min(q[1]).min(q[2]);
             let hi = q[0].max(q[1]).max(q[2]);
             if lo.x > R_CUT || lo.y > R_CUT || hi.x < -R_CUT || hi.y < -R_CUT || !(lo.x <= hi.x) {
