@@ -403,14 +403,11 @@ pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<Po
     Ok(tree)
 }
 
+/// Barycentrics of a uniform point on a triangle for (u, v) in [0,1)².
 #[inline]
-fn sample_triangle(a: Vec3, b: Vec3, c: Vec3, u: f32, v: f32) -> (f32, f32, f32) {
+fn sample_triangle(u: f32, v: f32) -> (f32, f32, f32) {
     let su = u.sqrt();
-    let w0 = 1.0 - su;
-    let w1 = su * (1.0 - v);
-    let w2 = su * v;
-    let _ = (a, b, c);
-    (w0, w1, w2)
+    (1.0 - su, su * (1.0 - v), su * v)
 }
 
 fn build_node(ctx: &Ctx, tris: Vec<u32>, cube_lo: Vec3, side: f32, depth: u32) -> BNode {
@@ -451,7 +448,7 @@ fn build_node(ctx: &Ctx, tris: Vec<u32>, cube_lo: Vec3, side: f32, depth: u32) -
         for s in 0..n {
             let mut r = Sampler::new(node_key, t, s + 1);
             let (u, v) = r.next2();
-            let (w0, w1, w2) = sample_triangle(a, b, c, u, v);
+            let (w0, w1, w2) = sample_triangle(u, v);
             let p = a * w0 + b * w1 + c * w2;
             let mut nn = (na * w0 + nb * w1 + nc * w2).normalize_or_zero();
             if nn == Vec3::ZERO || !nn.is_finite() {

@@ -112,6 +112,17 @@ impl Cone {
             c: self.a.c + t * (self.b.c + t * self.c.c),
         }
     }
+    /// Σ(t) for 8 depths at once (the packet form of [`Cone::sigma`]).
+    #[inline]
+    pub fn sigma_x8(&self, t: wide::f32x8) -> (wide::f32x8, wide::f32x8, wide::f32x8) {
+        use wide::f32x8 as V;
+        let (a, b, c) = (&self.a, &self.b, &self.c);
+        (
+            V::splat(a.a) + t * (V::splat(b.a) + t * V::splat(c.a)),
+            V::splat(a.b) + t * (V::splat(b.b) + t * V::splat(c.b)),
+            V::splat(a.c) + t * (V::splat(b.c) + t * V::splat(c.c)),
+        )
+    }
     /// Ray coordinates (x, y, t) of a point.
     #[inline]
     pub fn coords(&self, p: Vec3) -> Vec3 {

@@ -377,14 +377,7 @@ pub fn node_test_x8(cone: &Cone, cx: &[f32; 8], cy: &[f32; 8], cz: &[f32; 8], r:
     let t_lo = (t - rv).max(tmin).max(zero);
     let t_hi = (t + rv).max(zero);
     let tc = t.max(zero);
-    let sig = |tt: f32x8| {
-        let (a, b, c) = (&cone.a, &cone.b, &cone.c);
-        (
-            f32x8::splat(a.a) + tt * (f32x8::splat(b.a) + tt * f32x8::splat(c.a)),
-            f32x8::splat(a.b) + tt * (f32x8::splat(b.b) + tt * f32x8::splat(c.b)),
-            f32x8::splat(a.c) + tt * (f32x8::splat(b.c) + tt * f32x8::splat(c.c)),
-        )
-    };
+    let sig = |tt: f32x8| cone.sigma_x8(tt);
     let (sa, sb, sc) = sig(tc);
     let e = eigen_x8(sa, sb, sc, 1.0e-9, floor);
     let (la, lb, lc) = sig(t_lo);
@@ -511,11 +504,7 @@ pub fn point_q_x8(
         let (co, sn, s1, s2) = match boxe {
             Some(e) => (f32x8::splat(e.cos), f32x8::splat(e.sin), f32x8::splat(e.s1), f32x8::splat(e.s2)),
             None => {
-                let tt = t.max(f32x8::splat(0.0));
-                let (a, b, c) = (&cone.a, &cone.b, &cone.c);
-                let sa = f32x8::splat(a.a) + tt * (f32x8::splat(b.a) + tt * f32x8::splat(c.a));
-                let sb = f32x8::splat(a.b) + tt * (f32x8::splat(b.b) + tt * f32x8::splat(c.b));
-                let sc = f32x8::splat(a.c) + tt * (f32x8::splat(b.c) + tt * f32x8::splat(c.c));
+                let (sa, sb, sc) = cone.sigma_x8(t.max(f32x8::splat(0.0)));
                 let e = eigen_x8(sa, sb, sc, clamp, floor);
                 (e.cos, e.sin, e.s1, e.s2)
             }
