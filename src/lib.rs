@@ -15,9 +15,11 @@
 pub mod baseline;
 pub mod cli;
 pub mod core;
+pub mod deform;
 pub mod error;
 pub mod experiment;
 pub mod film;
+pub mod lod;
 pub mod multires;
 pub mod scene;
 
