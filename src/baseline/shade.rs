@@ -74,10 +74,49 @@ impl<'a> TraceCtx<'a> {
     /// Shades a known hit (used directly for packet-traced primary rays).
     pub fn shade(&self, ray: &Ray, hit: &Hit, depth: u32, mut smp: Option<&mut Sampler>, c: &mut Counters) -> Vec3 {
         let s = self.surface(ray, hit);
-        let m = s.mat;
         let v = -ray.dir;
-        let eps = 1e-4 * (1.0 + s.p.abs().max_element());
+        let eps = surface_eps(s.p);
         let p_out = s.p + s.ng * eps;
+        let mut l = self.direct(&s, v, p_out, smp.as_deref_mut(), c, |r, c| self.accel.occluded1(r, c));
+        if depth >= self.max_depth {
+            return l;
+        }
+        let sec = secondary(&s, v);
+        if let Some(t) = sec.refract {
+            c.inc(Counter::rays_refract);
+            let lt = self.radiance(&Ray::new(s.p - s.ng * eps, t), depth + 1, smp.as_deref_mut(), c);
+            l += lt * s.mat.color * s.mat.transmit;
+        }
+        if sec.reflect_w > 0.0 {
+            let mut dir = sec.mirror;
+            if s.mat.roughness > 0.0 {
+                if let Some(r) = smp.as_deref_mut() {
+                    dir = sample_cone(sec.mirror, s.mat.roughness, r.next(), r.next());
+                    if dir.dot(s.ng) <= 0.0 {
+                        dir = sec.mirror;
+                    }
+                }
+            }
+            c.inc(Counter::rays_reflect);
+            l += self.radiance(&Ray::new(p_out, dir), depth + 1, smp, c) * sec.reflect_w;
+        }
+        l
+    }
+
+    /// Local illumination at a surface: ambient plus Phong from every light, each behind a
+    /// shadow ray answered by `occluded` (so tracers with their own visibility, such as the
+    /// per-ray LOD tracer, share the shading exactly). `p_out` is the hit point offset to the
+    /// side of the incoming ray.
+    pub fn direct(
+        &self,
+        s: &Surface,
+        v: Vec3,
+        p_out: Vec3,
+        mut smp: Option<&mut Sampler>,
+        c: &mut Counters,
+        mut occluded: impl FnMut(&Ray, &mut Counters) -> bool,
+    ) -> Vec3 {
+        let m = s.mat;
         let mut l = self.scene.ambient * m.color * m.kd;
         for light in &self.scene.lights {
             let lp = match (&mut smp, light) {
@@ -99,7 +138,7 @@ impl<'a> TraceCtx<'a> {
                 continue;
             }
             c.inc(Counter::rays_shadow);
-            if self.accel.occluded1(&Ray::segment(p_out, ldir, 0.0, d * (1.0 - 1e-4)), c) {
+            if occluded(&Ray::segment(p_out, ldir, 0.0, d * (1.0 - 1e-4)), c) {
                 continue;
             }
             let e = light.intensity() * (cos / d2);
@@ -111,40 +150,43 @@ impl<'a> TraceCtx<'a> {
             }
             l += f * e;
         }
-        if depth >= self.max_depth {
-            return l;
-        }
-        let cos_i = v.dot(s.ns).clamp(-1.0, 1.0);
-        let mirror = (2.0 * cos_i) * s.ns - v;
-        let mut reflect_w = m.reflect;
-        if m.transmit > 0.0 {
-            let eta = if s.front { 1.0 / m.ior } else { m.ior };
-            let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
-            if k < 0.0 {
-                // Total internal reflection: the transmitted part is reflected.
-                reflect_w += m.transmit;
-            } else {
-                let t = (-v * eta + s.ns * (eta * cos_i - k.sqrt())).normalize();
-                c.inc(Counter::rays_refract);
-                let lt = self.radiance(&Ray::new(s.p - s.ng * eps, t), depth + 1, smp.as_deref_mut(), c);
-                l += lt * m.color * m.transmit;
-            }
-        }
-        if reflect_w > 0.0 {
-            let mut dir = mirror;
-            if m.roughness > 0.0 {
-                if let Some(r) = smp.as_deref_mut() {
-                    dir = sample_cone(mirror, m.roughness, r.next(), r.next());
-                    if dir.dot(s.ng) <= 0.0 {
-                        dir = mirror;
-                    }
-                }
-            }
-            c.inc(Counter::rays_reflect);
-            l += self.radiance(&Ray::new(p_out, dir), depth + 1, smp, c) * reflect_w;
-        }
         l
     }
+}
+
+/// Offset of secondary-ray origins from a hit point at `p` (relative to its magnitude).
+#[inline]
+pub fn surface_eps(p: Vec3) -> f32 {
+    1e-4 * (1.0 + p.abs().max_element())
+}
+
+/// The secondary rays of a hit (Whitted): the refracted direction, weighted by
+/// `color · transmit` (`None` without transparency or on total internal reflection, whose
+/// share then goes to the mirror), the mirror direction and the reflected weight.
+pub struct Secondary {
+    pub refract: Option<Vec3>,
+    pub mirror: Vec3,
+    pub reflect_w: f32,
+}
+
+pub fn secondary(s: &Surface, v: Vec3) -> Secondary {
+    let m = s.mat;
+    let cos_i = v.dot(s.ns).clamp(-1.0, 1.0);
+    let mirror = (2.0 * cos_i) * s.ns - v;
+    let mut reflect_w = m.reflect;
+    let mut refract = None;
+    if m.transmit > 0.0 {
+        let eta = if s.front { 1.0 / m.ior } else { m.ior };
+        let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+        if k < 0.0 {
+            // Total internal reflection: the transmitted part is reflected.
+            reflect_w += m.transmit;
+        } else {
+            let t = (-v * eta + s.ns * (eta * cos_i - k.sqrt())).normalize();
+            refract = Some(t);
+        }
+    }
+    Secondary { refract, mirror, reflect_w }
 }
 
 /// Uniform direction in the cone of half-angle `theta_max` around unit `axis`.

@@ -117,6 +117,8 @@ pub struct RenderArgs {
     pub quiet: bool,
     #[command(flatten)]
     pub multires: crate::multires::MultiresArgs,
+    #[command(flatten)]
+    pub lod: crate::lod::LodArgs,
 }
 
 pub fn parse_vec3(s: &str) -> Result<glam::Vec3, String> {
@@ -127,10 +129,14 @@ pub fn parse_vec3(s: &str) -> Result<glam::Vec3, String> {
     Ok(glam::Vec3::new(v[0], v[1], v[2]))
 }
 
+/// AOV names: EXR depth, normal, colour; PNG maps of `--method lod` (disparities d_r, d_t
+/// ×20, and the level-1 LOD of the reflected / transmitted rays).
+pub const AOVS: &[&str] = &["depth", "normal", "color", "disparity-r", "disparity-t", "lod-r", "lod-t"];
+
 fn parse_aov(s: &str) -> Result<(String, PathBuf), String> {
     let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}': expected depth=FILE.exr, normal=FILE.exr or color=FILE.exr"))?;
-    if k != "depth" && k != "normal" && k != "color" {
-        return Err(format!("unknown AOV '{k}' (depth, normal or color)"));
+    if !AOVS.contains(&k) {
+        return Err(format!("unknown AOV '{k}' ({})", AOVS.join(", ")));
     }
     if v.is_empty() {
         return Err(format!("AOV '{k}' needs a file name"));

@@ -58,10 +58,15 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     opts.validate()?;
     let out = a.out.clone().unwrap_or_else(|| "render.png".into());
     check_out_path(&out)?;
-    for (_, p) in &a.aov {
+    for (k, p) in &a.aov {
         check_out_path(p)?;
-        if p.extension().map(|e| e.to_ascii_lowercase()) != Some("exr".into()) {
-            return Err(Error::Usage(format!("{}: AOVs are written as .exr", p.display())));
+        let png = k.starts_with("disparity") || k.starts_with("lod");
+        let ext = if png { "png" } else { "exr" };
+        if p.extension().map(|e| e.to_ascii_lowercase()) != Some(ext.into()) {
+            return Err(Error::Usage(format!("{}: the {k} AOV is written as .{ext}", p.display())));
+        }
+        if png && a.method != crate::cli::Method::Lod {
+            return Err(Error::Usage(format!("the {k} AOV exists for --method lod only")));
         }
     }
     if let Some(p) = &a.stats {
@@ -75,14 +80,18 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         }
         scene.max_depth = d;
     }
-    let r = run::run(&scene, a.method, a.accel, &opts, &a.multires)?;
+    let r = run::run(&scene, a.method, a.accel, &opts, &a.multires, &a.lod)?;
     io::write_png(&out, &r.out.film)?;
     for (kind, p) in &a.aov {
         match kind.as_str() {
             "depth" => io::write_exr_depth(p, &r.out.film)?,
             "normal" => io::write_exr_normal(p, &r.out.film)?,
             "color" => io::write_film_exr(p, &r.out.film)?,
-            other => return Err(Error::Usage(format!("--aov {other}: unknown AOV (depth, normal, color)"))),
+            k @ ("disparity-r" | "disparity-t" | "lod-r" | "lod-t") => {
+                let m = &r.lod.as_ref().expect("lod method").maps;
+                io::write_rgb8_png(p, &crate::lod::maps_image(m, k))?
+            }
+            other => return Err(Error::Usage(format!("--aov {other}: unknown AOV"))),
         }
     }
     let stats = r.stats(&scene, a.method, a.accel, &opts);

@@ -29,6 +29,10 @@ counters!(
     fragments_merged,
     samples,
     pixels_refined,
+    lod_queries,
+    lod_level_sum,
+    lod_exceptions,
+    lod_rays_dropped,
 );
 
 #[derive(Clone, Debug)]

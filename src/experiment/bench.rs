@@ -6,7 +6,14 @@
 //! A method spec is `METHOD[:ACCEL][:key=value...]`, keys: `spp`, `threads`, `packet`,
 //! `fps` (distributed first-pass spp), `vt` (distributed variance threshold), `depth`; for
 //! the cone tracers (`multires`, `cone`): `k`, `c` (oversampling), `clamp`, `lod`, `dtol`,
-//! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage`.
+//! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage`;
+//! for `lod`: `f`, `a` (a_LOD), `thres`, `sel=0` (no selective tracing), `levels`, `dist`
+//! (distance criterion), `force` (fixed LOD).
+//!
+//! A `lod` row is also compared with the full-detail row of the same scene (the first
+//! `whitted` row with the same accel and spp): triangle tests and time saved, the maximum
+//! and mean pixel difference (8-bit display values, as the paper's percentages), a
+//! magnified difference image like the paper's Fig. 4e, and the two distortion maps.
 //! Examples: `whitted:embree`, `whitted:bvh:threads=1`, `distributed:embree:spp=64`.
 
 use super::run;
@@ -63,6 +70,9 @@ pub struct MethodSpec {
     /// Cone-tracer options (`multires`, `cone`).
     #[serde(skip)]
     pub multires: crate::multires::MultiresArgs,
+    /// Per-ray LOD options (`lod`).
+    #[serde(skip)]
+    pub lod: crate::lod::LodArgs,
 }
 
 impl MethodSpec {
@@ -83,6 +93,7 @@ impl MethodSpec {
             variance_threshold: 0.001,
             max_depth: None,
             multires: Default::default(),
+            lod: Default::default(),
         };
         for p in parts {
             if let Some((k, v)) = p.split_once('=') {
@@ -109,13 +120,20 @@ impl MethodSpec {
                         spec.multires.tri_weight = crate::multires::trace::TriWeight::from_str(v, true)
                             .map_err(|_| bad(format!("tri={v}: paper or coverage")))?
                     }
+                    "f" => spec.lod.lod_f = num(v)? as f32,
+                    "a" => spec.lod.lod_a = num(v)? as f32,
+                    "thres" => spec.lod.lod_threshold = num(v)? as f32,
+                    "sel" => spec.lod.no_selective = num(v)? == 0.0,
+                    "levels" => spec.lod.lod_levels = num(v)? as u32,
+                    "dist" => spec.lod.lod_distance = Some(num(v)? as f32),
+                    "force" => spec.lod.lod_force = Some(num(v)? as f32),
                     "eigen" => {
                         spec.multires.eigen = crate::multires::trace::EigenMode::from_str(v, true)
                             .map_err(|_| bad(format!("eigen={v}: per-box or exact")))?
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen, tri)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen, tri; lod: f, a, thres, sel, levels, dist, force)"
                         )))
                     }
                 }
@@ -168,6 +186,40 @@ pub struct BenchRow {
     pub psnr: Option<f64>,
     pub flip: Option<f64>,
     pub image: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lod_vs_full: Option<LodComparison>,
+}
+
+/// A `lod` row against its full-detail Whitted counterpart (Papaioannou et al. Fig. 4).
+#[derive(Serialize, Debug, Clone)]
+pub struct LodComparison {
+    pub against: String,
+    /// 1 − tests(lod)/tests(full), so 0.3 = 30 % fewer ray–triangle tests.
+    pub triangle_test_reduction: f64,
+    /// 1 − time(lod)/time(full).
+    pub time_reduction: f64,
+    /// Largest per-pixel difference of 8-bit display values, as a fraction of 255.
+    pub max_pixel_diff: f64,
+    pub mean_pixel_diff: f64,
+}
+
+/// Per-pixel largest channel difference of the 8-bit display images, in [0, 1].
+pub fn pixel_diff(a: &Film, b: &Film) -> Vec<f32> {
+    let (x, y) = (crate::film::io::to_rgb8(a), crate::film::io::to_rgb8(b));
+    x.pixels()
+        .zip(y.pixels())
+        .map(|(p, q)| (0..3).map(|c| (p[c] as i32 - q[c] as i32).unsigned_abs()).max().unwrap_or(0) as f32 / 255.0)
+        .collect()
+}
+
+/// The difference magnified like the paper's Fig. 4e: white = equal, black = the largest
+/// difference of the image.
+pub fn diff_image(d: &[f32], w: u32, h: u32) -> image::RgbImage {
+    let m = d.iter().copied().fold(0.0f32, f32::max).max(1e-6);
+    image::RgbImage::from_fn(w, h, |x, y| {
+        let g = 255 - (d[(y * w + x) as usize] / m * 255.0).round() as u8;
+        image::Rgb([g, g, g])
+    })
 }
 
 #[derive(Serialize, Debug, Clone)]
@@ -187,7 +239,7 @@ pub fn run_spec(
     threads: usize,
     repeat: u32,
     quiet: bool,
-) -> Result<(Film, run::Stats)> {
+) -> Result<(Film, run::Stats, Option<crate::lod::trace::LodMaps>)> {
     let mut sc;
     let scene = if let Some(d) = spec.max_depth {
         sc = scene.clone();
@@ -199,14 +251,14 @@ pub fn run_spec(
     let opts = spec.opts(width, height, threads, quiet);
     let mut best: Option<run::RunResult> = None;
     for _ in 0..repeat.max(1) {
-        let r = run::run(scene, spec.method, spec.accel, &opts, &spec.multires)?;
+        let r = run::run(scene, spec.method, spec.accel, &opts, &spec.multires, &spec.lod)?;
         if best.as_ref().is_none_or(|b| r.out.seconds < b.out.seconds) {
             best = Some(r);
         }
     }
     let r = best.expect("at least one run");
     let stats = r.stats(scene, spec.method, spec.accel, &opts);
-    Ok((r.out.film, stats))
+    Ok((r.out.film, stats, r.lod.map(|l| l.maps)))
 }
 
 /// Errors of `film` against `reference`: (RMSE, PSNR dB, mean FLIP) and the FLIP error map.
@@ -244,7 +296,7 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
     for scene in &scenes {
         let ref_film = match &reference {
             Some(r) => {
-                let (film, _) = run_spec(scene, r, a.width, a.height, a.threads, 1, a.quiet)?;
+                let (film, _, _) = run_spec(scene, r, a.width, a.height, a.threads, 1, a.quiet)?;
                 if let Some(out) = &a.out {
                     crate::film::io::write_png(&out.join(format!("{}-reference-{}.png", scene.name, r.slug())), &film)?;
                 }
@@ -253,8 +305,40 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
             None => None,
         };
         let mut first_time = None;
+        // Full-detail Whitted films of this scene, for the lod rows.
+        let mut full: Vec<(MethodSpec, Film, run::Stats)> = Vec::new();
         for spec in &specs {
-            let (film, stats) = run_spec(scene, spec, a.width, a.height, a.threads, a.repeat, a.quiet)?;
+            let (film, stats, maps) = run_spec(scene, spec, a.width, a.height, a.threads, a.repeat, a.quiet)?;
+            let mut lod_vs_full = None;
+            if spec.method == Method::Lod {
+                if let Some((fs, ff, fst)) =
+                    full.iter().find(|(f, _, _)| f.accel == spec.accel && f.spp == spec.spp && f.max_depth == spec.max_depth)
+                {
+                    let d = pixel_diff(&film, ff);
+                    let tests = |s: &run::Stats| s.counters.get("triangle_tests").copied().unwrap_or(0) as f64;
+                    lod_vs_full = Some(LodComparison {
+                        against: fs.text.clone(),
+                        triangle_test_reduction: if tests(fst) > 0.0 { 1.0 - tests(&stats) / tests(fst) } else { 0.0 },
+                        time_reduction: 1.0 - stats.render_seconds / fst.render_seconds.max(1e-12),
+                        max_pixel_diff: d.iter().copied().fold(0.0f32, f32::max) as f64,
+                        mean_pixel_diff: d.iter().map(|&x| x as f64).sum::<f64>() / d.len().max(1) as f64,
+                    });
+                    if let Some(out) = &a.out {
+                        crate::film::io::write_rgb8_png(
+                            &out.join(format!("{}-{}-diff.png", scene.name, spec.slug())),
+                            &diff_image(&d, film.width, film.height),
+                        )?;
+                    }
+                }
+                if let (Some(out), Some(m)) = (&a.out, &maps) {
+                    for k in ["disparity-r", "disparity-t"] {
+                        crate::film::io::write_rgb8_png(
+                            &out.join(format!("{}-{}-{k}.png", scene.name, spec.slug())),
+                            &crate::lod::maps_image(m, k),
+                        )?;
+                    }
+                }
+            }
             let t0 = *first_time.get_or_insert(stats.render_seconds);
             let (rmse, psnr, flip) = match &ref_film {
                 Some(r) => {
@@ -287,7 +371,11 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
                 psnr,
                 flip,
                 image,
+                lod_vs_full,
             });
+            if spec.method == Method::Whitted {
+                full.push((spec.clone(), film, rows.last().expect("row").stats.clone()));
+            }
         }
     }
     let report = BenchReport { width: a.width, height: a.height, reference: a.reference.clone(), rows };
@@ -360,6 +448,27 @@ pub fn table_string(report: &BenchReport) -> String {
             r.stats.counters.get("triangle_tests").copied().unwrap_or(0),
             r.stats.counters.get("node_tests").copied().unwrap_or(0),
         ));
+    }
+    let lod: Vec<&BenchRow> = report.rows.iter().filter(|r| r.lod_vs_full.is_some()).collect();
+    if !lod.is_empty() {
+        s.push_str("\nPer-ray LOD against full detail (Papaioannou et al.):\n\n");
+        s.push_str("| scene | method | against | triangle tests saved | time saved | max pixel diff | mean pixel diff | mean level | rays dropped |\n");
+        s.push_str("|---|---|---|---:|---:|---:|---:|---:|---:|\n");
+        for r in lod {
+            let c = r.lod_vs_full.as_ref().expect("filtered");
+            s.push_str(&format!(
+                "| {} | {} | {} | {:.1} % | {:.1} % | {:.1} % | {:.2} % | {:.2} | {} |\n",
+                r.scene,
+                r.spec,
+                c.against,
+                100.0 * c.triangle_test_reduction,
+                100.0 * c.time_reduction,
+                100.0 * c.max_pixel_diff,
+                100.0 * c.mean_pixel_diff,
+                r.stats.lod.as_ref().map(|l| l.mean_query_level).unwrap_or(0.0),
+                r.stats.counters.get("lod_rays_dropped").copied().unwrap_or(0),
+            ));
+        }
     }
     s
 }

@@ -5,7 +5,11 @@ use crate::baseline::accel::{self, AccelKind};
 use crate::baseline::render::{render, Integrator, RenderOpts, RenderOutput};
 use crate::baseline::shade::TraceCtx;
 use crate::cli::Method;
+use crate::core::stats::Counter;
 use crate::error::{Error, Result};
+use crate::lod::chain::LodScenes;
+use crate::lod::trace::LodTracer;
+use crate::lod::LodArgs;
 use crate::multires::trace::MultiresScene;
 use crate::multires::MultiresArgs;
 use crate::scene::Scene;
@@ -21,6 +25,29 @@ pub struct RunResult {
     pub finished: bool,
     /// The point hierarchy (cone tracers): totals over the unique meshes.
     pub hierarchy: Option<HierarchyStats>,
+    /// `--method lod`: chain figures and the pass-1 maps.
+    pub lod: Option<LodResult>,
+}
+
+/// What `--method lod` reports besides the image.
+pub struct LodResult {
+    pub stats: LodStats,
+    pub maps: crate::lod::trace::LodMaps,
+}
+
+/// Figures of the LOD chains and the per-ray selection (Papaioannou et al.).
+#[derive(Serialize, Debug, Clone, Default)]
+pub struct LodStats {
+    pub levels: u32,
+    /// Instanced triangles of the scene at each level.
+    pub triangles_per_level: Vec<u64>,
+    pub chain_seconds: f64,
+    pub pass1_seconds: f64,
+    /// Mean level of the intersection queries of secondary rays (0 = full detail).
+    pub mean_query_level: f64,
+    /// Share of pixels whose reflected / transmitted level-1 ray has LOD < 1.
+    pub reduced_reflect_share: f64,
+    pub reduced_transmit_share: f64,
 }
 
 /// Build figures of the multi-resolution point hierarchy (Wand & Straßer Table 1).
@@ -60,23 +87,25 @@ pub struct Stats {
     pub finished: bool,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub hierarchy: Option<HierarchyStats>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lod: Option<LodStats>,
     pub counters: BTreeMap<String, u64>,
 }
 
 fn unsupported(m: Method) -> Error {
     let issue = match m {
         Method::Surfel => "Adams et al., issue 4",
-        Method::Lod => "Papaioannou et al., issue 5",
         _ => "",
     };
-    Error::Usage(format!("--method {} is not implemented yet ({issue}); available: whitted, distributed, multires, cone", m.name()))
+    Error::Usage(format!("--method {} is not implemented yet ({issue}); available: whitted, distributed, multires, cone, lod", m.name()))
 }
 
-pub fn run(scene: &Scene, method: Method, accel_kind: AccelKind, opts: &RenderOpts, mr: &MultiresArgs) -> Result<RunResult> {
+pub fn run(scene: &Scene, method: Method, accel_kind: AccelKind, opts: &RenderOpts, mr: &MultiresArgs, la: &LodArgs) -> Result<RunResult> {
     let integrator = match method {
         Method::Whitted => Integrator::Whitted,
         Method::Distributed => Integrator::Distributed,
         Method::Multires | Method::Cone => return run_cone(scene, method, opts, mr),
+        Method::Lod => return run_lod(scene, accel_kind, opts, la),
         m => return Err(unsupported(m)),
     };
     opts.validate()?;
@@ -88,7 +117,7 @@ pub fn run(scene: &Scene, method: Method, accel_kind: AccelKind, opts: &RenderOp
     let cam = scene.camera.frame(opts.width, opts.height);
     let o = RenderOpts { integrator, ..opts.clone() };
     let out = render(&ctx, &cam, &o)?;
-    Ok(RunResult { out, build_seconds, accel_bytes: acc.memory_bytes(), finished: true, hierarchy: None })
+    Ok(RunResult { out, build_seconds, accel_bytes: acc.memory_bytes(), finished: true, hierarchy: None, lod: None })
 }
 
 /// The cone tracers of Wand & Straßer: build the point hierarchies, then trace.
@@ -111,7 +140,46 @@ fn run_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &MultiresArgs)
     }
     let cam = scene.camera.frame(opts.width, opts.height);
     let r = crate::multires::render::render(&ms, &tp, &cam, opts)?;
-    Ok(RunResult { out: r.out, build_seconds: ms.build_seconds, accel_bytes: ms.memory_bytes(), finished: r.finished, hierarchy: Some(h) })
+    Ok(RunResult {
+        out: r.out,
+        build_seconds: ms.build_seconds,
+        accel_bytes: ms.memory_bytes(),
+        finished: r.finished,
+        hierarchy: Some(h),
+        lod: None,
+    })
+}
+
+/// Papaioannou et al.: build the LOD chains and one acceleration structure per level, then
+/// the two-pass tracer. Build time covers chains and structures.
+fn run_lod(scene: &Scene, accel_kind: AccelKind, opts: &RenderOpts, la: &LodArgs) -> Result<RunResult> {
+    let (cp, lp) = la.params()?;
+    opts.validate()?;
+    if accel_kind == AccelKind::Octree {
+        return Err(Error::Usage("--method lod runs on --accel bvh or --accel embree".into()));
+    }
+    let t0 = Instant::now();
+    let ls = LodScenes::build(scene, &cp)?;
+    let leaves: Vec<_> = ls.scenes.iter().map(|s| s.leaf_instances()).collect::<Result<_>>()?;
+    let accels: Vec<_> = ls.scenes.iter().map(|s| accel::build(accel_kind, s)).collect::<Result<_>>()?;
+    let build_seconds = t0.elapsed().as_secs_f64();
+    let tr = LodTracer::new(&ls, &leaves, &accels, &lp);
+    let cam = scene.camera.frame(opts.width, opts.height);
+    let r = crate::lod::trace::render(&tr, &cam, opts)?;
+    let c = &r.out.counters;
+    let q = c.get(Counter::lod_queries).max(1);
+    let npix = r.maps.lod_r.len().max(1) as f64;
+    let stats = LodStats {
+        levels: cp.levels,
+        triangles_per_level: ls.triangles_per_level(),
+        chain_seconds: ls.build_seconds,
+        pass1_seconds: r.pass1_seconds,
+        mean_query_level: c.get(Counter::lod_level_sum) as f64 / q as f64,
+        reduced_reflect_share: r.maps.lod_r.iter().filter(|&&x| x < 1.0).count() as f64 / npix,
+        reduced_transmit_share: r.maps.lod_t.iter().filter(|&&x| x < 1.0).count() as f64 / npix,
+    };
+    let accel_bytes = accels.iter().map(|a| a.memory_bytes()).sum();
+    Ok(RunResult { out: r.out, build_seconds, accel_bytes, finished: true, hierarchy: None, lod: Some(LodResult { stats, maps: r.maps }) })
 }
 
 impl RunResult {
@@ -136,6 +204,7 @@ impl RunResult {
             peak_rss_bytes: peak_rss_bytes(),
             finished: self.finished,
             hierarchy: self.hierarchy.clone(),
+            lod: self.lod.as_ref().map(|l| l.stats.clone()),
             counters: self.out.counters.to_map(),
         }
     }

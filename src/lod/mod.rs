@@ -1,2 +1,96 @@
 //! Papaioannou et al., *Exploiting Multiresolution Models to Accelerate Ray Tracing*: LOD chains,
 //! the distortion buffer, per-ray LOD selection and the two-pass tracer.
+
+pub mod chain;
+pub mod trace;
+
+use crate::error::Result;
+use chain::ChainParams;
+use trace::LodParams;
+
+/// The command-line options of `--method lod`, each a paper parameter with its default.
+#[derive(clap::Args, Debug, Clone)]
+pub struct LodArgs {
+    /// Levels per mesh including the original (paper: up to 8).
+    #[arg(long, default_value_t = 8)]
+    pub lod_levels: u32,
+    /// Distortion factor f of LOD⁽¹⁾ = LOD⁽⁰⁾·(1 − d)^f (paper: 10–24).
+    #[arg(long, default_value_t = 16.0)]
+    pub lod_f: f32,
+    /// Degradation rate a_LOD of the deeper levels (paper: 0.4–0.6).
+    #[arg(long, default_value_t = 0.5)]
+    pub lod_a: f32,
+    /// thres_LOD: deeper rays degrade only when their level-1 disparity exceeds it (the paper
+    /// gives no value; 0.01 ≈ neighbouring rays 1.8° apart on both axes).
+    #[arg(long, default_value_t = 0.01)]
+    pub lod_threshold: f32,
+    /// Disable selective tracing (§4).
+    #[arg(long)]
+    pub no_selective: bool,
+    /// Ray level from which selective tracing drops the weaker child (paper: 2).
+    #[arg(long, default_value_t = 2)]
+    pub lod_selective_level: u32,
+    /// Strength ratio above which selective tracing drops the weaker child (paper: 200 % = 2).
+    #[arg(long, default_value_t = 2.0)]
+    pub lod_selective_ratio: f32,
+    /// Distance criterion: objects farther than this get LOD = distance₀/distance as their
+    /// highest model (off by default).
+    #[arg(long)]
+    pub lod_distance: Option<f32>,
+    /// Force every ray to this LOD (1.0 renders what `--method whitted` renders).
+    #[arg(long)]
+    pub lod_force: Option<f32>,
+}
+
+impl Default for LodArgs {
+    fn default() -> Self {
+        let p = LodParams::default();
+        LodArgs {
+            lod_levels: 8,
+            lod_f: p.f,
+            lod_a: p.a_lod,
+            lod_threshold: p.thres,
+            no_selective: !p.selective,
+            lod_selective_level: p.selective_level,
+            lod_selective_ratio: p.selective_ratio,
+            lod_distance: None,
+            lod_force: None,
+        }
+    }
+}
+
+impl LodArgs {
+    pub fn params(&self) -> Result<(ChainParams, LodParams)> {
+        let p = LodParams {
+            f: self.lod_f,
+            a_lod: self.lod_a,
+            thres: self.lod_threshold,
+            selective: !self.no_selective,
+            selective_level: self.lod_selective_level,
+            selective_ratio: self.lod_selective_ratio,
+            force: self.lod_force,
+        };
+        p.validate()?;
+        let c = ChainParams { levels: self.lod_levels, distance: self.lod_distance };
+        if c.levels == 0 || c.levels > chain::MAX_LEVELS {
+            return Err(crate::error::Error::Usage(format!("--lod-levels {} out of range (1..=8)", c.levels)));
+        }
+        Ok((c, p))
+    }
+}
+
+/// A pass-1 map as a greyscale image: `disparity-r`/`disparity-t` show 20·d (white at
+/// d ≥ 0.05), `lod-r`/`lod-t` show 1 − LOD⁽¹⁾ (white = coarsest), so darker is more detail
+/// in every map.
+pub fn maps_image(m: &trace::LodMaps, kind: &str) -> image::RgbImage {
+    let v: Vec<f32> = match kind {
+        "disparity-r" => m.d_r.iter().map(|d| 20.0 * d).collect(),
+        "disparity-t" => m.d_t.iter().map(|d| 20.0 * d).collect(),
+        "lod-r" => m.lod_r.iter().map(|l| 1.0 - l).collect(),
+        _ => m.lod_t.iter().map(|l| 1.0 - l).collect(),
+    };
+    image::RgbImage::from_fn(m.width, m.height, |x, y| {
+        let g = (v[(y * m.width + x) as usize].clamp(0.0, 1.0) * 255.0).round() as u8;
+        image::Rgb([g, g, g])
+    })
+}

@@ -297,6 +297,22 @@ impl Scene {
         Ok(())
     }
 
+    /// The scene's materials, lights, camera and settings with no meshes and an empty root.
+    pub fn clone_without_geometry(&self) -> Scene {
+        Scene {
+            name: self.name.clone(),
+            meshes: Vec::new(),
+            groups: vec![Group { name: "root".into(), children: Vec::new() }],
+            root: 0,
+            materials: self.materials.clone(),
+            lights: self.lights.clone(),
+            camera: self.camera.clone(),
+            background: self.background,
+            ambient: self.ambient,
+            max_depth: self.max_depth,
+        }
+    }
+
     /// Memory held by the unique meshes (bytes).
     pub fn mesh_bytes(&self) -> usize {
         self.meshes.iter().map(|m| m.memory_bytes()).sum()
