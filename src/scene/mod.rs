@@ -11,6 +11,7 @@
 pub mod builtin;
 pub mod camera;
 pub mod load;
+pub mod lodscenes;
 pub mod mesh;
 pub mod tomlscene;
 
