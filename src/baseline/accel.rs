@@ -92,6 +92,58 @@ pub trait Accel: Sync + Send {
     }
     /// Bytes held by the acceleration structure (not counting the scene's meshes).
     fn memory_bytes(&self) -> usize;
+    /// Closest hit among the leaf instances `filter` admits (used by the per-ray LOD tracer's
+    /// enter/exit list). The default steps past rejected hits with repeated queries (at most
+    /// 64); back-ends that can test the filter at the instance level override it.
+    fn intersect1_filtered(&self, ray: &Ray, filter: InstFilter, c: &mut Counters) -> Option<Hit> {
+        let mut r = *ray;
+        for _ in 0..64 {
+            match self.intersect1(&r, c) {
+                Some(h) if !filter.admits(h.inst) => {
+                    r.tnear = next_up(h.t);
+                    if !(r.tnear <= r.tfar) {
+                        return None;
+                    }
+                }
+                h => return h,
+            }
+        }
+        None
+    }
+}
+
+/// Which leaf instances a filtered query may hit.
+#[derive(Clone, Copy, Debug)]
+pub enum InstFilter<'a> {
+    All,
+    /// Every instance but these.
+    Skip(&'a [u32]),
+    /// This instance only.
+    Only(u32),
+}
+
+impl InstFilter<'_> {
+    #[inline(always)]
+    pub fn admits(&self, inst: u32) -> bool {
+        match self {
+            InstFilter::All => true,
+            InstFilter::Skip(s) => !s.contains(&inst),
+            InstFilter::Only(o) => *o == inst,
+        }
+    }
+}
+
+/// The next representable float above `t` (to step past a hit).
+#[inline]
+pub fn next_up(t: f32) -> f32 {
+    if t.is_nan() || t == f32::INFINITY {
+        return t;
+    }
+    if t == 0.0 {
+        return f32::from_bits(1);
+    }
+    let b = t.to_bits();
+    f32::from_bits(if t > 0.0 { b + 1 } else { b - 1 })
 }
 
 /// Builds the requested back-end for a validated scene.

@@ -15,7 +15,7 @@
 //! Packets: obvhs has no packet traversal; [`Accel::intersect8`] here is the default loop of
 //! single rays over the CWBVH (the coherent-packet path is Embree's `rtcIntersect8`).
 
-use super::accel::{Accel, Hit, Ray};
+use super::accel::{Accel, Hit, InstFilter, Ray};
 use super::tri::{intersect_watertight, RayShear};
 use crate::core::stats::{Counter, Counters};
 use crate::error::{Error, Result};
@@ -259,23 +259,24 @@ impl BvhAccel {
     /// time, as Embree picks its kernels; `LODTRACE_BVH_ISA=sse2` forces the baseline. Both
     /// give bit-identical results (no FMA contraction: the arithmetic is the same IEEE ops).
     #[inline(always)]
-    fn trace<const ANY: bool>(&self, ray: &Ray, c: &mut Counters) -> Option<Hit> {
+    fn trace<const ANY: bool>(&self, ray: &Ray, f: InstFilter, c: &mut Counters) -> Option<Hit> {
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
             // SAFETY: `avx2` is set only when the CPU reports AVX2, BMI1/2, LZCNT and POPCNT.
-            return unsafe { self.trace_avx2::<ANY>(ray, c) };
+            return unsafe { self.trace_avx2::<ANY>(ray, f, c) };
         }
-        self.trace_impl::<ANY, false>(ray, c)
+        self.trace_impl::<ANY, false>(ray, f, c)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt")]
-    unsafe fn trace_avx2<const ANY: bool>(&self, ray: &Ray, c: &mut Counters) -> Option<Hit> {
-        self.trace_impl::<ANY, true>(ray, c)
+    unsafe fn trace_avx2<const ANY: bool>(&self, ray: &Ray, f: InstFilter, c: &mut Counters) -> Option<Hit> {
+        self.trace_impl::<ANY, true>(ray, f, c)
     }
 
+    /// `filter` is tested once per visited instance, before its BLAS.
     #[inline(always)]
-    fn trace_impl<const ANY: bool, const AVX: bool>(&self, ray: &Ray, c: &mut Counters) -> Option<Hit> {
+    fn trace_impl<const ANY: bool, const AVX: bool>(&self, ray: &Ray, filter: InstFilter, c: &mut Counters) -> Option<Hit> {
         #[inline(always)]
         fn node_test<const AVX: bool>(n: &CwBvhNode, r: &obvhs::ray::Ray, oct: u32) -> u32 {
             #[cfg(target_arch = "x86_64")]
@@ -306,8 +307,11 @@ impl BvhAccel {
                     node_test::<AVX>(node, &tl_ray, state.oct_inv4)
                 },
                 {
-                    n_inst += 1;
                     let ti = state.primitive_id as usize;
+                    if !filter.admits(self.inst_ids[ti]) {
+                        continue;
+                    }
+                    n_inst += 1;
                     let inst = &self.insts[ti];
                     let blas = &self.blas[inst.blas as usize];
                     let lo = inst.inv.transform_point3(ray.org);
@@ -359,10 +363,13 @@ impl Accel for BvhAccel {
         "bvh"
     }
     fn intersect1(&self, ray: &Ray, c: &mut Counters) -> Option<Hit> {
-        self.trace::<false>(ray, c)
+        self.trace::<false>(ray, InstFilter::All, c)
     }
     fn occluded1(&self, ray: &Ray, c: &mut Counters) -> bool {
-        self.trace::<true>(ray, c).is_some()
+        self.trace::<true>(ray, InstFilter::All, c).is_some()
+    }
+    fn intersect1_filtered(&self, ray: &Ray, filter: InstFilter, c: &mut Counters) -> Option<Hit> {
+        self.trace::<false>(ray, filter, c)
     }
     fn memory_bytes(&self) -> usize {
         let node = std::mem::size_of::<obvhs::cwbvh::node::CwBvhNode>();

@@ -36,7 +36,7 @@
 //!   balancing of §4 (an idle worker takes half of a busy worker's remaining range).
 
 use super::chain::{level_of, LodScenes};
-use crate::baseline::accel::{Accel, Hit, Ray, K};
+use crate::baseline::accel::{Accel, Hit, InstFilter, Ray, K};
 use crate::baseline::render::{tiles, Progress, RenderOpts, RenderOutput};
 use crate::baseline::shade::{secondary, surface_eps, TraceCtx};
 use crate::core::luminance;
@@ -204,43 +204,22 @@ impl<'a> LodTracer<'a> {
             return self.ctxs[lv as usize].accel.intersect1(ray, c).map(|h| (h, lv));
         }
         c.inc(Counter::lod_exceptions);
-        let listed = |inst: u32| exc.iter().any(|e| e.0 == inst && e.1 as u32 != lv);
-        let mut best: Option<(Hit, u32)> = None;
-        let mut r = *ray;
-        for _ in 0..64 {
-            match self.ctxs[lv as usize].accel.intersect1(&r, c) {
-                Some(h) if listed(h.inst) => {
-                    r.tnear = next_up(h.t);
-                    if r.tnear > r.tfar {
-                        break;
-                    }
-                }
-                Some(h) => {
-                    best = Some((h, lv));
-                    break;
-                }
-                None => break,
-            }
+        // Objects entered at another level: skipped at the ray's level, then each tested
+        // alone at its entry level, nearest wins.
+        let mut skip = [0u32; INSIDE_MAX];
+        let mut n = 0;
+        for e in exc.iter().filter(|e| e.1 as u32 != lv) {
+            skip[n] = e.0;
+            n += 1;
         }
+        let mut best = self.ctxs[lv as usize].accel.intersect1_filtered(ray, InstFilter::Skip(&skip[..n]), c).map(|h| (h, lv));
         for &(inst, lo) in exc.iter().filter(|e| e.1 as u32 != lv) {
             let mut r = *ray;
             if let Some((b, _)) = &best {
                 r.tfar = b.t;
             }
-            for _ in 0..64 {
-                match self.ctxs[lo as usize].accel.intersect1(&r, c) {
-                    Some(h) if h.inst == inst => {
-                        best = Some((h, lo as u32));
-                        break;
-                    }
-                    Some(h) => {
-                        r.tnear = next_up(h.t);
-                        if r.tnear > r.tfar {
-                            break;
-                        }
-                    }
-                    None => break,
-                }
+            if let Some(h) = self.ctxs[lo as usize].accel.intersect1_filtered(&r, InstFilter::Only(inst), c) {
+                best = Some((h, lo as u32));
             }
         }
         best
@@ -374,19 +353,6 @@ impl<'a> LodTracer<'a> {
         }
         (l, lr, lt)
     }
-}
-
-/// The next representable float above `t` (to step past a hit).
-#[inline]
-fn next_up(t: f32) -> f32 {
-    if t.is_nan() || t == f32::INFINITY {
-        return t;
-    }
-    if t == 0.0 {
-        return f32::from_bits(1);
-    }
-    let b = t.to_bits();
-    f32::from_bits(if t > 0.0 { b + 1 } else { b - 1 })
 }
 
 /// Mean planar angle / 2π between a direction and its horizontal and vertical neighbours
@@ -607,12 +573,5 @@ mod tests {
         assert_eq!(l.entries(), &[(5, 2)]);
         l.exit(9);
         assert_eq!(l.entries(), &[(5, 2)]);
-    }
-
-    #[test]
-    fn next_up_steps_past() {
-        for t in [0.0f32, 1e-30, 1.0, 123.456] {
-            assert!(next_up(t) > t);
-        }
     }
 }
