@@ -122,3 +122,92 @@ fn render_writes_exr_aovs() {
     let (_, _, n) = lodtrace::film::io::read_image_linear(&np).unwrap();
     assert!(n.iter().filter(|v| v.length() > 0.5).all(|v| (v.length() - 1.0).abs() < 1e-3));
 }
+
+#[test]
+fn lod_bench_writes_diff_and_distortion_maps() {
+    let d = tmp("lodbench");
+    let (code, out, err) = lodtrace(&[
+        "bench",
+        "cabinet",
+        "--methods",
+        "whitted:bvh,lod:bvh",
+        "--width",
+        "48",
+        "--height",
+        "36",
+        "--quiet",
+        "--out",
+        d.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.contains("Per-ray LOD against full detail"), "{out}");
+    for f in ["cabinet-lod_bvh-diff.png", "cabinet-lod_bvh-disparity-r.png", "cabinet-lod_bvh-disparity-t.png"] {
+        assert!(d.join(f).is_file(), "{f} missing");
+    }
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("bench.json")).unwrap()).unwrap();
+    let row = &v["rows"][1];
+    assert_eq!(row["lod_vs_full"]["against"], "whitted:bvh");
+    assert!(row["stats"]["lod"]["triangles_per_level"].as_array().unwrap().len() == 8);
+    // render --aov of the maps.
+    let p = d.join("dr.png");
+    let (code, _, err) = lodtrace(&[
+        "render",
+        "cabinet",
+        "--method",
+        "lod",
+        "--accel",
+        "bvh",
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--quiet",
+        "--out",
+        d.join("l.png").to_str().unwrap(),
+        "--aov",
+        &format!("disparity-r={}", p.display()),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(p.is_file());
+}
+
+#[test]
+fn bad_lod_options_are_one_line_exit_2() {
+    let d = tmp("lodbad");
+    let out = d.join("x.png");
+    let o = out.to_str().unwrap();
+    for extra in [
+        &["--lod-f", "0.5"][..],
+        &["--lod-f", "nan"],
+        &["--lod-a", "1.5"],
+        &["--lod-threshold", "-1"],
+        &["--lod-levels", "0"],
+        &["--lod-levels", "9"],
+        &["--lod-selective-ratio", "0.5"],
+        &["--lod-force", "2"],
+        &["--lod-distance", "-3"],
+        &["--accel", "octree"],
+        &["--aov", "disparity-r=x.exr"],
+    ] {
+        let mut args = vec!["render", "cube", "--method", "lod", "--accel", "bvh", "--width", "8", "--height", "8", "--quiet", "--out", o];
+        args.extend_from_slice(extra);
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{extra:?}: {err}");
+        one_error_line(&err);
+        assert!(!out.exists(), "{extra:?} left an output file");
+    }
+    // The maps exist for --method lod only.
+    let (code, _, err) = lodtrace(&[
+        "render",
+        "cube",
+        "--width",
+        "8",
+        "--height",
+        "8",
+        "--out",
+        o,
+        "--aov",
+        &format!("lod-t={}", d.join("m.png").display()),
+    ]);
+    assert_eq!(code, 2, "{err}");
+}

@@ -40,6 +40,9 @@ pub struct LodArgs {
     /// Force every ray to this LOD (1.0 renders what `--method whitted` renders).
     #[arg(long)]
     pub lod_force: Option<f32>,
+    /// Measure disparity net of the incident rays' divergence (a flat mirror gives 0).
+    #[arg(long)]
+    pub lod_net_disparity: bool,
 }
 
 impl Default for LodArgs {
@@ -55,6 +58,7 @@ impl Default for LodArgs {
             lod_selective_ratio: p.selective_ratio,
             lod_distance: None,
             lod_force: None,
+            lod_net_disparity: p.net_disparity,
         }
     }
 }
@@ -69,6 +73,7 @@ impl LodArgs {
             selective_level: self.lod_selective_level,
             selective_ratio: self.lod_selective_ratio,
             force: self.lod_force,
+            net_disparity: self.lod_net_disparity,
         };
         p.validate()?;
         let c = ChainParams { levels: self.lod_levels, distance: self.lod_distance };

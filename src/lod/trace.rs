@@ -32,6 +32,11 @@
 //! - The "enter/exit" list holds at most [`INSIDE_MAX`] objects (deeper nesting is not
 //!   tracked). The exception test runs the query at the ray's level skipping the listed
 //!   objects, then each listed object at its stored level, and keeps the nearest.
+//! - `--lod-net-disparity` (off by default) subtracts the angle between the neighbouring
+//!   *incident* rays from the outgoing angle, per axis: the disparity an object adds. The
+//!   paper's absolute angles include the pixel's own angular size (about 0.0015 rad at 512²
+//!   and 45°), which a flat mirror passes on unchanged; at that size it never lowers the
+//!   level (LOD⁽¹⁾ > 0.99 maps to level 0), so both modes keep a flat mirror at full LOD.
 //! - Parallelism: tiles in a rayon pool; rayon's work stealing is the dynamic load
 //!   balancing of §4 (an idle worker takes half of a busy worker's remaining range).
 
@@ -70,11 +75,23 @@ pub struct LodParams {
     pub selective_ratio: f32,
     /// Every ray uses this LOD (for tests and experiments): 1.0 = the full-detail tracer.
     pub force: Option<f32>,
+    /// Disparity net of the incident rays' own divergence (a flat mirror then gives exactly
+    /// zero); off = the paper's absolute angles.
+    pub net_disparity: bool,
 }
 
 impl Default for LodParams {
     fn default() -> Self {
-        LodParams { f: 16.0, a_lod: 0.5, thres: 0.01, selective: true, selective_level: 2, selective_ratio: 2.0, force: None }
+        LodParams {
+            f: 16.0,
+            a_lod: 0.5,
+            thres: 0.01,
+            selective: true,
+            selective_level: 2,
+            selective_ratio: 2.0,
+            force: None,
+            net_disparity: false,
+        }
     }
 }
 
@@ -473,14 +490,15 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
     }
 
     // Disparities from the horizontal and vertical neighbours (same sample index).
-    let at = |i: i64, j: i64, s: u32, r: bool| -> Option<Vec3> {
+    let at = |i: i64, j: i64, s: u32, r: bool| -> Option<usize> {
         if i < 0 || j < 0 || i >= w as i64 || j >= h as i64 {
             return None;
         }
-        let c = &buf[(j as usize * w as usize + i as usize) * spp as usize + s as usize];
-        let d = if r { c.r } else { c.t };
-        (d != Vec3::ZERO).then_some(d)
+        let k = (j as usize * w as usize + i as usize) * spp as usize + s as usize;
+        let d = if r { buf[k].r } else { buf[k].t };
+        (d != Vec3::ZERO).then_some(k)
     };
+    let net = tr.p.net_disparity;
     let disp: Vec<(f32, f32)> = (0..npix * spp as usize)
         .into_par_iter()
         .map(|k| {
@@ -489,10 +507,17 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
             let (i, j) = ((pix % w as usize) as i64, (pix / w as usize) as i64);
             let cell = &buf[k];
             let one = |r: bool| {
-                let d = if r { cell.r } else { cell.t };
+                let dir = |c: &Cell| if r { c.r } else { c.t };
                 let hn = at(i + 1, j, s, r).or_else(|| at(i - 1, j, s, r));
                 let vn = at(i, j + 1, s, r).or_else(|| at(i, j - 1, s, r));
-                disparity(d, hn, vn)
+                let out = disparity(dir(cell), hn.map(|n| dir(&buf[n])), vn.map(|n| dir(&buf[n])));
+                if net {
+                    // Minus the divergence the incident rays already had.
+                    let inc = disparity(cell.ray.dir, hn.map(|n| buf[n].ray.dir), vn.map(|n| buf[n].ray.dir));
+                    (out - inc).max(0.0)
+                } else {
+                    out
+                }
             };
             (one(true), one(false))
         })
@@ -560,6 +585,51 @@ mod tests {
         let e = Vec3::new(1.0, 0.0, 1.0).normalize();
         let x = disparity(d, Some(e), None);
         assert!((x - 0.125).abs() < 1e-6, "{x}");
+    }
+
+    /// A ray that entered an object at one level leaves it at that level (Fig. 3), whatever
+    /// its own level has become; without the entry the coarse model is hit.
+    #[test]
+    fn exit_is_tested_at_the_entry_level() {
+        use crate::baseline::accel::{self, AccelKind};
+        use crate::lod::chain::{ChainParams, LodScenes};
+        use crate::scene::{builtin::uv_sphere, Scene, Target};
+        let mut sc = Scene::empty("ball");
+        let m = sc.add_mesh(uv_sphere(24, 48, 0));
+        sc.instance(Target::Mesh(m), glam::Affine3A::IDENTITY, None);
+        // A second object touching the ball from outside (the close-contact case).
+        sc.instance(Target::Mesh(m), glam::Affine3A::from_translation(Vec3::new(2.0, 0.0, 0.0)), None);
+        let ls = LodScenes::build(&sc, &ChainParams { levels: 8, distance: None }).unwrap();
+        let leaves: Vec<_> = ls.scenes.iter().map(|s| s.leaf_instances().unwrap()).collect();
+        let accels: Vec<_> = ls.scenes.iter().map(|s| accel::build(AccelKind::Bvh, s).unwrap()).collect();
+        let p = LodParams::default();
+        let tr = LodTracer::new(&ls, &leaves, &accels, &p);
+        let mut c = Counters::default();
+        let mut smp = Sampler::new(1, 2, 3);
+        let mut differ = 0;
+        for _ in 0..500 {
+            let (a, b) = smp.next2();
+            let z = 1.0 - 2.0 * a;
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            let d = Vec3::new(r * (std::f32::consts::TAU * b).cos(), r * (std::f32::consts::TAU * b).sin(), z);
+            let ray = Ray::new(Vec3::ZERO, d);
+            let mut inside = Inside::default();
+            inside.enter(0, 0);
+            let coarse = RayState { lod: 0.05, k: 0.5, d: 0.1, inside: Inside::default() };
+            let entered = RayState { inside, ..coarse };
+            let lv = tr.level(&coarse);
+            assert_eq!(lv, 6);
+            let (h0, l0) = tr.intersect(&ray, lv, &entered, &mut c).expect("exit hit");
+            assert_eq!((l0, h0.inst), (0, 0));
+            let fine = accels[0].intersect1(&ray, &mut c).unwrap();
+            assert_eq!(h0.t, fine.t);
+            let (h6, l6) = tr.intersect(&ray, lv, &coarse, &mut c).expect("coarse hit");
+            assert_eq!(l6, 6);
+            assert_eq!(h6.t, accels[6].intersect1(&ray, &mut c).unwrap().t);
+            differ += (h6.t != h0.t) as u32;
+        }
+        // The levels are different models, so the test means something.
+        assert!(differ > 400, "{differ}");
     }
 
     #[test]
