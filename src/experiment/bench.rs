@@ -11,7 +11,7 @@
 //! (distance criterion), `force` (fixed LOD), `net=1` (net disparity).
 //!
 //! A `lod` row is also compared with the full-detail row of the same scene (the first
-//! `whitted` row with the same accel and spp): triangle tests and time saved, the maximum
+//! `whitted` row with the same accel, spp, threads and depth): triangle tests and time saved, the maximum
 //! and mean pixel difference (8-bit display values, as the paper's percentages), a
 //! magnified difference image like the paper's Fig. 4e, and the two distortion maps.
 //! Examples: `whitted:embree`, `whitted:bvh:threads=1`, `distributed:embree:spp=64`.
@@ -319,9 +319,9 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
             let (film, stats, maps) = run_spec(scene, spec, a.width, a.height, a.threads, a.repeat, a.quiet)?;
             let mut lod_vs_full = None;
             if spec.method == Method::Lod {
-                if let Some((fs, ff, fst)) =
-                    full.iter().find(|(f, _, _)| f.accel == spec.accel && f.spp == spec.spp && f.max_depth == spec.max_depth)
-                {
+                if let Some((fs, ff, fst)) = full.iter().find(|(f, _, _)| {
+                    f.accel == spec.accel && f.spp == spec.spp && f.max_depth == spec.max_depth && f.threads == spec.threads
+                }) {
                     let d = pixel_diff(&film, ff);
                     let tests = |s: &run::Stats| s.counters.get("triangle_tests").copied().unwrap_or(0) as f64;
                     let (imax, dmax) = d.iter().copied().enumerate().fold((0, 0.0f32), |a, (i, x)| if x > a.1 { (i, x) } else { a });

@@ -23,7 +23,7 @@ struct Job {
     width: u32,
     height: u32,
     methods: String,
-    reference: String,
+    reference: Option<String>,
 }
 
 fn jobs(quick: bool) -> Vec<Job> {
@@ -43,11 +43,26 @@ fn jobs(quick: bool) -> Vec<Job> {
     let methods = m.join(",");
     let fx = format!("whitted:{a0},multires,distributed:{a0}:spp=27");
     let (sw, sh, cw, ch, sref, cref) = if quick { (256, 256, 320, 240, 66, 27) } else { (512, 512, 640, 480, 258, 102) };
+    let r = |spp: u32| Some(format!("distributed:{a0}:spp={spp}:vt=0"));
+    // Papaioannou et al.: per-ray LOD against the full-detail tracer, 2×2 supersampling as
+    // in the paper, on both back-ends; the chessboard also at one thread (speed-up per
+    // processor).
+    let mut lod = Vec::new();
+    for a in &accel_list {
+        lod.push(format!("whitted:{a}:spp=4"));
+        lod.push(format!("lod:{a}:spp=4"));
+    }
+    let lod_cb = format!("{},whitted:bvh:spp=4:threads=1,lod:bvh:spp=4:threads=1", lod.join(","));
+    let lod = lod.join(",");
+    let (lw, lh) = if quick { (256, 256) } else { (512, 512) };
     vec![
-        Job { scene: "spheres", width: sw, height: sh, methods: methods.clone(), reference: format!("distributed:{a0}:spp={sref}:vt=0") },
-        Job { scene: "complex", width: cw, height: ch, methods, reference: format!("distributed:{a0}:spp={cref}:vt=0") },
+        Job { scene: "spheres", width: sw, height: sh, methods: methods.clone(), reference: r(sref) },
+        Job { scene: "complex", width: cw, height: ch, methods, reference: r(cref) },
         // Fig. 8: soft shadows, depth of field, blurry reflections at three roughnesses.
-        Job { scene: "effects", width: sw, height: sh, methods: fx, reference: format!("distributed:{a0}:spp={sref}:vt=0") },
+        Job { scene: "effects", width: sw, height: sh, methods: fx, reference: r(sref) },
+        Job { scene: "chessboard", width: lw, height: lh, methods: lod_cb, reference: None },
+        Job { scene: "cabinet", width: lw, height: lh, methods: lod.clone(), reference: None },
+        Job { scene: "reflector", width: lw, height: lh, methods: lod, reference: None },
     ]
 }
 
@@ -59,12 +74,19 @@ pub fn run(a: &DemoArgs) -> Result<()> {
             eprintln!("demo: skipping '{}' (not available: run tools/setup for its meshes)", job.scene);
             continue;
         }
-        eprintln!("demo: {} at {}x{}: {} (reference {})", job.scene, job.width, job.height, job.methods, job.reference);
+        eprintln!(
+            "demo: {} at {}x{}: {} (reference {})",
+            job.scene,
+            job.width,
+            job.height,
+            job.methods,
+            job.reference.as_deref().unwrap_or("none")
+        );
         let dir = a.out.join(job.scene);
         let args = BenchArgs {
             scenes: vec![job.scene.to_string()],
             methods: job.methods.clone(),
-            reference: Some(job.reference.clone()),
+            reference: job.reference.clone(),
             out: Some(dir.clone()),
             width: job.width,
             height: job.height,
@@ -112,17 +134,19 @@ fn index_html(sections: &[(Job, BenchReport)]) -> String {
         }
         h.push_str("</table>");
         let dir = Path::new(job.scene);
-        let _ = write!(
-            h,
-            "<figure><img src=\"{}\"><figcaption>reference: {}</figcaption></figure>",
-            dir.join(format!(
-                "{}-reference-{}.png",
-                job.scene,
-                bench::MethodSpec::parse(&job.reference).map(|s| s.slug()).unwrap_or_default()
-            ))
-            .display(),
-            esc(&job.reference)
-        );
+        if let Some(reference) = &job.reference {
+            let _ = write!(
+                h,
+                "<figure><img src=\"{}\"><figcaption>reference: {}</figcaption></figure>",
+                dir.join(format!(
+                    "{}-reference-{}.png",
+                    job.scene,
+                    bench::MethodSpec::parse(reference).map(|s| s.slug()).unwrap_or_default()
+                ))
+                .display(),
+                esc(reference)
+            );
+        }
         for row in &r.rows {
             if let Some(img) = &row.image {
                 let _ = write!(
@@ -133,6 +157,39 @@ fn index_html(sections: &[(Job, BenchReport)]) -> String {
                     row.stats.render_seconds,
                     row.flip.map(|v| format!("{v:.4}")).unwrap_or("-".into())
                 );
+            }
+        }
+        let lod: Vec<_> = r.rows.iter().filter_map(|row| row.lod_vs_full.as_ref().map(|c| (row, c))).collect();
+        if !lod.is_empty() {
+            h.push_str("<h3>Per-ray LOD against full detail</h3><p>Difference images are magnified like the paper's Fig. 4e (white = equal, black = the largest difference); the distortion maps show 20·d (refraction d<sub>t</sub>, reflection d<sub>r</sub>) as in Fig. 4c/d.</p><table><tr><th>method</th><th>against</th><th>triangle tests saved</th><th>time saved</th><th>max pixel diff</th><th>99th pct</th><th>mean diff</th><th>max diff, full-LOD pixels</th></tr>");
+            for (row, c) in &lod {
+                let _ = write!(
+                    h,
+                    "<tr><td>{}</td><td>{}</td><td>{:.1} %</td><td>{:.1} %</td><td>{:.1} %</td><td>{:.1} %</td><td>{:.2} %</td><td>{:.1} %</td></tr>",
+                    esc(&row.spec),
+                    esc(&c.against),
+                    100.0 * c.triangle_test_reduction,
+                    100.0 * c.time_reduction,
+                    100.0 * c.max_pixel_diff,
+                    100.0 * c.p99_pixel_diff,
+                    100.0 * c.mean_pixel_diff,
+                    100.0 * c.max_diff_full_lod_pixels
+                );
+            }
+            h.push_str("</table>");
+            for (row, _) in &lod {
+                let slug = bench::MethodSpec::parse(&row.spec).map(|s| s.slug()).unwrap_or_default();
+                for (k, what) in
+                    [("diff", "difference (magnified)"), ("disparity-t", "refraction disparity"), ("disparity-r", "reflection disparity")]
+                {
+                    let _ = write!(
+                        h,
+                        "<figure><img src=\"{}\"><figcaption>{} — {}</figcaption></figure>",
+                        dir.join(format!("{}-{}-{}.png", job.scene, slug, k)).display(),
+                        esc(&row.spec),
+                        what
+                    );
+                }
             }
         }
         let _ = write!(h, "<p><img src=\"{}\" style=\"max-width:640px\"></p>", dir.join("bench-time.png").display());
