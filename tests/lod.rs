@@ -79,8 +79,9 @@ fn flat_mirror_keeps_full_lod() {
         Camera { eye: Vec3::new(0.5, 0.3, 3.0), look: Vec3::new(0.0, 0.0, 0.0), up: Vec3::Y, fovy: 40.0, aperture: 0.0, focal_dist: 3.0 };
     s.lights.push(Light::Point { pos: Vec3::new(0.0, 3.0, 3.0), intensity: Vec3::splat(30.0) });
     let o = opts(64, 64, 1);
-    for net in [false, true] {
-        let la = LodArgs { lod_net_disparity: net, ..Default::default() };
+    use lodtrace::lod::trace::Selector;
+    for (net, sel) in [(false, Selector::Disparity), (true, Selector::Disparity), (true, Selector::Cone)] {
+        let la = LodArgs { lod_net_disparity: net, lod_selector: sel, ..Default::default() };
         let r = render(&s, Method::Lod, AccelKind::Bvh, &o, &la);
         let m = &r.lod.as_ref().unwrap().maps;
         assert!(r.out.film.depth.iter().all(|d| d.is_finite()), "the mirror fills the view");
@@ -102,8 +103,10 @@ fn flat_mirror_keeps_full_lod() {
         Affine3A::from_translation(Vec3::new(0.0, 0.0, 1.0)) * Affine3A::from_scale(Vec3::splat(0.6)),
         Some(mirror),
     );
-    let r = render(&s, Method::Lod, AccelKind::Bvh, &o, &LodArgs::default());
-    assert!(r.lod.as_ref().unwrap().maps.lod_r.iter().any(|&l| l < 0.5));
+    for sel in [Selector::Disparity, Selector::Cone] {
+        let r = render(&s, Method::Lod, AccelKind::Bvh, &o, &LodArgs { lod_selector: sel, ..Default::default() });
+        assert!(r.lod.as_ref().unwrap().maps.lod_r.iter().any(|&l| l < 0.8), "{sel:?}");
+    }
 }
 
 /// The bvh back-end's instance filter gives what stepping past rejected hits gives.

@@ -8,7 +8,8 @@
 //! the cone tracers (`multires`, `cone`): `k`, `c` (oversampling), `clamp`, `lod`, `dtol`,
 //! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage`;
 //! for `lod`: `f`, `a` (a_LOD), `thres`, `sel=0` (no selective tracing), `levels`, `dist`
-//! (distance criterion), `force` (fixed LOD), `net=1` (net disparity).
+//! (distance criterion), `force` (fixed LOD), `net=1` (net disparity), `select=cone` (the
+//! ray-cone selector).
 //!
 //! A `lod` row is also compared with the full-detail row of the same scene (the first
 //! `whitted` row with the same accel, spp, threads and depth): triangle tests and time saved, the maximum
@@ -128,13 +129,16 @@ impl MethodSpec {
                     "dist" => spec.lod.lod_distance = Some(num(v)? as f32),
                     "force" => spec.lod.lod_force = Some(num(v)? as f32),
                     "net" => spec.lod.lod_net_disparity = num(v)? != 0.0,
+                    "select" => {
+                        spec.lod.lod_selector = crate::lod::trace::Selector::from_str(v, true).map_err(|_| bad(format!("select={v}: disparity or cone")))?
+                    }
                     "eigen" => {
                         spec.multires.eigen = crate::multires::trace::EigenMode::from_str(v, true)
                             .map_err(|_| bad(format!("eigen={v}: per-box or exact")))?
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen, tri; lod: f, a, thres, sel, levels, dist, force, net)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen, tri; lod: f, a, thres, sel, select, levels, dist, force, net)"
                         )))
                     }
                 }

@@ -163,9 +163,9 @@ fn run_lod(scene: &Scene, accel_kind: AccelKind, opts: &RenderOpts, la: &LodArgs
     let leaves: Vec<_> = ls.scenes.iter().map(|s| s.leaf_instances()).collect::<Result<_>>()?;
     let accels: Vec<_> = ls.scenes.iter().map(|s| accel::build(accel_kind, s)).collect::<Result<_>>()?;
     let build_seconds = t0.elapsed().as_secs_f64();
-    let tr = LodTracer::new(&ls, &leaves, &accels, &lp);
+    let mut tr = LodTracer::new(&ls, &leaves, &accels, &lp);
     let cam = scene.camera.frame(opts.width, opts.height);
-    let r = crate::lod::trace::render(&tr, &cam, opts)?;
+    let r = crate::lod::trace::render(&mut tr, &cam, opts)?;
     let c = &r.out.counters;
     let q = c.get(Counter::lod_queries).max(1);
     let npix = r.maps.lod_r.len().max(1) as f64;

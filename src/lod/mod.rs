@@ -43,6 +43,10 @@ pub struct LodArgs {
     /// Measure disparity net of the incident rays' divergence (a flat mirror gives 0).
     #[arg(long)]
     pub lod_net_disparity: bool,
+    /// What lowers the level-1 LOD: the paper's neighbour disparity, or the spread a ray
+    /// cone gains from the surface curvature (beyond the paper).
+    #[arg(long, value_enum, default_value = "disparity")]
+    pub lod_selector: trace::Selector,
 }
 
 impl Default for LodArgs {
@@ -59,6 +63,7 @@ impl Default for LodArgs {
             lod_distance: None,
             lod_force: None,
             lod_net_disparity: p.net_disparity,
+            lod_selector: p.selector,
         }
     }
 }
@@ -74,6 +79,7 @@ impl LodArgs {
             selective_ratio: self.lod_selective_ratio,
             force: self.lod_force,
             net_disparity: self.lod_net_disparity,
+            selector: self.lod_selector,
         };
         p.validate()?;
         let c = ChainParams { levels: self.lod_levels, distance: self.lod_distance };

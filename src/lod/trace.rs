@@ -58,6 +58,15 @@ use std::time::Instant;
 /// Objects a ray can be inside of at once (the enter/exit list of Fig. 3).
 pub const INSIDE_MAX: usize = 4;
 
+/// What lowers the level-1 LOD.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Selector {
+    /// The paper's ray disparity between neighbouring pixels (§2.2).
+    Disparity,
+    /// Beyond the paper: the spread a ray cone gains at the surface, from its curvature.
+    Cone,
+}
+
 /// The paper's parameters (§3, §4), each a named option.
 #[derive(Clone, Debug)]
 pub struct LodParams {
@@ -78,6 +87,7 @@ pub struct LodParams {
     /// Disparity net of the incident rays' own divergence (a flat mirror then gives exactly
     /// zero); off = the paper's absolute angles.
     pub net_disparity: bool,
+    pub selector: Selector,
 }
 
 impl Default for LodParams {
@@ -91,6 +101,7 @@ impl Default for LodParams {
             selective_ratio: 2.0,
             force: None,
             net_disparity: false,
+            selector: Selector::Disparity,
         }
     }
 }
@@ -179,9 +190,13 @@ struct Cell {
     /// Reflected and transmitted directions (the distortion buffer), zero when absent.
     r: Vec3,
     t: Vec3,
+    /// The cone selector's (d_r, d_t) for this sample (zero with the disparity selector).
+    cone: (f32, f32),
 }
 
 pub struct LodTracer<'a> {
+    /// Angle between neighbouring pixel-centre rays (radians), for the cone selector.
+    pixel_angle: f32,
     ctxs: Vec<TraceCtx<'a>>,
     p: &'a LodParams,
     lvl_max: u32,
@@ -199,7 +214,7 @@ impl<'a> LodTracer<'a> {
             .map(|((s, l), a)| TraceCtx { scene: s, leaves: l, accel: a.as_ref(), max_depth: s.max_depth })
             .collect::<Vec<_>>();
         let max_depth = ls.scenes[0].max_depth;
-        LodTracer { ctxs, p, lvl_max: ls.lvl_max, max_depth }
+        LodTracer { pixel_angle: 0.0, ctxs, p, lvl_max: ls.lvl_max, max_depth }
     }
 
     #[inline]
@@ -311,7 +326,7 @@ impl<'a> LodTracer<'a> {
 
     /// Pass 1 for one primary ray and its hit: local shading and the distortion-buffer entry.
     fn pass1_cell(&self, ray: Ray, hit: Option<Hit>, c: &mut Counters) -> Cell {
-        let mut cell = Cell { ray, hit, l0: self.ctxs[0].scene.background, r: Vec3::ZERO, t: Vec3::ZERO };
+        let mut cell = Cell { ray, hit, l0: self.ctxs[0].scene.background, r: Vec3::ZERO, t: Vec3::ZERO, cone: (0.0, 0.0) };
         let Some(h) = hit else { return cell };
         let lv = self.level(&self.root_state());
         let ctx = &self.ctxs[lv as usize];
@@ -329,7 +344,45 @@ impl<'a> LodTracer<'a> {
         if sec.reflect_w > 0.0 {
             cell.r = sec.mirror;
         }
+        if self.p.selector == Selector::Cone {
+            cell.cone = self.cone_disparity(ctx, &ray, &h, &s, cell.r != Vec3::ZERO, cell.t != Vec3::ZERO);
+        }
         cell
+    }
+
+    /// The ray-cone selector (beyond the paper; ray cones after Amanatides 1984 and
+    /// Akenine-Möller et al. 2019): the primary cone of spread α (one pixel) has width
+    /// w = α·t at the hit; the surface bends normals by Δn = κ·w across it (κ: the largest
+    /// normal change per unit length along the triangle's edges); the outgoing cone spreads
+    /// by α + 2Δn after reflection and by η·α + |1 − η|·Δn after refraction (first order,
+    /// η the ratio of indices). The spread the surface *adds* over the pixel's own α, on both
+    /// image axes, divided by 2π, is this selector's d — in the units of the paper's
+    /// disparity (two neighbour angles over 2π), zero for a flat mirror.
+    fn cone_disparity(&self, ctx: &TraceCtx, ray: &Ray, h: &Hit, s: &crate::baseline::shade::Surface, r: bool, t: bool) -> (f32, f32) {
+        let leaf = &ctx.leaves[h.inst as usize];
+        let mesh = &ctx.scene.meshes[leaf.mesh as usize];
+        let [i0, i1, i2] = mesh.tris[h.prim as usize];
+        let nm = glam::Mat3::from(leaf.normal_mat);
+        let mut kappa = 0.0f32;
+        for (a, b) in [(i0, i1), (i1, i2), (i2, i0)] {
+            let dp = leaf.xform.transform_vector3(mesh.pos(a) - mesh.pos(b)).length();
+            let dn = ((nm * mesh.normal(a)).normalize_or_zero() - (nm * mesh.normal(b)).normalize_or_zero()).length();
+            if dp > 0.0 {
+                kappa = kappa.max(dn / dp);
+            }
+        }
+        let alpha = self.pixel_angle;
+        let w = alpha * h.t * ray.dir.length();
+        let dn = kappa * w;
+        let tau = std::f32::consts::TAU;
+        let dr = if r { 2.0 * (2.0 * dn) / tau } else { 0.0 };
+        let dt = if t {
+            let eta = if s.front { 1.0 / s.mat.ior } else { s.mat.ior };
+            2.0 * ((eta * alpha + (1.0 - eta).abs() * dn) - alpha).max(0.0) / tau
+        } else {
+            0.0
+        };
+        (dr.clamp(0.0, 1.0), dt.clamp(0.0, 1.0))
     }
 
     /// Pass 2 for one primary sample: the level-1 sub-trees at the LODs from the disparities.
@@ -389,9 +442,11 @@ pub struct LodRender {
 }
 
 /// Renders one frame with `--method lod`.
-pub fn render(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> Result<LodRender> {
+pub fn render(tr: &mut LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> Result<LodRender> {
     opts.validate()?;
     tr.p.validate()?;
+    tr.pixel_angle = 2.0 * cam.s / opts.height as f32;
+    let tr = &*tr;
     let pool = rayon::ThreadPoolBuilder::new().num_threads(opts.threads).build().map_err(|e| Error::Usage(format!("thread pool: {e}")))?;
     let threads = pool.current_num_threads();
     let start = Instant::now();
@@ -416,7 +471,7 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
     };
 
     // Pass 1: level-0 rays (packets of K at one sample per pixel, as the Whitted tracer).
-    let empty = Cell { ray: Ray::new(Vec3::ZERO, Vec3::Z), hit: None, l0: Vec3::ZERO, r: Vec3::ZERO, t: Vec3::ZERO };
+    let empty = Cell { ray: Ray::new(Vec3::ZERO, Vec3::Z), hit: None, l0: Vec3::ZERO, r: Vec3::ZERO, t: Vec3::ZERO, cone: (0.0, 0.0) };
     let mut buf = vec![empty; npix * sppu];
     let mut film = Film::new(w, h);
     let mut counters = buf
@@ -497,7 +552,11 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
         (d != Vec3::ZERO).then_some(k)
     };
     let net = tr.p.net_disparity;
+    let cone = tr.p.selector == Selector::Cone;
     let disparity_at = |k: usize| -> (f32, f32) {
+        if cone {
+            return buf[k].cone;
+        }
         let s = k % sppu;
         let pix = k / sppu;
         let (i, j) = ((pix % wu) as i64, (pix / wu) as i64);

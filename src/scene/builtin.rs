@@ -39,7 +39,7 @@ pub const BUILTINS: &[BuiltinInfo] = &[
     BuiltinInfo { name: "spheres", about: "Wand & Strasser Fig. 6: reflective and refractive sphere on a geometric checkerboard (~7,400 triangles)" },
     BuiltinInfo { name: "effects", about: "Wand & Strasser Fig. 8: soft shadows from an elliptical light, depth of field, blurry reflections at three roughnesses (~14,000 triangles)" },
     BuiltinInfo { name: "complex", about: "Wand & Strasser Fig. 7: specular cows, glass bunnies, procedural plants on a huge geometric checkerboard (~8.7M instanced / ~110k unique triangles; needs tools/setup)" },
-    BuiltinInfo { name: "chessboard", about: "Papaioannou et al. Fig. 4: wooden chessboard with bumpy glass squares, glass and wooden lathe pawns, carved base plate (~0.75M instanced triangles)" },
+    BuiltinInfo { name: "chessboard", about: "Papaioannou et al. Fig. 4: wooden chessboard with bumpy glass squares, glass and wooden lathe pawns, carved base plate (~1.66M instanced triangles)" },
     BuiltinInfo { name: "cabinet", about: "Papaioannou et al. Fig. 6: cabinet with a flat mirror on its back wall reflecting glasses and vases" },
     BuiltinInfo { name: "reflector", about: "Papaioannou et al. Fig. 5: armadillo, bunnies and cow seen in curved chrome reflectors (needs tools/setup)" },
     BuiltinInfo { name: "instanced", about: "test: nested instance groups with rotations, non-uniform scales and material overrides (~5,000 triangles)" },
