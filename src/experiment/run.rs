@@ -76,6 +76,8 @@ pub struct Stats {
     pub threads: usize,
     pub build_seconds: f64,
     pub render_seconds: f64,
+    /// Process CPU time during the render (with `--threads 1`: the render's own cost).
+    pub render_cpu_seconds: f64,
     pub mrays_per_second: f64,
     pub triangles_instanced: u64,
     pub triangles_unique: u64,
@@ -196,6 +198,7 @@ impl RunResult {
             threads: self.out.threads,
             build_seconds: self.build_seconds,
             render_seconds: self.out.seconds,
+            render_cpu_seconds: self.out.cpu_seconds,
             mrays_per_second: rays as f64 / self.out.seconds.max(1e-9) / 1e6,
             triangles_instanced: inst,
             triangles_unique: uniq,

@@ -31,6 +31,7 @@ pub fn render(ms: &MultiresScene, tp: &TraceParams, cam: &CameraFrame, opts: &Re
     let pool = rayon::ThreadPoolBuilder::new().num_threads(opts.threads).build().map_err(|e| Error::Usage(format!("thread pool: {e}")))?;
     let threads = pool.current_num_threads();
     let start = Instant::now();
+    let cpu0 = crate::baseline::render::process_cpu_seconds();
     let abort = AtomicBool::new(false);
     let (lo, hi) = ms.scene.bounds()?;
     let tracer = Tracer {
@@ -82,5 +83,5 @@ pub fn render(ms: &MultiresScene, tp: &TraceParams, cam: &CameraFrame, opts: &Re
         }
     }
     let finished = !abort.load(Ordering::Relaxed);
-    Ok(ConeRender { out: RenderOutput { film, counters, seconds: start.elapsed().as_secs_f64(), threads }, finished })
+    Ok(ConeRender { out: RenderOutput { film, counters, seconds: start.elapsed().as_secs_f64(), cpu_seconds: crate::baseline::render::process_cpu_seconds() - cpu0, threads }, finished })
 }
