@@ -16,8 +16,9 @@
 //! keeps only the vertices it uses, with the original normals.
 //!
 //! The paper's 2003 chains were "generated externally with the help of commercial
-//! software"; they are built here once per unique mesh per run, in parallel (rayon), and
-//! shared by all instances.
+//! software"; they are built here once per unique mesh, in parallel (rayon), shared by all
+//! instances, and cached on disk ([`cache_dir`], keyed by a hash of the mesh), so later runs
+//! read them back.
 //!
 //! Per-level scenes ([`LodScenes`]): level scene r holds every leaf instance of the input
 //! scene, in the same order (so a hit's instance index means the same object at every
@@ -91,6 +92,125 @@ impl LodChain {
         }
         LodChain { levels, errors }
     }
+}
+
+/// The on-disk chain cache: `$LODTRACE_CACHE`, else `$XDG_CACHE_HOME/lodtrace`, else
+/// `~/.cache/lodtrace` (None when none can be made: then chains are rebuilt every run).
+pub fn cache_dir() -> Option<std::path::PathBuf> {
+    let d = if let Some(d) = std::env::var_os("LODTRACE_CACHE") {
+        std::path::PathBuf::from(d)
+    } else if let Some(x) = std::env::var_os("XDG_CACHE_HOME") {
+        std::path::PathBuf::from(x).join("lodtrace")
+    } else {
+        std::path::PathBuf::from(std::env::var_os("HOME")?).join(".cache").join("lodtrace")
+    };
+    std::fs::create_dir_all(&d).ok()?;
+    Some(d)
+}
+
+/// Cache key of a mesh's chain: a hash of the geometry, the materials, the level count and
+/// the code version (so a changed simplifier never reads old files).
+fn chain_key(mesh: &Mesh, n_levels: u32) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    ("lodchain-v1", env!("CARGO_PKG_VERSION"), n_levels, mesh.tris.len(), mesh.vertex_count()).hash(&mut h);
+    for v in [&mesh.px, &mesh.py, &mesh.pz, &mesh.nx, &mesh.ny, &mesh.nz] {
+        for x in v.iter() {
+            x.to_bits().hash(&mut h);
+        }
+    }
+    mesh.tris.hash(&mut h);
+    mesh.mat.hash(&mut h);
+    h.finish()
+}
+
+impl LodChain {
+    /// [`LodChain::build`] through the on-disk cache: built once, then read back (levels ≥ 1
+    /// as vertex and index arrays; level 0 is the input mesh itself).
+    pub fn cached(mesh: &Mesh, n_levels: u32) -> LodChain {
+        let Some(dir) = cache_dir() else { return LodChain::build(mesh, n_levels) };
+        let path = dir.join(format!("{:016x}.lod", chain_key(mesh, n_levels)));
+        if let Some(c) = std::fs::read(&path).ok().and_then(|b| decode_chain(&b, mesh, n_levels)) {
+            return c;
+        }
+        let c = LodChain::build(mesh, n_levels);
+        let tmp = path.with_extension(format!("tmp{}", std::process::id()));
+        if std::fs::write(&tmp, encode_chain(&c)).is_ok() {
+            let _ = std::fs::rename(&tmp, &path);
+        }
+        c
+    }
+}
+
+fn encode_chain(c: &LodChain) -> Vec<u8> {
+    let mut b = Vec::new();
+    let put = |b: &mut Vec<u8>, x: u32| b.extend_from_slice(&x.to_le_bytes());
+    put(&mut b, c.levels.len() as u32);
+    for (m, e) in c.levels.iter().zip(&c.errors).skip(1) {
+        put(&mut b, e.to_bits());
+        put(&mut b, m.vertex_count() as u32);
+        put(&mut b, m.tris.len() as u32);
+        put(&mut b, m.has_normals() as u32);
+        for v in [&m.px, &m.py, &m.pz] {
+            v.iter().for_each(|x| put(&mut b, x.to_bits()));
+        }
+        if m.has_normals() {
+            for v in [&m.nx, &m.ny, &m.nz] {
+                v.iter().for_each(|x| put(&mut b, x.to_bits()));
+            }
+        }
+        m.tris.iter().flatten().for_each(|&i| put(&mut b, i));
+        m.mat.iter().for_each(|&i| put(&mut b, i));
+    }
+    b
+}
+
+/// Reads a cached chain; None on any inconsistency (then it is rebuilt).
+fn decode_chain(b: &[u8], mesh: &Mesh, n_levels: u32) -> Option<LodChain> {
+    let mut at = 0usize;
+    let mut get = || -> Option<u32> {
+        let x = u32::from_le_bytes(b.get(at..at + 4)?.try_into().ok()?);
+        at += 4;
+        Some(x)
+    };
+    let n = get()?;
+    if n != n_levels.max(1) {
+        return None;
+    }
+    let mut levels = vec![mesh.clone()];
+    let mut errors = vec![0.0];
+    for _ in 1..n {
+        errors.push(f32::from_bits(get()?));
+        let (nv, nt, has_n) = (get()? as usize, get()? as usize, get()? != 0);
+        if nv > 1 << 28 || nt > 1 << 28 {
+            return None;
+        }
+        let mut m = Mesh::new(mesh.name.clone());
+        let mut floats = |k: usize| -> Option<Vec<f32>> { (0..k).map(|_| get().map(f32::from_bits)).collect() };
+        m.px = floats(nv)?;
+        m.py = floats(nv)?;
+        m.pz = floats(nv)?;
+        if has_n {
+            m.nx = floats(nv)?;
+            m.ny = floats(nv)?;
+            m.nz = floats(nv)?;
+        }
+        let mut tris = Vec::with_capacity(nt);
+        for _ in 0..nt {
+            let t = [get()?, get()?, get()?];
+            if t.iter().any(|&i| i as usize >= nv) {
+                return None;
+            }
+            tris.push(t);
+        }
+        m.tris = tris;
+        m.mat = (0..nt).map(|_| get()).collect::<Option<_>>()?;
+        if m.tris.is_empty() {
+            return None;
+        }
+        levels.push(m);
+    }
+    (at == b.len()).then_some(LodChain { levels, errors })
 }
 
 /// Simplifies to about `target` triangles; returns the mesh and meshoptimizer's relative error.
@@ -173,7 +293,7 @@ impl LodScenes {
         let t0 = Instant::now();
         let lvl_max = p.levels - 1;
         let leaves = scene.leaf_instances()?;
-        let chains: Vec<LodChain> = scene.meshes.par_iter().map(|m| LodChain::build(m, p.levels)).collect();
+        let chains: Vec<LodChain> = scene.meshes.par_iter().map(|m| LodChain::cached(m, p.levels)).collect();
         let eye = scene.camera.eye;
         let offsets: Vec<u32> = leaves
             .iter()
@@ -269,6 +389,27 @@ mod tests {
             assert_eq!(c.levels[k].nx.len(), c.levels[k].px.len());
         }
         assert!(c.levels[7].tris.len() < n / 4);
+    }
+
+    #[test]
+    fn cache_round_trips_and_rejects_garbage() {
+        let m = uv_sphere(20, 40, 0);
+        let c = LodChain::build(&m, 5);
+        let b = encode_chain(&c);
+        let d = decode_chain(&b, &m, 5).expect("decodes");
+        for (a, b) in c.levels.iter().zip(&d.levels) {
+            assert_eq!(a.tris, b.tris);
+            assert_eq!(a.px, b.px);
+            assert_eq!(a.nz, b.nz);
+            assert_eq!(a.mat, b.mat);
+        }
+        assert!(decode_chain(&b, &m, 6).is_none());
+        assert!(decode_chain(&b[..b.len() - 3], &m, 5).is_none());
+        let mut bad = b.clone();
+        let n = bad.len();
+        bad[n - 8..n - 4].copy_from_slice(&u32::MAX.to_le_bytes());
+        let _ = decode_chain(&bad, &m, 5); // never panics
+        assert_ne!(chain_key(&m, 5), chain_key(&m, 6));
     }
 
     #[test]
