@@ -1,0 +1,152 @@
+//! A deformable surfel object: everything precomputed once in the undeformed system
+//! (Adams et al. §4.4, "Precomputation"): surfel → simulation-node weights (Eq. 1), static
+//! 16-surfel MLS neighbourhoods (§4.2.1), clipping neighbours (§4.3), and the sphere tree
+//! with its lists (§4.1). Shared (`Arc`) by all instances of the same model — the paper's
+//! §6 memory saving: instances only hold their deformed state.
+
+use super::displace::{NodeWeights, SimNodes};
+use super::knn::KdTree;
+use super::surfel::SurfelModel;
+use super::tree::SphereTree;
+use super::DeformError;
+use glam::Vec3;
+use rayon::prelude::*;
+use std::sync::Arc;
+
+/// Precomputation parameters (paper defaults).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ObjectParams {
+    /// Simulation nodes per surfel in Eq. 1 (the armadillo of §6 uses 16).
+    pub nodes_per_surfel: usize,
+    /// Nodes in each node's MLS gradient neighbourhood.
+    pub nodes_per_gradient: usize,
+    /// Static MLS neighbourhood size (§4.2.1: 16; at most 32).
+    pub mls_neighbours: usize,
+    /// MLS support h = this × distance to the farthest of the neighbours.
+    pub mls_support: f32,
+}
+
+impl Default for ObjectParams {
+    fn default() -> Self {
+        ObjectParams { nodes_per_surfel: 16, nodes_per_gradient: 12, mls_neighbours: 16, mls_support: 1.1 }
+    }
+}
+
+/// The static data of one deformable model.
+#[derive(Debug)]
+pub struct SurfelObject {
+    pub model: SurfelModel,
+    pub nodes: SimNodes,
+    pub weights: NodeWeights,
+    pub tree: SphereTree,
+    /// Reference positions (copied out of the SoA for the hot deformation loop).
+    pub pos: Vec<Vec3>,
+    /// Collection of each surfel.
+    pub coll: Vec<u32>,
+    /// MLS neighbours: `nbr[i*nk .. i*nk + nk]` (nearest first, the surfel itself first).
+    pub nk: usize,
+    pub nbr: Vec<u32>,
+    /// MLS support radius per surfel (reference).
+    pub h: Vec<f32>,
+    /// Clipping partners of each collection.
+    pub clip_partners: Vec<Vec<u32>>,
+    /// Two nearest surfels of each partner: surfel i of collection c, partner slot k at
+    /// `clip_nb[clip_base[c] + (i − start_c)·partners + k]`.
+    pub clip_base: Vec<usize>,
+    pub clip_nb: Vec<[u32; 2]>,
+}
+
+impl SurfelObject {
+    /// Precomputes an object from its surfels and simulation nodes (reference positions and
+    /// masses).
+    pub fn build(mut model: SurfelModel, node_rest: Vec<Vec3>, node_mass: Vec<f32>, p: &ObjectParams) -> Result<Arc<Self>, DeformError> {
+        model.validate()?;
+        if p.nodes_per_surfel == 0 || p.mls_neighbours < 3 || p.mls_neighbours > 32 || !(p.mls_support >= 1.0 && p.mls_support.is_finite())
+        {
+            return Err(DeformError::Invalid(format!("bad object parameters {p:?}")));
+        }
+        let nodes = SimNodes::new(node_rest, node_mass, p.nodes_per_gradient)?;
+        let pos = model.surfels.positions();
+        let weights = NodeWeights::new(&pos, &nodes, p.nodes_per_surfel);
+        let coll = model.collection_of();
+        let min_coll = model.collections.iter().map(|c| (c.end - c.start) as usize).min().unwrap_or(0);
+        let nk = p.mls_neighbours.min(min_coll);
+        if nk < 3 {
+            return Err(DeformError::TooSmall(format!("a surfel collection has {min_coll} surfels")));
+        }
+        // Per-collection kd-trees for MLS and clipping neighbours.
+        let trees: Vec<KdTree> = model.collections.iter().map(|c| KdTree::new(&pos[c.start as usize..c.end as usize])).collect();
+        let per: Vec<(Vec<u32>, f32)> = (0..pos.len())
+            .into_par_iter()
+            .map_init(Vec::new, |out, i| {
+                let c = &model.collections[coll[i] as usize];
+                trees[coll[i] as usize].knn(pos[i], nk, None, out);
+                let h = out.last().map(|o| o.1.sqrt()).unwrap_or(0.0) * p.mls_support;
+                (out.iter().map(|o| o.0 + c.start).collect(), h.max(model.surfels.r[i]))
+            })
+            .collect();
+        let mut nbr = Vec::with_capacity(pos.len() * nk);
+        let mut h = Vec::with_capacity(pos.len());
+        for (a, b) in per {
+            nbr.extend(a);
+            h.push(b);
+        }
+        let mut clip_partners = vec![Vec::new(); model.collections.len()];
+        for &(a, b) in &model.clip {
+            if !clip_partners[a as usize].contains(&b) {
+                clip_partners[a as usize].push(b);
+            }
+            if !clip_partners[b as usize].contains(&a) {
+                clip_partners[b as usize].push(a);
+            }
+        }
+        let mut clip_base = Vec::with_capacity(model.collections.len());
+        let mut clip_nb = Vec::new();
+        for (ci, c) in model.collections.iter().enumerate() {
+            clip_base.push(clip_nb.len());
+            let parts = &clip_partners[ci];
+            if parts.is_empty() {
+                continue;
+            }
+            let rows: Vec<[u32; 2]> = (c.start..c.end)
+                .into_par_iter()
+                .map_init(Vec::new, |out, i| {
+                    let mut row = Vec::with_capacity(parts.len());
+                    for &pc in parts {
+                        let o = &model.collections[pc as usize];
+                        trees[pc as usize].knn(pos[i as usize], 2, None, out);
+                        let a = out[0].0 + o.start;
+                        let b = out.get(1).map(|x| x.0 + o.start).unwrap_or(a);
+                        row.push([a, b]);
+                    }
+                    row
+                })
+                .flatten()
+                .collect();
+            clip_nb.extend(rows);
+        }
+        let tree = SphereTree::build(&pos, &model.surfels.r, &nodes, &weights, p.nodes_per_surfel);
+        Ok(Arc::new(SurfelObject { model, nodes, weights, tree, pos, coll, nk, nbr, h, clip_partners, clip_base, clip_nb }))
+    }
+
+    pub fn surfel_count(&self) -> usize {
+        self.pos.len()
+    }
+
+    /// The clipping neighbours of surfel `s` against partner slot `k` of its collection.
+    #[inline]
+    pub fn clip_pair(&self, s: usize, k: usize) -> [u32; 2] {
+        let c = self.coll[s] as usize;
+        let np = self.clip_partners[c].len();
+        let start = self.model.collections[c].start as usize;
+        self.clip_nb[self.clip_base[c] + (s - start) * np + k]
+    }
+
+    /// Approximate bytes of the static data.
+    pub fn memory_bytes(&self) -> usize {
+        self.pos.len() * (7 * 4 + 12 + 4 + 4 + self.nk * 4 + self.weights.k * 8)
+            + self.tree.len() * (4 * 4 + 4 * 4 + 3)
+            + self.tree.list_node.len() * 16
+            + self.clip_nb.len() * 8
+    }
+}

@@ -1,0 +1,881 @@
+//! Ray tracing deforming surfel objects, per frame (Adams et al. §4.1.2, §4.2, §4.4): closest
+//! hit and any hit, with three update modes:
+//!
+//! - `Naive`: every frame, all surfels are deformed (Eq. 1) and the hierarchy is rebuilt
+//!   from scratch (median split + miniball), as in the paper's "no coherence" curve.
+//! - `Lazy`: the hierarchy built once for the undeformed object is updated only where rays
+//!   go: a node's centre and radius (Eq. 3–4, 9) are computed the first time it is needed in
+//!   a frame; once both children are current the parent's radius is tightened with Eq. 11;
+//!   surfels (and their MLS neighbours) are deformed when a ray reaches their leaf.
+//! - `LazyCache`: `Lazy` plus the per-ray cache of §4.2.2: the leaf of the closest hit of
+//!   slot k (e.g. pixel k) in the previous frame is tested first, so its hit bounds the
+//!   traversal from the root.
+//!
+//! Shadow rays (`occluded`) use the §4.4 optimisation: at a hit parent, a child that is
+//! already current is visited before one that would need an update; any accepted hit ends the
+//! ray. Accepted hits pass the clipping test of §4.3 against the two nearest surfels of every
+//! partner collection.
+//!
+//! **Concurrency and determinism.** `intersect` and `occluded` take `&self` and may run on any
+//! number of threads. Lazy state lives in atomics: a node or surfel carries the frame stamp
+//! of its last update; its value is a pure function of the frame, so racing writers store
+//! identical bits (release/acquire on the stamp publishes them). Eq. 11 tightening uses
+//! `fetch_min` on the radius bits (radii are positive, so their bit patterns order like the
+//! floats). The closest hit is a pure function of the frame and the ray: every leaf ball lies
+//! inside all its ancestors' balls and an MLS hit must lie inside its leaf ball, so culling
+//! never removes the closest accepted hit, whatever radii the inner nodes have when a ray
+//! tests them; ties are broken by (instance, surfel). Images are therefore identical for any
+//! thread count and in all three modes. Work counters (sphere tests, nodes updated) may vary
+//! slightly between multi-threaded runs, because which rays see a tightened radius depends
+//! on timing; single-threaded they are deterministic.
+//!
+//! Instances of the same object share its precomputed data (§6); the roots of all instances
+//! are tested 8 per step with the f32x8 sphere kernel.
+
+use super::displace::{deform_point, DeformField, DeformedSurfel};
+use super::miniball::miniball;
+use super::mls::{clipped_by, ellipse_hit, mls_intersect, MlsOutcome, MlsParams};
+use super::object::SurfelObject;
+use super::tree::{child_bound, leaf_sphere, sphere_test_1, sphere_test_spheres, Topology, LEAF};
+use super::DeformError;
+use crate::baseline::accel::Ray;
+use crate::core::stats::{Counter, Counters};
+use glam::Vec3;
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering::*};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// How the hierarchy follows the deformation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum UpdateMode {
+    Naive,
+    Lazy,
+    LazyCache,
+}
+
+impl UpdateMode {
+    pub const ALL: [UpdateMode; 3] = [UpdateMode::Naive, UpdateMode::Lazy, UpdateMode::LazyCache];
+    pub fn name(self) -> &'static str {
+        match self {
+            UpdateMode::Naive => "naive",
+            UpdateMode::Lazy => "lazy",
+            UpdateMode::LazyCache => "lazy-cache",
+        }
+    }
+}
+
+impl std::str::FromStr for UpdateMode {
+    type Err = DeformError;
+    fn from_str(s: &str) -> Result<Self, DeformError> {
+        match s {
+            "naive" => Ok(UpdateMode::Naive),
+            "lazy" => Ok(UpdateMode::Lazy),
+            "lazy-cache" | "lazycache" | "cache" => Ok(UpdateMode::LazyCache),
+            _ => Err(DeformError::Invalid(format!("unknown update mode '{s}' (naive, lazy, lazy-cache)"))),
+        }
+    }
+}
+
+/// Tracer parameters (paper defaults; the switches exist for ablations).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct TraceParams {
+    pub mls: MlsParams,
+    /// Factor out the optimal rigid transform (§4.1.3).
+    pub factor_rigid: bool,
+    /// Tighten parents with the child bound (Eq. 11).
+    pub eq11: bool,
+    /// Shadow rays visit an already updated child first (§4.4).
+    pub shadow_updated_first: bool,
+    /// The MLS support grows with the local stretch bound, at most by this factor.
+    pub max_support_stretch: f32,
+    /// Per-ray cache (LazyCache): cache the ancestor this many levels above the leaf of the
+    /// closest hit (0 = the leaf itself, the paper's choice; see module docs).
+    pub cache_up: u32,
+    /// Visit the nearer child first (by sphere entry). Off: always the left child first.
+    pub ordered: bool,
+    /// Take the smaller of the paper's Eq. 9 bound and the re-centred bound (see `tree`);
+    /// off = the paper's bound alone.
+    pub recentred_bound: bool,
+}
+
+impl Default for TraceParams {
+    fn default() -> Self {
+        TraceParams {
+            mls: MlsParams::default(),
+            factor_rigid: true,
+            eq11: true,
+            shadow_updated_first: true,
+            max_support_stretch: 3.0,
+            cache_up: 0,
+            ordered: true,
+            recentred_bound: true,
+        }
+    }
+}
+
+/// The deformable objects of a scene: shared precomputed models and the instances (one per
+/// simulated body; `instances[b]` is the object of body b).
+#[derive(Clone, Debug)]
+pub struct DeformScene {
+    pub objects: Vec<Arc<SurfelObject>>,
+    pub instances: Vec<u32>,
+}
+
+/// A closest (or any) hit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfelHit {
+    /// Ray parameter (in multiples of the ray direction).
+    pub t: f32,
+    pub p: Vec3,
+    /// MLS normal n(x), unit, pointing out of the surface.
+    pub n: Vec3,
+    pub instance: u32,
+    /// Surfel whose leaf produced the hit, and its collection.
+    pub surfel: u32,
+    pub collection: u32,
+    /// Leaf node of the hit (in the lazy hierarchy; naive trees are rebuilt every frame).
+    pub node: u32,
+    /// MLS evaluations until convergence.
+    pub iterations: u32,
+}
+
+/// Per-thread work counters of the deform tracer (merge by addition).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct DeformCounters {
+    /// Ray–sphere tests (roots, inner nodes, leaves, the cached node).
+    pub sphere_tests: u64,
+    /// Leaves reached: ellipse tests.
+    pub leaf_tests: u64,
+    /// MLS iterations started (ellipse hit).
+    pub mls_runs: u64,
+    pub mls_iterations: u64,
+    pub mls_hits: u64,
+    pub mls_rejected: u64,
+    /// Accepted MLS hits rejected by clipping.
+    pub clipped: u64,
+    pub cache_lookups: u64,
+    /// Cached node gave a hit.
+    pub cache_hits: u64,
+}
+
+impl DeformCounters {
+    pub fn merge(&mut self, o: &DeformCounters) {
+        self.sphere_tests += o.sphere_tests;
+        self.leaf_tests += o.leaf_tests;
+        self.mls_runs += o.mls_runs;
+        self.mls_iterations += o.mls_iterations;
+        self.mls_hits += o.mls_hits;
+        self.mls_rejected += o.mls_rejected;
+        self.clipped += o.clipped;
+        self.cache_lookups += o.cache_lookups;
+        self.cache_hits += o.cache_hits;
+    }
+    /// Mean MLS iterations of converged hits and rejections together.
+    pub fn mean_mls_iterations(&self) -> f64 {
+        self.mls_iterations as f64 / (self.mls_runs.max(1)) as f64
+    }
+}
+
+/// Per-frame update statistics (read after the frame's rays).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct FrameStats {
+    pub frame: u32,
+    pub mode: String,
+    /// Wall time of `begin_frame` (field, and for naive the deformation and rebuild).
+    pub update_seconds: f64,
+    pub inner_nodes_total: u64,
+    /// Inner nodes whose centre and radius were computed this frame (naive: all, rebuilt).
+    pub inner_nodes_updated: u64,
+    /// Inner nodes whose radius Eq. 11 reduced below the Eq. 9 bound.
+    pub nodes_tightened: u64,
+    pub surfels_total: u64,
+    pub surfels_deformed: u64,
+}
+
+/// Radius tightness at one level: used radius / tightest radius (miniball of the deformed
+/// surfel centres, grown by their ellipse extents — the construction of the initial tree).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct LevelRatio {
+    pub level: u32,
+    pub nodes_updated: u64,
+    pub sampled: u64,
+    pub mean_ratio: f64,
+    pub max_ratio: f64,
+}
+
+const SURF_F: usize = 10;
+
+struct SurfelState {
+    stamp: Vec<AtomicU32>,
+    /// p(3), u(3), v(3), stretch per surfel.
+    data: Vec<AtomicU32>,
+}
+
+/// The lazily written state of one node: frame stamps, centre and radius. One 32-byte
+/// record per node (not split per field like the static tree): a scalar traversal reads all
+/// of it at once, so a record costs one cache line where five arrays would cost five, and
+/// writes from one thread invalidate one line. (Measured on `armadillo-ball`, detail 0.2:
+/// see the report in `mod.rs`.)
+#[repr(C, align(32))]
+struct NodeSlot {
+    stamp: AtomicU32,
+    tight: AtomicU32,
+    c: [AtomicU32; 3],
+    r: AtomicU32,
+}
+
+const _: () = assert!(std::mem::size_of::<NodeSlot>() == 32);
+
+struct NodeState {
+    slot: Vec<NodeSlot>,
+}
+
+impl NodeState {
+    fn new(n: usize) -> Self {
+        NodeState {
+            slot: (0..n)
+                .map(|_| NodeSlot {
+                    stamp: AtomicU32::new(0),
+                    tight: AtomicU32::new(0),
+                    c: [AtomicU32::new(0), AtomicU32::new(0), AtomicU32::new(0)],
+                    r: AtomicU32::new(0),
+                })
+                .collect(),
+        }
+    }
+    #[inline(always)]
+    fn load(&self, n: usize) -> (Vec3, f32) {
+        let s = &self.slot[n];
+        let g = |a: &AtomicU32| f32::from_bits(a.load(Relaxed));
+        (Vec3::new(g(&s.c[0]), g(&s.c[1]), g(&s.c[2])), g(&s.r))
+    }
+    #[inline(always)]
+    fn store(&self, n: usize, c: Vec3, r: f32, frame: u32) {
+        let s = &self.slot[n];
+        s.c[0].store(c.x.to_bits(), Relaxed);
+        s.c[1].store(c.y.to_bits(), Relaxed);
+        s.c[2].store(c.z.to_bits(), Relaxed);
+        s.r.store(r.to_bits(), Relaxed);
+        s.stamp.store(frame, Release);
+    }
+}
+
+fn atomics(n: usize) -> Vec<AtomicU32> {
+    (0..n).map(|_| AtomicU32::new(0)).collect()
+}
+
+struct Instance {
+    obj: Arc<SurfelObject>,
+    field: DeformField,
+    surf: SurfelState,
+    nodes: NodeState,
+    naive: Option<Topology>,
+}
+
+#[derive(Clone, Copy)]
+struct Best {
+    t: f32,
+    hit: Option<SurfelHit>,
+}
+
+impl Best {
+    #[inline]
+    fn offer(&mut self, h: SurfelHit) {
+        let better = match self.hit {
+            None => h.t <= self.t,
+            Some(b) => h.t < b.t || (h.t == b.t && (h.instance, h.surfel) < (b.instance, b.surfel)),
+        };
+        if better {
+            self.t = h.t;
+            self.hit = Some(h);
+        }
+    }
+}
+
+const NO_CACHE: u64 = u64::MAX;
+
+/// The per-frame tracer of deforming surfel objects (see module docs).
+pub struct DeformTracer {
+    mode: UpdateMode,
+    params: TraceParams,
+    inst: Vec<Instance>,
+    frame: u32,
+    cache: Vec<AtomicU64>,
+    update_seconds: f64,
+}
+
+impl DeformTracer {
+    pub fn new(scene: &DeformScene, mode: UpdateMode, params: TraceParams) -> Result<Self, DeformError> {
+        if scene.instances.is_empty() {
+            return Err(DeformError::Invalid("scene has no instances".into()));
+        }
+        let p = &params;
+        if !(p.mls.eps_rel.is_finite() && p.mls.eps_rel > 0.0) || p.mls.max_iter == 0 || !(p.max_support_stretch >= 1.0) {
+            return Err(DeformError::Invalid(format!("bad trace parameters {p:?}")));
+        }
+        let mut inst = Vec::with_capacity(scene.instances.len());
+        for &o in &scene.instances {
+            let obj = scene.objects.get(o as usize).ok_or_else(|| DeformError::Invalid(format!("instance of missing object {o}")))?.clone();
+            let (ns, nn) = (obj.surfel_count(), obj.tree.len());
+            inst.push(Instance {
+                field: DeformField::identity(&obj.nodes),
+                surf: SurfelState { stamp: atomics(ns), data: atomics(ns * SURF_F) },
+                nodes: NodeState::new(nn),
+                naive: None,
+                obj,
+            });
+        }
+        Ok(DeformTracer { mode, params, inst, frame: 0, cache: Vec::new(), update_seconds: 0.0 })
+    }
+
+    pub fn mode(&self) -> UpdateMode {
+        self.mode
+    }
+    pub fn params(&self) -> &TraceParams {
+        &self.params
+    }
+    pub fn frame(&self) -> u32 {
+        self.frame
+    }
+    pub fn instance_count(&self) -> usize {
+        self.inst.len()
+    }
+    pub fn object(&self, instance: usize) -> &Arc<SurfelObject> {
+        &self.inst[instance].obj
+    }
+
+    /// Sizes the per-ray cache (LazyCache): slots `0..n` (e.g. one per pixel). Clears it.
+    pub fn set_cache_slots(&mut self, n: usize) {
+        self.cache = (0..n).map(|_| AtomicU64::new(NO_CACHE)).collect();
+    }
+
+    /// Starts a frame: `nodes[b]` are the deformed simulation-node positions of body b.
+    pub fn begin_frame(&mut self, nodes: &[Vec<Vec3>]) -> Result<(), DeformError> {
+        if nodes.len() != self.inst.len() {
+            return Err(DeformError::FrameMismatch(format!("{} bodies in the frame, {} instances", nodes.len(), self.inst.len())));
+        }
+        let t0 = Instant::now();
+        let fields: Vec<DeformField> = self
+            .inst
+            .par_iter()
+            .zip(nodes.par_iter())
+            .map(|(i, x)| DeformField::compute(&i.obj.nodes, x, self.params.factor_rigid))
+            .collect::<Result<_, _>>()?;
+        self.frame = self.frame.wrapping_add(1).max(1);
+        let frame = self.frame;
+        for (i, f) in self.inst.iter_mut().zip(fields) {
+            i.field = f;
+        }
+        if self.mode == UpdateMode::Naive {
+            for i in self.inst.iter_mut() {
+                let obj = &i.obj;
+                let def: Vec<DeformedSurfel> = (0..obj.surfel_count()).into_par_iter().map(|s| deform_surfel(obj, &i.field, s)).collect();
+                def.par_iter().enumerate().for_each(|(s, d)| store_surfel(&i.surf, s, d, frame));
+                let pts: Vec<Vec3> = def.iter().map(|d| d.p).collect();
+                let ext: Vec<f32> = def.iter().map(|d| d.extent()).collect();
+                i.naive = Some(Topology::build(&pts, &ext));
+            }
+        } else {
+            for i in self.inst.iter_mut() {
+                i.naive = None;
+            }
+        }
+        self.update_seconds = t0.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    // -- lazy state ------------------------------------------------------------------------
+
+    #[inline]
+    fn surfel(&self, ii: &Instance, s: usize) -> DeformedSurfel {
+        if ii.surf.stamp[s].load(Acquire) == self.frame {
+            let d = &ii.surf.data[s * SURF_F..s * SURF_F + SURF_F];
+            let g = |k: usize| f32::from_bits(d[k].load(Relaxed));
+            DeformedSurfel { p: Vec3::new(g(0), g(1), g(2)), u: Vec3::new(g(3), g(4), g(5)), v: Vec3::new(g(6), g(7), g(8)), stretch: g(9) }
+        } else {
+            let d = deform_surfel(&ii.obj, &ii.field, s);
+            store_surfel(&ii.surf, s, &d, self.frame);
+            d
+        }
+    }
+
+    #[inline]
+    fn topo<'a>(&self, ii: &'a Instance) -> &'a Topology {
+        ii.naive.as_ref().unwrap_or(&ii.obj.tree.topo)
+    }
+
+    #[inline]
+    fn current(&self, ii: &Instance, n: usize) -> bool {
+        ii.naive.is_some() || ii.nodes.slot[n].stamp.load(Relaxed) == self.frame
+    }
+
+    /// The sphere of node n in this frame (updating it lazily: Eq. 3–4, 9 for inner nodes,
+    /// the deformed surfel (Eq. 1) for leaves).
+    #[inline]
+    fn sphere(&self, ii: &Instance, n: usize) -> (Vec3, f32) {
+        if let Some(t) = &ii.naive {
+            return (t.center(n), t.r[n]);
+        }
+        let st = &ii.nodes;
+        if st.slot[n].stamp.load(Acquire) == self.frame {
+            return st.load(n);
+        }
+        let tree = &ii.obj.tree;
+        let (c, r) = if tree.topo.right[n] == LEAF {
+            leaf_sphere(&self.surfel(ii, tree.topo.surfel[n] as usize))
+        } else {
+            tree.update_eq9(n, &ii.field, &ii.obj.nodes.rest, self.params.recentred_bound)
+        };
+        st.store(n, c, r, self.frame);
+        (c, r)
+    }
+
+    /// Eq. 11, evaluated at every descent through a node once both children are current
+    /// ("if a node is already visited before, update the radius using Equation 11"), so
+    /// tightening propagates upwards as the children tighten. The atomic is only written
+    /// when the bound improves.
+    #[inline]
+    fn tighten(&self, ii: &Instance, n: usize, c: Vec3, s1: (Vec3, f32), s2: (Vec3, f32)) {
+        if ii.naive.is_some() || !self.params.eq11 {
+            return;
+        }
+        let rr = child_bound(c, s1.0, s1.1, s2.0, s2.1);
+        let slot = &ii.nodes.slot[n];
+        let cur = f32::from_bits(slot.r.load(Relaxed));
+        if rr < cur && rr > 0.0 {
+            slot.r.fetch_min(rr.to_bits(), Relaxed);
+            if slot.tight.load(Relaxed) != self.frame {
+                slot.tight.store(self.frame, Relaxed);
+            }
+        }
+    }
+
+    // -- leaves ----------------------------------------------------------------------------
+
+    /// Ellipse hit, MLS iteration and clipping at leaf `n` of instance `k`.
+    fn leaf(&self, k: usize, n: usize, ray: &Ray, dc: &mut DeformCounters, ctr: &mut Counters) -> Option<SurfelHit> {
+        let ii = &self.inst[k];
+        let obj = &ii.obj;
+        let s = self.topo(ii).surfel[n] as usize;
+        let ds = self.surfel(ii, s);
+        dc.leaf_tests += 1;
+        ctr.inc(Counter::surfel_tests);
+        // Ellipse and MLS run over the ray's whole interval, not [tnear, best t]: an
+        // iteration may pass beyond the current best and still converge in front of it, and
+        // the result must not depend on the order in which leaves are visited. `tfar` only
+        // culls the final hit (in `Best::offer`).
+        let (t0, x0) = ellipse_hit(ray.org, ray.dir, ds.p, ds.u, ds.v, ray.tnear, ray.tfar)?;
+        let (sc, sr) = leaf_sphere(&ds);
+        let mut nb = [(Vec3::ZERO, Vec3::ZERO); 32];
+        let nk = obj.nk.min(32);
+        for (q, slot) in obj.nbr[s * obj.nk..s * obj.nk + nk].iter().zip(nb.iter_mut()) {
+            let dq = self.surfel(ii, *q as usize);
+            *slot = (dq.p, dq.normal());
+        }
+        let h = obj.h[s] * ds.stretch.clamp(1.0, self.params.max_support_stretch);
+        dc.mls_runs += 1;
+        match mls_intersect(ray.org, ray.dir, t0, x0, &nb[..nk], h, sc, sr, ray.tnear, ray.tfar, &self.params.mls) {
+            MlsOutcome::Rejected { iters } => {
+                dc.mls_iterations += iters as u64;
+                dc.mls_rejected += 1;
+                None
+            }
+            MlsOutcome::Hit { t, p, n: nrm, iters } => {
+                dc.mls_iterations += iters as u64;
+                dc.mls_hits += 1;
+                let c = obj.coll[s];
+                for slot in 0..obj.clip_partners[c as usize].len() {
+                    let [a, b] = obj.clip_pair(s, slot);
+                    let (da, db) = (self.surfel(ii, a as usize), self.surfel(ii, b as usize));
+                    if clipped_by(p, da.p, da.normal(), db.p, db.normal()) {
+                        dc.clipped += 1;
+                        return None;
+                    }
+                }
+                let node = if ii.naive.is_some() { u32::MAX } else { n as u32 };
+                Some(SurfelHit { t, p, n: nrm, instance: k as u32, surfel: s as u32, collection: c, node, iterations: iters })
+            }
+        }
+    }
+
+    // -- closest hit -----------------------------------------------------------------------
+
+    /// Closest hit; `slot` selects the per-ray cache entry (LazyCache; ignored otherwise).
+    pub fn intersect(&self, ray: &Ray, slot: Option<u32>, ctr: &mut Counters) -> Option<SurfelHit> {
+        self.intersect_ex(ray, slot, ctr, &mut DeformCounters::default())
+    }
+
+    /// [`intersect`](Self::intersect) with the tracer's own counters.
+    pub fn intersect_ex(&self, ray: &Ray, slot: Option<u32>, ctr: &mut Counters, dc: &mut DeformCounters) -> Option<SurfelHit> {
+        if !ray.is_valid() || self.frame == 0 {
+            return None;
+        }
+        let mut best = Best { t: ray.tfar, hit: None };
+        let slot = if self.mode == UpdateMode::LazyCache { slot.filter(|s| (*s as usize) < self.cache.len()) } else { None };
+        let mut skip = (u32::MAX, u32::MAX);
+        if let Some(sl) = slot {
+            let v = self.cache[sl as usize].load(Relaxed);
+            if v != NO_CACHE {
+                let (k, n) = ((v >> 32) as usize, (v & 0xffff_ffff) as usize);
+                if k < self.inst.len() && n < self.inst[k].obj.tree.len() {
+                    dc.cache_lookups += 1;
+                    skip = (k as u32, n as u32);
+                    let (c, r) = self.sphere(&self.inst[k], n);
+                    dc.sphere_tests += 1;
+                    ctr.inc(Counter::node_tests);
+                    if let Some(te) = sphere_test_1(ray.org, ray.dir, c, r, ray.tnear, best.t) {
+                        self.closest_in(k, ray, n as u32, te, &mut best, u32::MAX, dc, ctr);
+                        if best.hit.is_some() {
+                            dc.cache_hits += 1;
+                        }
+                    }
+                }
+            }
+        }
+        let roots = self.root_hits(ray, best.t, dc, ctr);
+        for (te, k) in roots {
+            if te > best.t {
+                continue;
+            }
+            let sk = if skip.0 == k as u32 { skip.1 } else { u32::MAX };
+            self.closest_in(k, ray, 0, te, &mut best, sk, dc, ctr);
+        }
+        if let Some(sl) = slot {
+            let v = match best.hit {
+                Some(h) => {
+                    let topo = &self.inst[h.instance as usize].obj.tree.topo;
+                    let mut n = h.node;
+                    for _ in 0..self.params.cache_up {
+                        match topo.parent[n as usize] {
+                            u32::MAX => break,
+                            p => n = p,
+                        }
+                    }
+                    ((h.instance as u64) << 32) | n as u64
+                }
+                None => NO_CACHE,
+            };
+            self.cache[sl as usize].store(v, Relaxed);
+        }
+        best.hit
+    }
+
+    /// Root spheres of all instances, 8 per f32x8 step: (entry, instance) of those hit,
+    /// nearest first.
+    fn root_hits(&self, ray: &Ray, tfar: f32, dc: &mut DeformCounters, ctr: &mut Counters) -> Vec<(f32, usize)> {
+        let mut out = Vec::new();
+        for base in (0..self.inst.len()).step_by(8) {
+            let (mut cx, mut cy, mut cz, mut r) = ([0f32; 8], [0f32; 8], [0f32; 8], [-1f32; 8]);
+            let m = (self.inst.len() - base).min(8);
+            for j in 0..m {
+                let (c, rr) = self.sphere(&self.inst[base + j], 0);
+                cx[j] = c.x;
+                cy[j] = c.y;
+                cz[j] = c.z;
+                r[j] = rr;
+            }
+            let (mask, entry) = sphere_test_spheres(ray.org, ray.dir, &cx, &cy, &cz, &r, ray.tnear, tfar);
+            dc.sphere_tests += m as u64;
+            ctr.add(Counter::node_tests, m as u64);
+            for j in 0..m {
+                if mask & (1 << j) != 0 && r[j] >= 0.0 {
+                    out.push((entry[j], base + j));
+                }
+            }
+        }
+        out.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        out
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    /// Front-to-back traversal of the subtree of `start` (already hit with entry `entry`);
+    /// the subtree of `skip` (already searched: the cached node) is left out.
+    fn closest_in(
+        &self,
+        k: usize,
+        ray: &Ray,
+        start: u32,
+        entry: f32,
+        best: &mut Best,
+        skip: u32,
+        dc: &mut DeformCounters,
+        ctr: &mut Counters,
+    ) {
+        let ii = &self.inst[k];
+        let topo = self.topo(ii);
+        let mut stack: Vec<(u32, f32)> = Vec::with_capacity(64);
+        stack.push((start, entry));
+        let (o, d) = (ray.org, ray.dir);
+        while let Some((n, te)) = stack.pop() {
+            if te > best.t {
+                continue;
+            }
+            if n == skip {
+                continue;
+            }
+            let n = n as usize;
+            if topo.right[n] == LEAF {
+                if let Some(h) = self.leaf(k, n, ray, dc, ctr) {
+                    best.offer(h);
+                }
+                continue;
+            }
+            let (l, r) = (n + 1, topo.right[n] as usize);
+            let s1 = self.sphere(ii, l);
+            let s2 = self.sphere(ii, r);
+            if ii.naive.is_none() && self.params.eq11 {
+                let (c, _) = self.sphere(ii, n);
+                self.tighten(ii, n, c, s1, s2);
+            }
+            dc.sphere_tests += 2;
+            ctr.add(Counter::node_tests, 2);
+            let e1 = sphere_test_1(o, d, s1.0, s1.1, ray.tnear, best.t);
+            let e2 = sphere_test_1(o, d, s2.0, s2.1, ray.tnear, best.t);
+            match (e1, e2) {
+                (Some(a), Some(b)) => {
+                    if a <= b || !self.params.ordered {
+                        stack.push((r as u32, b));
+                        stack.push((l as u32, a));
+                    } else {
+                        stack.push((l as u32, a));
+                        stack.push((r as u32, b));
+                    }
+                }
+                (Some(a), None) => stack.push((l as u32, a)),
+                (None, Some(b)) => stack.push((r as u32, b)),
+                (None, None) => {}
+            }
+        }
+    }
+
+    // -- any hit ---------------------------------------------------------------------------
+
+    /// Any accepted hit in [tnear, tfar]?
+    pub fn occluded(&self, ray: &Ray, ctr: &mut Counters) -> bool {
+        self.occluded_ex(ray, ctr, &mut DeformCounters::default())
+    }
+
+    pub fn occluded_ex(&self, ray: &Ray, ctr: &mut Counters, dc: &mut DeformCounters) -> bool {
+        if !ray.is_valid() || self.frame == 0 {
+            return false;
+        }
+        let roots = self.root_hits(ray, ray.tfar, dc, ctr);
+        let mut stack: Vec<u32> = Vec::with_capacity(64);
+        for (_, k) in roots {
+            let ii = &self.inst[k];
+            let topo = self.topo(ii);
+            stack.clear();
+            // The root was tested: start from its children (or the root itself if a leaf).
+            if topo.right[0] == LEAF {
+                if self.leaf(k, 0, ray, dc, ctr).is_some() {
+                    return true;
+                }
+                continue;
+            }
+            let push_children = |stack: &mut Vec<u32>, n: usize| {
+                let (l, r) = (n + 1, topo.right[n] as usize);
+                let first_l = if self.params.shadow_updated_first && ii.naive.is_none() {
+                    let (cl, cr) = (self.current(ii, l), self.current(ii, r));
+                    cl || !cr
+                } else {
+                    true
+                };
+                if first_l {
+                    stack.push(r as u32);
+                    stack.push(l as u32);
+                } else {
+                    stack.push(l as u32);
+                    stack.push(r as u32);
+                }
+            };
+            push_children(&mut stack, 0);
+            while let Some(n) = stack.pop() {
+                let n = n as usize;
+                let (c, r) = self.sphere(ii, n);
+                dc.sphere_tests += 1;
+                ctr.inc(Counter::node_tests);
+                if sphere_test_1(ray.org, ray.dir, c, r, ray.tnear, ray.tfar).is_none() {
+                    continue;
+                }
+                if topo.right[n] == LEAF {
+                    if self.leaf(k, n, ray, dc, ctr).is_some() {
+                        return true;
+                    }
+                } else {
+                    push_children(&mut stack, n);
+                }
+            }
+        }
+        false
+    }
+
+    /// Updates every node of the lazy hierarchies (Eq. 9 in parallel, then Eq. 11 bottom-up)
+    /// and deforms every surfel: a full refit. For checks, statistics and refit comparisons;
+    /// a no-op for naive trees (rebuilt in `begin_frame`).
+    pub fn update_all(&self) {
+        for ii in &self.inst {
+            if ii.naive.is_some() {
+                continue;
+            }
+            (0..ii.obj.surfel_count()).into_par_iter().for_each(|s| {
+                self.surfel(ii, s);
+            });
+            let topo = &ii.obj.tree.topo;
+            (0..topo.len()).into_par_iter().for_each(|n| {
+                if topo.right[n] != LEAF {
+                    self.sphere(ii, n);
+                }
+            });
+            if self.params.eq11 {
+                for n in (0..topo.len()).rev() {
+                    if topo.right[n] != LEAF {
+                        let s1 = self.sphere(ii, n + 1);
+                        let s2 = self.sphere(ii, topo.right[n] as usize);
+                        let (c, _) = self.sphere(ii, n);
+                        self.tighten(ii, n, c, s1, s2);
+                    }
+                }
+            }
+        }
+    }
+
+    // -- statistics and checks -------------------------------------------------------------
+
+    /// Update statistics of the current frame (count of stamped nodes and surfels).
+    pub fn frame_stats(&self) -> FrameStats {
+        let mut fs =
+            FrameStats { frame: self.frame, mode: self.mode.name().into(), update_seconds: self.update_seconds, ..Default::default() };
+        for ii in &self.inst {
+            let topo = &ii.obj.tree.topo;
+            let inner = topo.right.iter().filter(|r| **r != LEAF).count() as u64;
+            fs.inner_nodes_total += inner;
+            fs.surfels_total += ii.obj.surfel_count() as u64;
+            fs.surfels_deformed += ii.surf.stamp.iter().filter(|s| s.load(Relaxed) == self.frame).count() as u64;
+            if ii.naive.is_some() {
+                fs.inner_nodes_updated += inner;
+            } else {
+                fs.inner_nodes_updated +=
+                    (0..topo.len()).filter(|&n| topo.right[n] != LEAF && ii.nodes.slot[n].stamp.load(Relaxed) == self.frame).count() as u64;
+                fs.nodes_tightened += ii.nodes.slot.iter().filter(|s| s.tight.load(Relaxed) == self.frame).count() as u64;
+            }
+        }
+        fs
+    }
+
+    /// The deformed state of surfel `s` of instance `k` in this frame (pure; does not touch
+    /// the lazy state). For previews and checks.
+    pub fn deformed_surfel(&self, k: usize, s: usize) -> DeformedSurfel {
+        deform_surfel(&self.inst[k].obj, &self.inst[k].field, s)
+    }
+
+    /// Inner nodes that are current this frame, as (instance, node, level).
+    fn current_inner(&self) -> Vec<(usize, usize, u8)> {
+        let mut v = Vec::new();
+        for (k, ii) in self.inst.iter().enumerate() {
+            let topo = self.topo(ii);
+            for n in 0..topo.len() {
+                if topo.right[n] != LEAF && (ii.naive.is_some() || ii.nodes.slot[n].stamp.load(Relaxed) == self.frame) {
+                    v.push((k, n, topo.level[n]));
+                }
+            }
+        }
+        v
+    }
+
+    /// The sphere a node has now (without updating).
+    fn sphere_now(&self, ii: &Instance, n: usize) -> (Vec3, f32) {
+        match &ii.naive {
+            Some(t) => (t.center(n), t.r[n]),
+            None => ii.nodes.load(n),
+        }
+    }
+
+    /// Radius ratio per level over the inner nodes updated this frame, at most
+    /// `max_per_level` nodes sampled per level (evenly by index; deterministic).
+    pub fn radius_ratios(&self, max_per_level: usize) -> Vec<LevelRatio> {
+        let cur = self.current_inner();
+        let depth = cur.iter().map(|c| c.2 as usize + 1).max().unwrap_or(0);
+        let mut out = Vec::new();
+        for lv in 0..depth {
+            let at: Vec<&(usize, usize, u8)> = cur.iter().filter(|c| c.2 as usize == lv).collect();
+            if at.is_empty() {
+                continue;
+            }
+            let step = at.len().div_ceil(max_per_level.max(1));
+            let sample: Vec<&(usize, usize, u8)> = at.iter().step_by(step).copied().collect();
+            let ratios: Vec<f64> = sample
+                .par_iter()
+                .map(|&&(k, n, _)| {
+                    let ii = &self.inst[k];
+                    let topo = self.topo(ii);
+                    let (st, ct) = (topo.start[n] as usize, topo.count[n] as usize);
+                    let def: Vec<DeformedSurfel> =
+                        topo.perm[st..st + ct].iter().map(|&s| deform_surfel(&ii.obj, &ii.field, s as usize)).collect();
+                    let pts: Vec<Vec3> = def.iter().map(|d| d.p).collect();
+                    let (c, _) = miniball(&pts);
+                    let tight = def.iter().map(|d| (d.p - c).length() + d.extent()).fold(0.0f32, f32::max);
+                    self.sphere_now(ii, n).1 as f64 / tight.max(1e-30) as f64
+                })
+                .collect();
+            out.push(LevelRatio {
+                level: lv as u32,
+                nodes_updated: at.len() as u64,
+                sampled: ratios.len() as u64,
+                mean_ratio: ratios.iter().sum::<f64>() / ratios.len() as f64,
+                max_ratio: ratios.iter().copied().fold(0.0, f64::max),
+            });
+        }
+        out
+    }
+
+    /// Checks that every current node's sphere holds the deformed ellipses of all surfels of
+    /// its subtree (and every leaf its surfel). Returns the worst violation on failure.
+    pub fn check_containment(&self) -> Result<(), String> {
+        let cur = self.current_inner();
+        let bad: Option<String> = cur
+            .par_iter()
+            .filter_map(|&(k, n, _)| {
+                let ii = &self.inst[k];
+                let topo = self.topo(ii);
+                let (c, r) = self.sphere_now(ii, n);
+                let (st, ct) = (topo.start[n] as usize, topo.count[n] as usize);
+                for &s in &topo.perm[st..st + ct] {
+                    let d = deform_surfel(&ii.obj, &ii.field, s as usize);
+                    let reach = (d.p - c).length() + d.extent();
+                    if !(reach <= r) {
+                        return Some(format!("instance {k} node {n} (level {}): surfel {s} reaches {reach}, radius {r}", topo.level[n]));
+                    }
+                }
+                None
+            })
+            .min();
+        match bad {
+            Some(b) => Err(b),
+            None => Ok(()),
+        }
+    }
+}
+
+#[inline]
+fn deform_surfel(obj: &SurfelObject, f: &DeformField, s: usize) -> DeformedSurfel {
+    let k = obj.weights.k;
+    deform_point(
+        f,
+        &obj.nodes.rest,
+        obj.pos[s],
+        obj.model.surfels.axes(s),
+        &obj.weights.idx[s * k..s * k + k],
+        &obj.weights.w[s * k..s * k + k],
+    )
+}
+
+#[inline]
+fn store_surfel(st: &SurfelState, s: usize, d: &DeformedSurfel, frame: u32) {
+    let v = [d.p.x, d.p.y, d.p.z, d.u.x, d.u.y, d.u.z, d.v.x, d.v.y, d.v.z, d.stretch];
+    for (a, x) in st.data[s * SURF_F..s * SURF_F + SURF_F].iter().zip(v) {
+        a.store(x.to_bits(), Relaxed);
+    }
+    st.stamp[s].store(frame, Release);
+}

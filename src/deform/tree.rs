@@ -1,0 +1,564 @@
+//! The bounding-sphere hierarchy (Adams et al. §4.1): build, the precomputed terms of the
+//! lazy update (Eq. 3–4, 9), and the ray–sphere kernels (scalar reference and f32x8).
+//!
+//! **Build (§4.1.1).** Top-down: each node's surfels are split at the median along the
+//! longest axis of their bounding box until one surfel per leaf remains (the paper splits
+//! "according to the plane defined by the longest axis"; the median keeps the tree balanced:
+//! ⌈log₂ n⌉+1 levels). Nodes are stored in pre-order, so node `n` with `m` surfels has its left
+//! child at `n + 1` and its right child at `n + 2·m_left`: indices depend only on the input,
+//! subtrees are built in parallel (rayon) into disjoint slices, and the result is identical
+//! for any thread count. Centres are the miniball centres of the surfel centres (Gärtner).
+//!
+//! **Deviation: spheres bound surfel discs, not only centres.** A ray that hits a surfel's
+//! ellipse must reach its leaf, so each node sphere bounds the deformed ellipses:
+//! `R = max_i ‖x_i − x_c‖ + r_i`. The lazy bound (Eq. 9) is extended accordingly: the
+//! deformed ellipse of surfel i lies within `r_i (1 + Σ_j ω̄_ij ‖K_j‖_F)` of its centre, so
+//!
+//! `R' = R + Σ_j A_j ‖û_j − u_c‖ + Σ_j B_j ‖K_j‖_F`, `A_j = max_i ω̄_ij`,
+//! `B_j = max_i ω̄_ij (‖d_ij‖ + r_i)`
+//!
+//! (the paper's B_j is `max_i ω̄_ij ‖d_ij‖`). This is still the triangle inequality of Eq. 5–9,
+//! holds for *any* centre displacement `u_c`, and is padded by a relative 1e-5 against f32
+//! rounding.
+//!
+//! **Re-centred bound (addition).** Eq. 9's gradient term scales with the distance ‖d_ij‖ to
+//! the simulation nodes, which dwarfs the radius of small nodes (measured: updated/tightest
+//! ≈ 6–14 at the levels above the leaves on `armadillo-ball`). Expanding each node's
+//! first-order field about the sphere centre instead, `v_j = û_j + K_j (x_c − x_j)` (the
+//! summand of Eq. 3, so `u_c = Σ ω̄_cj v_j` costs nothing extra), the same triangle
+//! inequality gives `R' = R + Σ_j A_j ‖v_j − u_c‖ + Σ_j B'_j ‖K_j‖_F` with
+//! `B'_j = max_i ω̄_ij (‖x_i − x_c‖ + r_i)` (precomputed, ≤ A_j R): tight for small nodes,
+//! loose for big ones (Σ_j A_j grows with the list). Both bounds are valid for the same
+//! centre, so the update takes the smaller — same cost, one more multiply-add per entry. Since every leaf ball lies in every ancestor ball, the closest accepted hit along
+//! a ray is the same whatever the radii of the inner nodes (naive, lazy, cached): culling only
+//! skips work.
+//!
+//! **Centre (Eq. 3).** `u_c = Σ_j ω̄_cj (û_j + K_j d_cj)` over the node's simulation-node list
+//! with support `h_c = max(R, 1.25·distance to the k-th nearest listed node)` (the paper uses
+//! R; listed nodes may lie outside the sphere — Figure 1, right — so the support is widened
+//! until at least k nodes carry weight).
+//!
+//! **Lists.** Leaves need no list (they use their surfel, §4.1.2), inner nodes store
+//! (node index, ω̄_c, A_j, B_j), merged bottom-up from the children (A and B are maxima over
+//! the node's surfels, so the parent's entry is the max of the children's).
+
+use super::displace::{DeformField, DeformedSurfel, NodeWeights, SimNodes};
+use super::miniball::miniball;
+use glam::Vec3;
+use rayon::prelude::*;
+use wide::f32x8;
+
+pub const LEAF: u32 = u32::MAX;
+/// Relative padding of computed radii against f32 rounding.
+pub const RADIUS_PAD: f32 = 1e-5;
+const PAR_MIN: usize = 2048;
+
+#[derive(Clone, Copy, Default, Debug)]
+struct BNode {
+    c: Vec3,
+    r: f32,
+    start: u32,
+    count: u32,
+    axis: u8,
+    level: u8,
+}
+
+/// Topology and spheres of a tree over (points, extents), pre-order (see module docs).
+#[derive(Clone, Debug, Default)]
+pub struct Topology {
+    pub cx: Vec<f32>,
+    pub cy: Vec<f32>,
+    pub cz: Vec<f32>,
+    pub r: Vec<f32>,
+    /// Right child (left = n + 1), `LEAF` for leaves.
+    pub right: Vec<u32>,
+    /// Surfel of a leaf (`u32::MAX` for inner nodes).
+    pub surfel: Vec<u32>,
+    /// Split axis (for the front-to-back child order); 0 for leaves.
+    pub axis: Vec<u8>,
+    pub level: Vec<u8>,
+    /// Parent node (`u32::MAX` for the root).
+    pub parent: Vec<u32>,
+    /// Surfels of the subtree: `perm[start .. start + count]`.
+    pub start: Vec<u32>,
+    pub count: Vec<u32>,
+    pub perm: Vec<u32>,
+}
+
+impl Topology {
+    pub fn len(&self) -> usize {
+        self.r.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.r.is_empty()
+    }
+    pub fn depth(&self) -> usize {
+        self.level.iter().copied().max().map(|l| l as usize + 1).unwrap_or(0)
+    }
+    #[inline(always)]
+    pub fn center(&self, n: usize) -> Vec3 {
+        Vec3::new(self.cx[n], self.cy[n], self.cz[n])
+    }
+
+    /// Builds the tree over surfel centres `pts` with ellipse extents `ext`.
+    pub fn build(pts: &[Vec3], ext: &[f32]) -> Topology {
+        let n = pts.len();
+        assert!(n > 0 && ext.len() == n);
+        let mut perm: Vec<u32> = (0..n as u32).collect();
+        let mut nodes = vec![BNode::default(); 2 * n - 1];
+        build_rec(&mut perm, 0, pts, ext, &mut nodes, 0);
+        let mut t = Topology {
+            cx: nodes.iter().map(|b| b.c.x).collect(),
+            cy: nodes.iter().map(|b| b.c.y).collect(),
+            cz: nodes.iter().map(|b| b.c.z).collect(),
+            r: nodes.iter().map(|b| b.r).collect(),
+            right: Vec::with_capacity(nodes.len()),
+            surfel: Vec::with_capacity(nodes.len()),
+            axis: nodes.iter().map(|b| b.axis).collect(),
+            level: nodes.iter().map(|b| b.level).collect(),
+            parent: vec![u32::MAX; nodes.len()],
+            start: nodes.iter().map(|b| b.start).collect(),
+            count: nodes.iter().map(|b| b.count).collect(),
+            perm,
+        };
+        for (i, b) in nodes.iter().enumerate() {
+            if b.count == 1 {
+                t.right.push(LEAF);
+                t.surfel.push(t.perm[b.start as usize]);
+            } else {
+                let ml = b.count / 2;
+                t.right.push(i as u32 + 2 * ml);
+                t.surfel.push(u32::MAX);
+                t.parent[i + 1] = i as u32;
+                t.parent[i + 2 * ml as usize] = i as u32;
+            }
+        }
+        t
+    }
+}
+
+fn build_rec(perm: &mut [u32], start: u32, pts: &[Vec3], ext: &[f32], out: &mut [BNode], level: u8) {
+    let m = perm.len();
+    debug_assert_eq!(out.len(), 2 * m - 1);
+    if m == 1 {
+        let i = perm[0] as usize;
+        out[0] = BNode { c: pts[i], r: ext[i] * (1.0 + RADIUS_PAD), start, count: 1, axis: 0, level };
+        return;
+    }
+    let local: Vec<Vec3> = perm.iter().map(|&i| pts[i as usize]).collect();
+    let (c, _) = miniball(&local);
+    let r = perm.iter().map(|&i| (pts[i as usize] - c).length() + ext[i as usize]).fold(0.0f32, f32::max) * (1.0 + RADIUS_PAD);
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for p in &local {
+        lo = lo.min(*p);
+        hi = hi.max(*p);
+    }
+    let e = hi - lo;
+    let axis = if e.x >= e.y && e.x >= e.z {
+        0
+    } else if e.y >= e.z {
+        1
+    } else {
+        2
+    };
+    out[0] = BNode { c, r, start, count: m as u32, axis: axis as u8, level };
+    let ml = m / 2;
+    perm.select_nth_unstable_by(ml, |&a, &b| pts[a as usize][axis].total_cmp(&pts[b as usize][axis]).then(a.cmp(&b)));
+    let (pl, pr) = perm.split_at_mut(ml);
+    let (_, rest) = out.split_at_mut(1);
+    let (ol, or) = rest.split_at_mut(2 * ml - 1);
+    let lv = level.saturating_add(1);
+    if m >= PAR_MIN {
+        rayon::join(|| build_rec(pl, start, pts, ext, ol, lv), || build_rec(pr, start + ml as u32, pts, ext, or, lv));
+    } else {
+        build_rec(pl, start, pts, ext, ol, lv);
+        build_rec(pr, start + ml as u32, pts, ext, or, lv);
+    }
+}
+
+/// The static hierarchy of an object: topology over the undeformed surfels plus the
+/// per-inner-node simulation-node lists with ω̄_c, A_j, B_j (Eq. 3, 9).
+#[derive(Clone, Debug)]
+pub struct SphereTree {
+    pub topo: Topology,
+    /// List of node n: entries `list_off[n] .. list_off[n+1]` (empty for leaves).
+    pub list_off: Vec<u32>,
+    pub list_node: Vec<u32>,
+    pub list_wc: Vec<f32>,
+    pub list_a: Vec<f32>,
+    pub list_b: Vec<f32>,
+    /// B'_j of the re-centred bound: `max_i ω̄_ij (‖x_i − x_c‖ + r_i)`.
+    pub list_bc: Vec<f32>,
+}
+
+impl SphereTree {
+    /// `k_centre`: at least this many listed nodes carry weight in the centre update.
+    pub fn build(pts: &[Vec3], radii: &[f32], nodes: &SimNodes, w: &NodeWeights, k_centre: usize) -> SphereTree {
+        let topo = Topology::build(pts, radii);
+        let nn = topo.len();
+        // Bottom-up list merge (children have larger pre-order indices than their parent).
+        let mut lists: Vec<Vec<(u32, f32, f32)>> = vec![Vec::new(); nn];
+        for n in (0..nn).rev() {
+            if topo.right[n] == LEAF {
+                let s = topo.surfel[n] as usize;
+                let mut l: Vec<(u32, f32, f32)> = (0..w.k)
+                    .map(|e| {
+                        let j = w.idx[s * w.k + e];
+                        let a = w.w[s * w.k + e];
+                        let d = (nodes.rest[j as usize] - pts[s]).length();
+                        (j, a, a * (d + radii[s]))
+                    })
+                    .collect();
+                l.sort_by_key(|x| x.0);
+                lists[n] = l;
+            } else {
+                let (a, b) = (std::mem::take(&mut lists[n + 1]), std::mem::take(&mut lists[topo.right[n] as usize]));
+                let mut m = Vec::with_capacity(a.len() + b.len());
+                let (mut i, mut j) = (0, 0);
+                while i < a.len() || j < b.len() {
+                    if j >= b.len() || (i < a.len() && a[i].0 < b[j].0) {
+                        m.push(a[i]);
+                        i += 1;
+                    } else if i >= a.len() || b[j].0 < a[i].0 {
+                        m.push(b[j]);
+                        j += 1;
+                    } else {
+                        m.push((a[i].0, a[i].1.max(b[j].1), a[i].2.max(b[j].2)));
+                        i += 1;
+                        j += 1;
+                    }
+                }
+                // Keep the children's lists for the flattening pass below (leaves only need
+                // nothing, inner children need theirs): restore them.
+                lists[n + 1] = a;
+                lists[topo.right[n] as usize] = b;
+                lists[n] = m;
+            }
+        }
+        // Centre weights and B'_j, in parallel per node (pure per node).
+        let nsim = nodes.len();
+        let wc: Vec<(Vec<f32>, Vec<f32>)> = (0..nn)
+            .into_par_iter()
+            .map_init(
+                || vec![0f32; nsim],
+                |scratch, n| {
+                    if topo.right[n] == LEAF {
+                        return (Vec::new(), Vec::new());
+                    }
+                    let xc = topo.center(n);
+                    let (st, ct) = (topo.start[n] as usize, topo.count[n] as usize);
+                    for &s in &topo.perm[st..st + ct] {
+                        let s = s as usize;
+                        let reach = (pts[s] - xc).length() + radii[s];
+                        for e in 0..w.k {
+                            let j = w.idx[s * w.k + e] as usize;
+                            scratch[j] = scratch[j].max(w.w[s * w.k + e] * reach);
+                        }
+                    }
+                    let bc: Vec<f32> = lists[n].iter().map(|e| std::mem::take(&mut scratch[e.0 as usize])).collect();
+                    let d: Vec<f32> = lists[n].iter().map(|e| (nodes.rest[e.0 as usize] - xc).length()).collect();
+                    let k = k_centre.clamp(1, d.len());
+                    let mut ds = d.clone();
+                    ds.select_nth_unstable_by(k - 1, |a, b| a.total_cmp(b));
+                    let h = topo.r[n].max(1.25 * ds[k - 1]).max(1e-20);
+                    let mut wv: Vec<f32> = d.iter().map(|x| super::displace::spline_weight(x / h)).collect();
+                    let sw: f32 = wv.iter().sum();
+                    if sw > 0.0 {
+                        wv.iter_mut().for_each(|x| *x /= sw);
+                    } else {
+                        let c = wv.len() as f32;
+                        wv.iter_mut().for_each(|x| *x = 1.0 / c);
+                    }
+                    (wv, bc)
+                },
+            )
+            .collect();
+        let mut t = SphereTree {
+            topo,
+            list_off: vec![0],
+            list_node: Vec::new(),
+            list_wc: Vec::new(),
+            list_a: Vec::new(),
+            list_b: Vec::new(),
+            list_bc: Vec::new(),
+        };
+        for n in 0..nn {
+            if t.topo.right[n] != LEAF {
+                for ((e, w), bc) in lists[n].iter().zip(&wc[n].0).zip(&wc[n].1) {
+                    t.list_node.push(e.0);
+                    t.list_wc.push(*w);
+                    t.list_a.push(e.1);
+                    t.list_b.push(e.2);
+                    t.list_bc.push(*bc);
+                }
+            }
+            t.list_off.push(t.list_node.len() as u32);
+        }
+        t
+    }
+
+    pub fn len(&self) -> usize {
+        self.topo.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.topo.is_empty()
+    }
+
+    /// Eq. 3–4 and 9 for inner node `n`: (deformed centre, radius bound R'), the smaller of
+    /// the paper's bound and the re-centred one (module docs).
+    #[inline]
+    /// `recentred = false` gives the paper's bound alone (ablation).
+    pub fn update_eq9(&self, n: usize, f: &DeformField, rest: &[Vec3], recentred: bool) -> (Vec3, f32) {
+        let xc = self.topo.center(n);
+        let (s, e) = (self.list_off[n] as usize, self.list_off[n + 1] as usize);
+        // v_j: node j's first-order displacement extrapolated to the centre (Eq. 3 summand).
+        let mut vbuf = [Vec3::ZERO; 64];
+        let small = e - s <= vbuf.len();
+        let mut uc = Vec3::ZERO;
+        for i in s..e {
+            let j = self.list_node[i] as usize;
+            let v = f.u[j] + f.k[j] * (xc - rest[j]);
+            if small {
+                vbuf[i - s] = v;
+            }
+            uc += v * self.list_wc[i];
+        }
+        let (mut r_paper, mut r_centred) = (0.0f32, 0.0f32);
+        for i in s..e {
+            let j = self.list_node[i] as usize;
+            let v = if small { vbuf[i - s] } else { f.u[j] + f.k[j] * (xc - rest[j]) };
+            let (a, kf) = (self.list_a[i], f.kf[j]);
+            r_paper += a * (f.u[j] - uc).length() + self.list_b[i] * kf;
+            r_centred += a * (v - uc).length() + self.list_bc[i] * kf;
+        }
+        let r = self.topo.r[n] + if recentred { r_paper.min(r_centred) } else { r_paper };
+        let c = f.rot * xc + f.trans + uc;
+        (c, r * (1.0 + RADIUS_PAD) + RADIUS_PAD * c.abs().max_element())
+    }
+}
+
+/// Eq. 11: a second bound from two updated children, `max(‖c − c1‖ + r1, ‖c − c2‖ + r2)`.
+#[inline]
+pub fn child_bound(c: Vec3, c1: Vec3, r1: f32, c2: Vec3, r2: f32) -> f32 {
+    ((c - c1).length() + r1).max((c - c2).length() + r2) * (1.0 + RADIUS_PAD)
+}
+
+/// Leaf sphere of a deformed surfel: its centre and the ellipse extent.
+#[inline]
+pub fn leaf_sphere(s: &DeformedSurfel) -> (Vec3, f32) {
+    (s.p, s.extent() * (1.0 + RADIUS_PAD))
+}
+
+// ---------------------------------------------------------------------------------------
+// Ray–sphere kernels. Rays are (o, d) with d not necessarily unit; t in multiples of d.
+// The discriminant uses the cross-product form a·r² − ‖(c−o)×d‖² (no cancellation for far
+// spheres). A sphere counts as hit if [t0, t1] overlaps [tnear, tfar]; the returned entry is
+// max(t0, tnear). The tests are conservative: the discriminant is widened by
+// CONS_TOL·a·‖c−o‖² and [t0, t1] by CONS_TOL·(|b| + √disc)/a, bounds on their rounding, so a
+// ray that truly meets a sphere is never reported as a miss (tiny leaf spheres far from the
+// origin would otherwise flicker, and the ancestors of a hit leaf must all report a hit for
+// the modes to agree). The x8 kernels perform the same operations in the same order, so they
+// return bit-identical results to the scalar reference.
+// ---------------------------------------------------------------------------------------
+
+/// Relative tolerance of the conservative sphere tests (16 ulp).
+pub const CONS_TOL: f32 = 16.0 * f32::EPSILON;
+
+/// Scalar reference: entry distance into the sphere, or None.
+#[inline]
+pub fn sphere_test_1(o: Vec3, d: Vec3, c: Vec3, r: f32, tnear: f32, tfar: f32) -> Option<f32> {
+    let oc = c - o;
+    let a = d.x * d.x + d.y * d.y + d.z * d.z;
+    let b = oc.x * d.x + oc.y * d.y + oc.z * d.z;
+    let cx = oc.y * d.z - oc.z * d.y;
+    let cy = oc.z * d.x - oc.x * d.z;
+    let cz = oc.x * d.y - oc.y * d.x;
+    let oo = oc.x * oc.x + oc.y * oc.y + oc.z * oc.z;
+    let disc = a * (r * r) - (cx * cx + cy * cy + cz * cz) + CONS_TOL * (a * oo);
+    let sq = disc.max(0.0).sqrt();
+    let inv = 1.0 / a;
+    let slack = CONS_TOL * (b.abs() + sq);
+    let t0 = (b - sq - slack) * inv;
+    let t1 = (b + sq + slack) * inv;
+    let hit = disc >= 0.0 && t1 >= tnear && t0 <= tfar;
+    if hit {
+        Some(t0.max(tnear))
+    } else {
+        None
+    }
+}
+
+/// One ray against 8 spheres (e.g. the roots of 8 objects, or 8 nodes): bit i of the mask is
+/// set if sphere i is hit; `entry[i]` as in [`sphere_test_1`].
+#[inline]
+pub fn sphere_test_x8_spheres(
+    o: Vec3,
+    d: Vec3,
+    cx: &[f32; 8],
+    cy: &[f32; 8],
+    cz: &[f32; 8],
+    r: &[f32; 8],
+    tnear: f32,
+    tfar: f32,
+) -> (u8, [f32; 8]) {
+    let (ox, oy, oz) = (f32x8::splat(o.x), f32x8::splat(o.y), f32x8::splat(o.z));
+    let (dx, dy, dz) = (f32x8::splat(d.x), f32x8::splat(d.y), f32x8::splat(d.z));
+    kernel_x8(
+        [ox, oy, oz],
+        [dx, dy, dz],
+        [f32x8::from(*cx), f32x8::from(*cy), f32x8::from(*cz)],
+        f32x8::from(*r),
+        f32x8::splat(tnear),
+        f32x8::splat(tfar),
+    )
+}
+
+/// 8 rays (SoA) against one sphere.
+#[inline]
+pub fn sphere_test_x8_rays(o: &[[f32; 8]; 3], d: &[[f32; 8]; 3], c: Vec3, r: f32, tnear: &[f32; 8], tfar: &[f32; 8]) -> (u8, [f32; 8]) {
+    kernel_x8(
+        [f32x8::from(o[0]), f32x8::from(o[1]), f32x8::from(o[2])],
+        [f32x8::from(d[0]), f32x8::from(d[1]), f32x8::from(d[2])],
+        [f32x8::splat(c.x), f32x8::splat(c.y), f32x8::splat(c.z)],
+        f32x8::splat(r),
+        f32x8::from(*tnear),
+        f32x8::from(*tfar),
+    )
+}
+
+#[inline(always)]
+fn kernel_x8(o: [f32x8; 3], d: [f32x8; 3], c: [f32x8; 3], r: f32x8, tnear: f32x8, tfar: f32x8) -> (u8, [f32; 8]) {
+    let (ocx, ocy, ocz) = (c[0] - o[0], c[1] - o[1], c[2] - o[2]);
+    let a = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    let b = ocx * d[0] + ocy * d[1] + ocz * d[2];
+    let cx = ocy * d[2] - ocz * d[1];
+    let cy = ocz * d[0] - ocx * d[2];
+    let cz = ocx * d[1] - ocy * d[0];
+    let oo = ocx * ocx + ocy * ocy + ocz * ocz;
+    let tol = f32x8::splat(CONS_TOL);
+    let disc = a * (r * r) - (cx * cx + cy * cy + cz * cz) + tol * (a * oo);
+    let zero = f32x8::splat(0.0);
+    let sq = disc.max(zero).sqrt();
+    let inv = f32x8::splat(1.0) / a;
+    let slack = tol * (b.abs() + sq);
+    let t0 = (b - sq - slack) * inv;
+    let t1 = (b + sq + slack) * inv;
+    let hit = disc.simd_ge(zero) & t1.simd_ge(tnear) & t0.simd_le(tfar);
+    (hit.to_bitmask() as u8, t0.max(tnear).to_array())
+}
+
+/// Chooses the scalar reference when the `scalar` feature is on.
+#[inline]
+pub fn sphere_test_spheres(
+    o: Vec3,
+    d: Vec3,
+    cx: &[f32; 8],
+    cy: &[f32; 8],
+    cz: &[f32; 8],
+    r: &[f32; 8],
+    tnear: f32,
+    tfar: f32,
+) -> (u8, [f32; 8]) {
+    if cfg!(feature = "scalar") {
+        let mut m = 0u8;
+        let mut e = [0.0f32; 8];
+        for i in 0..8 {
+            let (oc, d0) = (Vec3::new(cx[i], cy[i], cz[i]), d);
+            // Same entry value as the x8 kernel (t0.max(tnear)) for hits.
+            if let Some(t) = sphere_test_1(o, d0, oc, r[i], tnear, tfar) {
+                m |= 1 << i;
+                e[i] = t;
+            } else {
+                e[i] = entry_1(o, d0, oc, r[i], tnear);
+            }
+        }
+        (m, e)
+    } else {
+        sphere_test_x8_spheres(o, d, cx, cy, cz, r, tnear, tfar)
+    }
+}
+
+/// max(t0, tnear) even for misses (for bit-exact comparisons with the x8 kernel).
+#[inline]
+pub fn entry_1(o: Vec3, d: Vec3, c: Vec3, r: f32, tnear: f32) -> f32 {
+    let oc = c - o;
+    let a = d.x * d.x + d.y * d.y + d.z * d.z;
+    let b = oc.x * d.x + oc.y * d.y + oc.z * d.z;
+    let cx = oc.y * d.z - oc.z * d.y;
+    let cy = oc.z * d.x - oc.x * d.z;
+    let cz = oc.x * d.y - oc.y * d.x;
+    let oo = oc.x * oc.x + oc.y * oc.y + oc.z * oc.z;
+    let disc = a * (r * r) - (cx * cx + cy * cy + cz * cz) + CONS_TOL * (a * oo);
+    let sq = disc.max(0.0).sqrt();
+    let slack = CONS_TOL * (b.abs() + sq);
+    ((b - sq - slack) * (1.0 / a)).max(tnear)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::rng::Sampler;
+
+    #[test]
+    fn x8_kernels_match_scalar() {
+        let mut s = Sampler::new(5, 6, 7);
+        let mut u = || s.next() * 4.0 - 2.0;
+        for _ in 0..2000 {
+            let o = Vec3::new(u(), u(), u());
+            let d = Vec3::new(u(), u(), u());
+            let (tn, tf) = (u().abs() * 0.1, u().abs() * 3.0);
+            let cx: [f32; 8] = std::array::from_fn(|_| u());
+            let cy: [f32; 8] = std::array::from_fn(|_| u());
+            let cz: [f32; 8] = std::array::from_fn(|_| u());
+            let r: [f32; 8] = std::array::from_fn(|_| u().abs() * 0.7);
+            let (m, e) = sphere_test_x8_spheres(o, d, &cx, &cy, &cz, &r, tn, tf);
+            for i in 0..8 {
+                let c = Vec3::new(cx[i], cy[i], cz[i]);
+                let s1 = sphere_test_1(o, d, c, r[i], tn, tf);
+                assert_eq!(s1.is_some(), m & (1 << i) != 0);
+                if let Some(t) = s1 {
+                    assert_eq!(t.to_bits(), e[i].to_bits());
+                }
+            }
+            // Rays packet against one sphere.
+            let ro: [[f32; 8]; 3] = std::array::from_fn(|_| std::array::from_fn(|_| u()));
+            let rd: [[f32; 8]; 3] = std::array::from_fn(|_| std::array::from_fn(|_| u()));
+            let tn8: [f32; 8] = std::array::from_fn(|_| u().abs() * 0.1);
+            let tf8: [f32; 8] = std::array::from_fn(|_| u().abs() * 3.0);
+            let c = Vec3::new(u(), u(), u());
+            let (m, e) = sphere_test_x8_rays(&ro, &rd, c, r[0], &tn8, &tf8);
+            for i in 0..8 {
+                let o = Vec3::new(ro[0][i], ro[1][i], ro[2][i]);
+                let d = Vec3::new(rd[0][i], rd[1][i], rd[2][i]);
+                let s1 = sphere_test_1(o, d, c, r[0], tn8[i], tf8[i]);
+                assert_eq!(s1.is_some(), m & (1 << i) != 0);
+                if let Some(t) = s1 {
+                    assert_eq!(t.to_bits(), e[i].to_bits());
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn topology_contains_and_is_preorder() {
+        let mut s = Sampler::new(1, 1, 1);
+        let pts: Vec<Vec3> = (0..3000).map(|_| Vec3::new(s.next(), s.next() * 3.0, s.next())).collect();
+        let ext = vec![0.01f32; pts.len()];
+        let t = Topology::build(&pts, &ext);
+        assert_eq!(t.len(), 2 * pts.len() - 1);
+        for n in 0..t.len() {
+            let (st, ct) = (t.start[n] as usize, t.count[n] as usize);
+            for &i in &t.perm[st..st + ct] {
+                assert!((pts[i as usize] - t.center(n)).length() + ext[i as usize] <= t.r[n]);
+            }
+            if t.right[n] != LEAF {
+                assert_eq!(t.count[n + 1] + t.count[t.right[n] as usize], t.count[n]);
+            }
+        }
+        assert!(t.depth() <= 14);
+        // Same result for a single thread.
+        let t1 = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(|| Topology::build(&pts, &ext));
+        assert_eq!(t1.r, t.r);
+        assert_eq!(t1.perm, t.perm);
+    }
+}

@@ -1,0 +1,643 @@
+//! Integration tests of the Adams et al. 2005 deform tracer (`lodtrace::deform`): containment
+//! of the lazily updated spheres, agreement of the update modes, MLS known answers, clipping,
+//! simulation stability, bad input. Small sizes: `cargo test --release --test deform`.
+//!
+//! `measure` (ignored) prints per-frame figures; see its doc comment.
+
+use glam::{Quat, Vec3};
+use lodtrace::baseline::accel::Ray;
+use lodtrace::core::rng::Sampler;
+use lodtrace::core::stats::Counters;
+use lodtrace::deform::sequences::{csg_head, nodes_inside};
+use lodtrace::deform::surfel::{rect_surfels, sphere_surfels};
+use lodtrace::deform::*;
+use lodtrace::scene::{Camera, Mesh};
+use proptest::prelude::*;
+use rayon::prelude::*;
+use std::sync::{Arc, OnceLock};
+
+fn ball(r: f32, surfels: usize, nodes: usize) -> Arc<SurfelObject> {
+    let s = sphere_surfels(Vec3::ZERO, r, surfels);
+    let (nd, _) = nodes_inside(&|p: Vec3| p.length() <= 0.9 * r, Vec3::splat(-r), Vec3::splat(r), nodes);
+    let m = vec![1.0; nd.len()];
+    SurfelObject::build(SurfelModel::single("ball", s, [1.0; 3]), nd, m, &ObjectParams::default()).unwrap()
+}
+
+fn scene1(obj: &Arc<SurfelObject>) -> DeformScene {
+    DeformScene { objects: vec![obj.clone()], instances: vec![0] }
+}
+
+/// A smooth non-rigid deformation with rotation: stretch, bend, twist, per-node noise.
+#[derive(Clone, Debug)]
+struct Deform {
+    axis: Vec3,
+    angle: f32,
+    trans: Vec3,
+    stretch: Vec3,
+    bend: f32,
+    twist: f32,
+    noise: f32,
+    seed: u32,
+}
+
+impl Deform {
+    fn apply(&self, rest: &[Vec3]) -> Vec<Vec3> {
+        let q = Quat::from_axis_angle(self.axis.normalize(), self.angle);
+        rest.iter()
+            .enumerate()
+            .map(|(j, x)| {
+                let mut p = *x * self.stretch;
+                p.y += self.bend * x.x * x.x;
+                let tw = Quat::from_rotation_y(self.twist * x.y);
+                p = tw * p;
+                let mut s = Sampler::new(self.seed, j as u32, 0);
+                p += Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * self.noise;
+                q * p + self.trans
+            })
+            .collect()
+    }
+}
+
+fn arb_deform() -> impl Strategy<Value = Deform> {
+    (
+        (-1.0f32..1.0, -1.0f32..1.0, 0.1f32..1.0),
+        0.0f32..std::f32::consts::TAU,
+        (-3.0f32..3.0, -3.0f32..3.0, -3.0f32..3.0),
+        (0.6f32..1.5, 0.6f32..1.5, 0.6f32..1.5),
+        -0.8f32..0.8,
+        -1.5f32..1.5,
+        0.0f32..0.15,
+        any::<u32>(),
+    )
+        .prop_map(|(a, angle, t, s, bend, twist, noise, seed)| Deform {
+            axis: Vec3::new(a.0, a.1, a.2),
+            angle,
+            trans: Vec3::new(t.0, t.1, t.2),
+            stretch: Vec3::new(s.0, s.1, s.2),
+            bend,
+            twist,
+            noise,
+            seed,
+        })
+}
+
+fn random_rays(seed: u32, n: usize, center: Vec3, dist: f32, spread: f32) -> Vec<Ray> {
+    (0..n)
+        .map(|i| {
+            let mut s = Sampler::new(seed, i as u32, 1);
+            let dir = Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5).normalize_or(Vec3::X);
+            let o = center + dir * dist;
+            let target = center + Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * spread;
+            Ray::new(o, (target - o).normalize())
+        })
+        .collect()
+}
+
+fn shared_ball() -> &'static Arc<SurfelObject> {
+    static B: OnceLock<Arc<SurfelObject>> = OnceLock::new();
+    B.get_or_init(|| ball(1.0, 1500, 60))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 40, .. ProptestConfig::default() })]
+
+    /// After every lazy update of every frame (partial updates with Eq. 11 tightening from
+    /// traversal, then a full refit), every surfel ellipse of a node lies inside its sphere.
+    #[test]
+    fn lazy_spheres_contain_their_surfels(
+        frames in prop::collection::vec(arb_deform(), 1..4),
+        rigid in any::<bool>(),
+        recentred in any::<bool>(),
+        eq11 in any::<bool>(),
+    ) {
+        let obj = shared_ball();
+        let params = TraceParams { factor_rigid: rigid, recentred_bound: recentred, eq11, ..TraceParams::default() };
+        let mut tr = DeformTracer::new(&scene1(obj), UpdateMode::LazyCache, params).unwrap();
+        tr.set_cache_slots(64);
+        let mut ctr = Counters::default();
+        for (k, d) in frames.iter().enumerate() {
+            let nodes = d.apply(&obj.nodes.rest);
+            tr.begin_frame(&[nodes]).unwrap();
+            for (i, ray) in random_rays(k as u32, 64, d.trans, 6.0, 2.0).iter().enumerate() {
+                let _ = tr.intersect(ray, Some(i as u32), &mut ctr);
+                let _ = tr.occluded(ray, &mut ctr);
+            }
+            prop_assert!(tr.check_containment().is_ok(), "{:?}", tr.check_containment());
+            tr.update_all();
+            prop_assert!(tr.check_containment().is_ok(), "{:?}", tr.check_containment());
+        }
+    }
+}
+
+fn render(tr: &DeformTracer, cam: &Camera, w: u32, h: u32, dc: &mut DeformCounters) -> Vec<Option<SurfelHit>> {
+    let f = cam.frame(w, h);
+    let mut ctr = Counters::default();
+    let mut out = Vec::with_capacity((w * h) as usize);
+    for j in 0..h {
+        for i in 0..w {
+            let ray = Ray::new(cam.eye, f.pixel_center_dir(i, j));
+            out.push(tr.intersect_ex(&ray, Some(j * w + i), &mut ctr, dc));
+        }
+    }
+    out
+}
+
+fn render_par(tr: &DeformTracer, cam: &Camera, w: u32, h: u32) -> Vec<Option<SurfelHit>> {
+    let f = cam.frame(w, h);
+    (0..w * h)
+        .into_par_iter()
+        .map(|p| {
+            let mut ctr = Counters::default();
+            tr.intersect(&Ray::new(cam.eye, f.pixel_center_dir(p % w, p / w)), Some(p), &mut ctr)
+        })
+        .collect()
+}
+
+fn same_hits(a: &[Option<SurfelHit>], b: &[Option<SurfelHit>]) -> Result<(), String> {
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        match (x, y) {
+            (None, None) => {}
+            (Some(x), Some(y)) if x.t.to_bits() == y.t.to_bits() && x.surfel == y.surfel && x.instance == y.instance && x.n == y.n => {}
+            _ => return Err(format!("pixel {i}: {x:?} vs {y:?}")),
+        }
+    }
+    Ok(())
+}
+
+/// Naive, lazy and lazy-cache render the same frames identically (bit for bit), on a
+/// multi-body scene with clipping (heads) and on many instances (elastic balls: roots tested
+/// 8 per SIMD step).
+#[test]
+fn modes_render_identically() {
+    for name in ["heads", "elastic-balls"] {
+        let opts = SequenceOptions { detail: 0.03, ..Default::default() };
+        let mut seq = Sequence::builtin(name, &opts).unwrap();
+        let rec = seq.record(12).unwrap();
+        let mut tracers: Vec<DeformTracer> =
+            UpdateMode::ALL.iter().map(|m| DeformTracer::new(&seq.scene, *m, TraceParams::default()).unwrap()).collect();
+        let (w, h) = (40, 30);
+        for t in &mut tracers {
+            t.set_cache_slots((w * h) as usize);
+        }
+        let mut any_hit = 0;
+        for (fi, frame) in rec.frames.iter().enumerate().step_by(3) {
+            let mut imgs = Vec::new();
+            for t in &mut tracers {
+                t.begin_frame(frame).unwrap();
+                imgs.push(render(t, &seq.camera, w, h, &mut DeformCounters::default()));
+            }
+            any_hit += imgs[0].iter().filter(|x| x.is_some()).count();
+            same_hits(&imgs[0], &imgs[1]).unwrap_or_else(|e| panic!("{name} frame {fi} naive vs lazy: {e}"));
+            same_hits(&imgs[0], &imgs[2]).unwrap_or_else(|e| panic!("{name} frame {fi} naive vs lazy-cache: {e}"));
+            for t in &tracers {
+                assert!(t.check_containment().is_ok(), "{:?}", t.check_containment());
+            }
+        }
+        assert!(any_hit > 100, "{name}: only {any_hit} hits");
+    }
+}
+
+/// The same image for 1 and 2 threads, and shadow rays agree across modes.
+#[test]
+fn deterministic_across_threads_and_shadow_rays_agree() {
+    let opts = SequenceOptions { detail: 0.03, ..Default::default() };
+    let mut seq = Sequence::builtin("heads", &opts).unwrap();
+    let rec = seq.record(20).unwrap();
+    let frame = &rec.frames[19];
+    let mut imgs = Vec::new();
+    for threads in [1, 2] {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let mut tr = DeformTracer::new(&seq.scene, UpdateMode::LazyCache, TraceParams::default()).unwrap();
+        tr.set_cache_slots(48 * 36);
+        tr.begin_frame(frame).unwrap();
+        imgs.push(pool.install(|| render_par(&tr, &seq.camera, 48, 36)));
+    }
+    same_hits(&imgs[0], &imgs[1]).unwrap();
+    // Shadow rays from the hits towards a light: same answers in all modes.
+    let light = Vec3::new(2.0, 4.0, 3.0);
+    let mut answers = Vec::new();
+    for m in UpdateMode::ALL {
+        let mut tr = DeformTracer::new(&seq.scene, m, TraceParams::default()).unwrap();
+        tr.begin_frame(frame).unwrap();
+        let mut ctr = Counters::default();
+        let a: Vec<bool> = imgs[0]
+            .iter()
+            .flatten()
+            .map(|h| {
+                let o = h.p + h.n * 1e-3;
+                tr.occluded(&Ray::segment(o, light - o, 1e-4, 1.0), &mut ctr)
+            })
+            .collect();
+        answers.push(a);
+    }
+    assert_eq!(answers[0], answers[1]);
+    assert_eq!(answers[0], answers[2]);
+    assert!(answers[0].iter().any(|x| *x) && answers[0].iter().any(|x| !*x));
+}
+
+/// MLS on a sampled sphere lands on the analytic sphere, before and after a rigid motion;
+/// on a sampled plane it lands on the plane. Iterations stay small.
+#[test]
+fn mls_known_answers_sphere_and_plane() {
+    let obj = ball(1.0, 4000, 80);
+    let mut tr = DeformTracer::new(&scene1(&obj), UpdateMode::Lazy, TraceParams::default()).unwrap();
+    let q = Quat::from_axis_angle(Vec3::new(0.3, 1.0, -0.2).normalize(), 1.1);
+    let t = Vec3::new(0.5, -2.0, 3.0);
+    let mut dc = DeformCounters::default();
+    let mut worst = 0.0f32;
+    for (c, nodes) in [(Vec3::ZERO, obj.nodes.rest.clone()), (t, obj.nodes.rest.iter().map(|x| q * *x + t).collect())] {
+        tr.begin_frame(&[nodes]).unwrap();
+        let mut ctr = Counters::default();
+        let mut hits = 0;
+        for ray in random_rays(3, 2000, c, 4.0, 1.2) {
+            if let Some(h) = tr.intersect_ex(&ray, None, &mut ctr, &mut dc) {
+                hits += 1;
+                let e = ((h.p - c).length() - 1.0).abs();
+                worst = worst.max(e);
+                assert!(e < 5e-3, "off the sphere by {e}");
+                assert!(h.n.dot((h.p - c).normalize()) > 0.999, "normal {:?}", h.n);
+                assert!(h.t.is_finite() && h.p.is_finite());
+            }
+        }
+        assert!(hits > 1000, "{hits} hits");
+    }
+    let mean_it = dc.mean_mls_iterations();
+    eprintln!("sphere: worst radial error {worst:.2e}, mean MLS iterations {mean_it:.2}");
+    assert!(mean_it <= 4.0, "mean MLS iterations {mean_it}");
+
+    // Plane z = 0 (a grid patch), rays from above at random angles.
+    let s = rect_surfels(Vec3::ZERO, Vec3::X, Vec3::Y, (-1.0, 1.0), (-1.0, 1.0), 0.04);
+    let (nd, _) = nodes_inside(&|_| true, Vec3::new(-1.0, -1.0, -0.2), Vec3::new(1.0, 1.0, 0.2), 40);
+    let m = vec![1.0; nd.len()];
+    let plane = SurfelObject::build(SurfelModel::single("plane", s, [1.0; 3]), nd, m, &ObjectParams::default()).unwrap();
+    let mut tr = DeformTracer::new(&scene1(&plane), UpdateMode::Lazy, TraceParams::default()).unwrap();
+    tr.begin_frame(std::slice::from_ref(&plane.nodes.rest)).unwrap();
+    let mut ctr = Counters::default();
+    let mut hits = 0;
+    for i in 0..1000u32 {
+        let mut sm = Sampler::new(9, i, 0);
+        let target = Vec3::new(sm.next() * 1.6 - 0.8, sm.next() * 1.6 - 0.8, 0.0);
+        let o = target + Vec3::new(sm.next() - 0.5, sm.next() - 0.5, 1.0) * 2.0;
+        if let Some(h) = tr.intersect(&Ray::new(o, target - o), None, &mut ctr) {
+            hits += 1;
+            assert!(h.p.z.abs() < 1e-4 && (h.p - target).length() < 1e-3, "{:?} vs {target}", h.p);
+            assert!((h.n - Vec3::Z).length() < 1e-4);
+        }
+    }
+    assert_eq!(hits, 1000, "holes in the plane");
+}
+
+/// Two planar surfaces meeting at a convex edge (solid {z < 0, x < 0}) with a clipping
+/// relation: rays from above hit up to x = 0 and miss beyond, with a transition far sharper
+/// than the surfel spacing; without the relation the surface spills over the edge.
+#[test]
+fn clipping_gives_a_sharp_edge() {
+    let sp = 0.05;
+    let top = rect_surfels(Vec3::ZERO, Vec3::X, Vec3::Y, (-1.0, 0.3), (-1.0, 1.0), sp); // normal +z
+    let side = rect_surfels(Vec3::ZERO, Vec3::Y, Vec3::Z, (-1.0, 1.0), (-1.0, 0.3), sp); // normal +x
+    assert!(side.normal(0).dot(Vec3::X) > 0.99);
+    let (nd, _) = nodes_inside(&|_| true, Vec3::splat(-1.0), Vec3::splat(0.3), 60);
+    let m = vec![1.0; nd.len()];
+    let build = |clip: bool| {
+        let mut model = SurfelModel::default();
+        model.add_collection("top", &top, [1.0; 3]);
+        model.add_collection("side", &side, [1.0; 3]);
+        if clip {
+            model.clip.push((0, 1));
+        }
+        SurfelObject::build(model, nd.clone(), m.clone(), &ObjectParams::default()).unwrap()
+    };
+    let edge = |obj: &Arc<SurfelObject>| -> (f32, f32) {
+        let mut tr = DeformTracer::new(&scene1(obj), UpdateMode::Lazy, TraceParams::default()).unwrap();
+        tr.begin_frame(std::slice::from_ref(&obj.nodes.rest)).unwrap();
+        let mut ctr = Counters::default();
+        // Last hit and first miss along x, rays straight down, several y.
+        let (mut last_hit, mut first_miss) = (f32::NEG_INFINITY, f32::INFINITY);
+        for yi in 0..5 {
+            let y = -0.5 + 0.23 * yi as f32;
+            for i in 0..=600 {
+                let x = -0.3 + 0.001 * i as f32;
+                let hit = tr.intersect(&Ray::new(Vec3::new(x, y, 1.0), -Vec3::Z), None, &mut ctr);
+                match hit {
+                    Some(h) => {
+                        assert!(h.p.z.abs() < 1e-3);
+                        last_hit = last_hit.max(x);
+                    }
+                    None => first_miss = first_miss.min(x),
+                }
+            }
+        }
+        (last_hit, first_miss)
+    };
+    let (lh, fm) = edge(&build(true));
+    assert!(lh < 0.0015 && fm > -0.0015, "clipped edge: last hit {lh}, first miss {fm}");
+    assert!(lh - fm < 0.002, "no holes before the edge: last hit {lh}, first miss {fm}");
+    let (lh, _) = edge(&build(false));
+    assert!(lh > 0.25, "unclipped surface should extend to x ≈ 0.3: {lh}");
+}
+
+/// The simulation stays bounded: no energy gain beyond collision slack, finite positions,
+/// nothing falls through the floor (single body dropped; several bodies colliding).
+#[test]
+fn simulation_energy_bounded() {
+    // A box mesh, dropped.
+    let mut mesh = Mesh::new("box");
+    for i in 0..8 {
+        mesh.push_vertex(Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32 * 0.6, ((i >> 2) & 1) as f32 * 0.8));
+    }
+    for f in [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]] {
+        mesh.push_tri(f[0], f[1], f[2], 0);
+        mesh.push_tri(f[0], f[2], f[3], 0);
+    }
+    let opts = SequenceOptions { detail: 0.02, mesh_surfels: Some(3000), mesh_nodes: 120, ..Default::default() };
+    let mut seq = Sequence::from_mesh(&mesh, &opts).unwrap();
+    let e0 = seq.world.energy().total();
+    let mut min_y = f32::INFINITY;
+    let mut max_e = f64::NEG_INFINITY;
+    for _ in 0..90 {
+        let f = seq.step();
+        for p in f.iter().flatten() {
+            assert!(p.is_finite());
+            min_y = min_y.min(p.y);
+        }
+        max_e = max_e.max(seq.world.energy().total());
+    }
+    assert!(max_e <= e0 * 1.02 + 1e-3, "energy grew: {max_e} vs {e0}");
+    assert!(min_y > -0.05, "fell through the floor: {min_y}");
+    // Several bodies: heads in a box.
+    let mut seq = Sequence::builtin("heads", &SequenceOptions { detail: 0.02, ..Default::default() }).unwrap();
+    let e0 = seq.world.energy().total();
+    for _ in 0..90 {
+        let f = seq.step();
+        assert!(f.iter().flatten().all(|p| p.is_finite() && p.y > -0.1 && p.x.abs() < 1.6 && p.z.abs() < 1.6));
+        let e = seq.world.energy().total();
+        assert!(e <= e0 * 1.05 + 1e-3, "energy grew: {e} vs {e0}");
+    }
+    // Deterministic: replay gives the same frames.
+    let a = Sequence::builtin("elastic-balls", &SequenceOptions { detail: 0.02, ..Default::default() }).unwrap().record(10).unwrap();
+    let b = Sequence::builtin("elastic-balls", &SequenceOptions { detail: 0.02, ..Default::default() }).unwrap().record(10).unwrap();
+    assert_eq!(a, b);
+}
+
+/// Bad input gives typed errors, never a panic; wild deformations never give NaN hits.
+#[test]
+fn bad_input_is_a_typed_error() {
+    let dir = std::env::temp_dir().join(format!("lodtrace-deform-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let write = |name: &str, rows: &[[f32; 6]]| {
+        let mut t = format!(
+            "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nend_header\n",
+            rows.len()
+        );
+        for r in rows {
+            t += &format!("{} {} {} {} {} {}\n", r[0], r[1], r[2], r[3], r[4], r[5]);
+        }
+        let p = dir.join(name);
+        std::fs::write(&p, t).unwrap();
+        p
+    };
+    let good: Vec<[f32; 6]> = (0..30).map(|i| [i as f32 * 0.1, (i % 7) as f32 * 0.2, (i % 3) as f32, 0.0, 0.0, 1.0]).collect();
+    assert!(ply::load_ply(&write("good.ply", &good)).is_ok());
+    let mut nan = good.clone();
+    nan[3][0] = f32::NAN;
+    assert!(ply::load_ply(&write("nan.ply", &nan)).is_err());
+    let mut zero_n = good.clone();
+    zero_n[4][3..].copy_from_slice(&[0.0; 3]);
+    assert!(matches!(ply::load_ply(&write("zn.ply", &zero_n)), Err(DeformError::BadSurfel { index: 4, .. })));
+    let mut dup = good.clone();
+    dup[10] = dup[11];
+    assert!(matches!(ply::load_ply(&write("dup.ply", &dup)), Err(DeformError::DuplicatePoint { .. })));
+    assert!(matches!(ply::load_ply(&write("few.ply", &good[..2])), Err(DeformError::TooSmall(_))));
+    std::fs::remove_dir_all(&dir).ok();
+
+    let mut tiny = Mesh::new("tiny");
+    for p in [Vec3::ZERO, Vec3::X, Vec3::Y] {
+        tiny.push_vertex(p);
+    }
+    tiny.push_tri(0, 1, 2, 0);
+    assert!(matches!(Sequence::from_mesh(&tiny, &SequenceOptions::default()), Err(DeformError::TooSmall(_))));
+    assert!(matches!(Sequence::from_mesh(&Mesh::new("empty"), &SequenceOptions::default()), Err(DeformError::TooSmall(_))));
+    assert!(matches!(Sequence::builtin("nope", &SequenceOptions::default()), Err(DeformError::UnknownSequence(_))));
+    let missing = SequenceOptions { armadillo: "/nonexistent/armadillo.off".into(), detail: 0.02, ..Default::default() };
+    assert!(matches!(Sequence::builtin("armadillo-ball", &missing), Err(DeformError::Load(_))));
+    let mut seq = Sequence::builtin("heads", &SequenceOptions { detail: 0.02, ..Default::default() }).unwrap();
+    assert!(matches!(seq.record(0), Err(DeformError::ZeroFrames)));
+
+    let obj = shared_ball();
+    let mut tr = DeformTracer::new(&scene1(obj), UpdateMode::Lazy, TraceParams::default()).unwrap();
+    assert!(matches!(tr.begin_frame(&[]), Err(DeformError::FrameMismatch(_))));
+    assert!(matches!(tr.begin_frame(&[vec![Vec3::ZERO; 3]]), Err(DeformError::FrameMismatch(_))));
+    let mut bad = obj.nodes.rest.clone();
+    bad[0].x = f32::NAN;
+    assert!(matches!(tr.begin_frame(&[bad]), Err(DeformError::FrameMismatch(_))));
+    assert!(DeformTracer::new(&DeformScene { objects: vec![], instances: vec![0] }, UpdateMode::Lazy, TraceParams::default()).is_err());
+    // Rays before the first frame, and invalid rays: misses.
+    let mut ctr = Counters::default();
+    assert!(tr.intersect(&Ray::new(Vec3::Z * 5.0, -Vec3::Z), None, &mut ctr).is_none());
+    // A crumpled deformation (huge per-node noise): MLS may diverge; hits stay finite.
+    let crumple = Deform { axis: Vec3::Y, angle: 0.3, trans: Vec3::ZERO, stretch: Vec3::ONE, bend: 0.0, twist: 0.0, noise: 1.5, seed: 7 };
+    tr.begin_frame(&[crumple.apply(&obj.nodes.rest)]).unwrap();
+    let mut dc = DeformCounters::default();
+    for ray in random_rays(5, 3000, Vec3::ZERO, 5.0, 2.0) {
+        if let Some(h) = tr.intersect_ex(&ray, None, &mut ctr, &mut dc) {
+            assert!(h.t.is_finite() && h.p.is_finite() && h.n.is_finite() && (h.n.length() - 1.0).abs() < 1e-3);
+        }
+    }
+    let nan_ray = Ray::new(Vec3::new(f32::NAN, 0.0, 5.0), -Vec3::Z);
+    assert!(tr.intersect(&nan_ray, None, &mut ctr).is_none() && !tr.occluded(&nan_ray, &mut ctr));
+    assert!(dc.mls_runs > 0);
+}
+
+/// Three-surface head: clipped surfaces meet; no hit lies outside the solid.
+#[test]
+fn csg_head_hits_stay_on_the_solid() {
+    let (model, inside) = csg_head(1.0, 6000);
+    let (nd, _) = nodes_inside(&*inside, Vec3::splat(-1.0), Vec3::splat(1.0), 80);
+    let m = vec![1.0; nd.len()];
+    let obj = SurfelObject::build(model, nd, m, &ObjectParams::default()).unwrap();
+    let mut tr = DeformTracer::new(&scene1(&obj), UpdateMode::LazyCache, TraceParams::default()).unwrap();
+    tr.begin_frame(std::slice::from_ref(&obj.nodes.rest)).unwrap();
+    let mut ctr = Counters::default();
+    let mut dc = DeformCounters::default();
+    let mut per_coll = [0usize; 3];
+    for ray in random_rays(11, 3000, Vec3::ZERO, 4.0, 1.5) {
+        if let Some(h) = tr.intersect_ex(&ray, None, &mut ctr, &mut dc) {
+            per_coll[h.collection as usize] += 1;
+            let p = h.p;
+            // On the boundary of sphere ∩ {y ≥ −0.55} ∩ {z ≤ 0.75}, within a surfel spacing.
+            let tol = 0.03;
+            assert!(p.length() <= 1.0 + tol && p.y >= -0.55 - tol && p.z <= 0.75 + tol, "{p} outside the solid");
+        }
+    }
+    assert!(per_coll.iter().all(|c| *c > 20), "{per_coll:?}");
+    assert!(dc.clipped > 0);
+}
+
+/// Per-frame figures for one sequence (ignored by default):
+/// `DEFORM_SEQ=armadillo-ball DEFORM_DETAIL=1 DEFORM_FRAMES=30 DEFORM_W=256 DEFORM_H=192 \
+///  cargo test --release --test deform measure -- --ignored --nocapture`
+/// Ablations (default 1): DEFORM_EQ11, DEFORM_RIGID, DEFORM_ORDERED, DEFORM_RECENTRED;
+/// DEFORM_CACHE_UP (levels above the leaf), DEFORM_SHADOWS (one shadow ray per hit).
+/// DEFORM_SEQ may also be a mesh file (.off/.obj): the default drop of `Sequence::from_mesh`.
+#[test]
+#[ignore]
+fn measure() {
+    let env = |k: &str, d: &str| std::env::var(k).unwrap_or_else(|_| d.to_string());
+    let name = env("DEFORM_SEQ", "armadillo-ball");
+    let detail: f32 = env("DEFORM_DETAIL", "0.2").parse().unwrap();
+    let frames: u32 = env("DEFORM_FRAMES", "30").parse().unwrap();
+    let w: u32 = env("DEFORM_W", "256").parse().unwrap();
+    let h: u32 = env("DEFORM_H", "192").parse().unwrap();
+    let shadows = env("DEFORM_SHADOWS", "1") == "1";
+    let mut opts = SequenceOptions { detail, ..Default::default() };
+    if let Ok(p) = std::env::var("DEFORM_ARMADILLO") {
+        opts.armadillo = p.into();
+    }
+    if let Ok(n) = std::env::var("DEFORM_MESH_SURFELS") {
+        opts.mesh_surfels = Some(n.parse().unwrap());
+    }
+    let t0 = std::time::Instant::now();
+    let mut seq = if name.ends_with(".off") || name.ends_with(".obj") {
+        let mesh = lodtrace::scene::load::load_mesh(std::path::Path::new(&name), 0).unwrap();
+        Sequence::from_mesh(&mesh, &opts).unwrap()
+    } else {
+        Sequence::builtin(&name, &opts).unwrap()
+    };
+    let build = t0.elapsed().as_secs_f64();
+    let surfels: usize = seq.scene.instances.iter().map(|&o| seq.scene.objects[o as usize].surfel_count()).sum();
+    let nodes: usize = seq.scene.instances.iter().map(|&o| seq.scene.objects[o as usize].nodes.len()).sum();
+    let spheres: usize = seq.scene.objects.iter().map(|o| o.tree.len()).sum();
+    let depth = seq.scene.objects.iter().map(|o| o.tree.topo.depth()).max().unwrap();
+    println!("{name}: detail {detail}, {surfels} surfels (instances), {nodes} sim nodes, {spheres} spheres (objects), {depth} levels, precompute {build:.2}s, {} threads", rayon::current_num_threads());
+    let t1 = std::time::Instant::now();
+    let rec = seq.record(frames).unwrap();
+    println!("simulation: {frames} frames in {:.2}s", t1.elapsed().as_secs_f64());
+    let light = seq.camera.eye + Vec3::new(1.0, 3.0, 1.0);
+    let f = seq.camera.frame(w, h);
+    let mut hits_ref: Option<Vec<Option<SurfelHit>>> = None;
+    let cache_up: u32 = env("DEFORM_CACHE_UP", &TraceParams::default().cache_up.to_string()).parse().unwrap();
+    for mode in UpdateMode::ALL {
+        let flag = |k: &str| env(k, "1") == "1";
+        let params = TraceParams {
+            cache_up,
+            eq11: flag("DEFORM_EQ11"),
+            factor_rigid: flag("DEFORM_RIGID"),
+            ordered: flag("DEFORM_ORDERED"),
+            recentred_bound: flag("DEFORM_RECENTRED"),
+            ..TraceParams::default()
+        };
+        let mut tr = DeformTracer::new(&seq.scene, mode, params).unwrap();
+        tr.set_cache_slots((w * h) as usize);
+        let (mut total, mut upd) = (0.0, 0.0);
+        let mut dc_all = DeformCounters::default();
+        let mut ratios: Vec<Vec<LevelRatio>> = Vec::new();
+        let mut updated = 0u64;
+        let mut per_frame = Vec::new();
+        let mut hit_px = 0usize;
+        for (fi, fr) in rec.frames.iter().enumerate() {
+            let t = std::time::Instant::now();
+            tr.begin_frame(fr).unwrap();
+            let res: Vec<(Option<SurfelHit>, DeformCounters)> = (0..h)
+                .into_par_iter()
+                .flat_map_iter(|j| {
+                    let tr = &tr;
+                    let f = &f;
+                    (0..w).map(move |i| {
+                        let mut ctr = Counters::default();
+                        let mut dc = DeformCounters::default();
+                        let ray = Ray::new(seq.camera.eye, f.pixel_center_dir(i, j));
+                        let hit = tr.intersect_ex(&ray, Some(j * w + i), &mut ctr, &mut dc);
+                        if let (Some(hh), true) = (hit, shadows) {
+                            let o = hh.p + hh.n * 1e-3;
+                            tr.occluded_ex(&Ray::segment(o, light - o, 1e-4, 1.0), &mut ctr, &mut dc);
+                        }
+                        (hit, dc)
+                    })
+                })
+                .collect();
+            let dt = t.elapsed().as_secs_f64();
+            total += dt;
+            per_frame.push(dt);
+            let fs = tr.frame_stats();
+            upd += fs.update_seconds;
+            updated += fs.inner_nodes_updated;
+            for (_, d) in &res {
+                dc_all.merge(d);
+            }
+            if fi as u32 == frames / 2 || fi as u32 == frames - 1 {
+                ratios.push(tr.radius_ratios(32));
+            }
+            let hits: Vec<Option<SurfelHit>> = res.into_iter().map(|x| x.0).collect();
+            hit_px += hits.iter().filter(|x| x.is_some()).count();
+            if fi as u32 == frames - 1 {
+                match &hits_ref {
+                    None => hits_ref = Some(hits),
+                    Some(r) => println!("  last frame identical to naive: {}", same_hits(r, &hits).is_ok()),
+                }
+            }
+        }
+        let n = frames as f64;
+        println!(
+            "{:>10}: {:.1} ms/frame (update {:.1} ms), sphere tests {:.0}/frame, leaf tests {:.0}/frame, MLS runs {:.0}/frame, mean MLS iterations {:.2}, cache hits {}/{}, inner nodes updated {:.0}/frame",
+            mode.name(),
+            1e3 * total / n,
+            1e3 * upd / n,
+            dc_all.sphere_tests as f64 / n,
+            dc_all.leaf_tests as f64 / n,
+            dc_all.mls_runs as f64 / n,
+            dc_all.mean_mls_iterations(),
+            dc_all.cache_hits,
+            dc_all.cache_lookups,
+            updated as f64 / n
+        );
+        println!("  hit pixels/frame {:.0} of {}", hit_px as f64 / n, w * h);
+        println!("  per frame ms: {:?}", per_frame.iter().map(|x| (x * 1e3).round() as i64).collect::<Vec<_>>());
+        if mode != UpdateMode::Naive {
+            for r in &ratios {
+                let all: f64 =
+                    r.iter().map(|l| l.mean_ratio * l.sampled as f64).sum::<f64>() / r.iter().map(|l| l.sampled as f64).sum::<f64>();
+                println!(
+                    "  radius ratio (updated/tightest): mean over sampled nodes {:.2}; per level: {}",
+                    all,
+                    r.iter().map(|l| format!("{}:{:.2}", l.level, l.mean_ratio)).collect::<Vec<_>>().join(" ")
+                );
+            }
+        }
+    }
+}
+
+/// On an unchanged frame the cached node holds the closest hit for (almost) every ray, and
+/// the cache cuts the sphere tests; results equal the uncached ones.
+#[test]
+fn cache_hits_on_repeated_frames() {
+    let opts = SequenceOptions { detail: 0.03, ..Default::default() };
+    let mut seq = Sequence::builtin("heads", &opts).unwrap();
+    let rec = seq.record(10).unwrap();
+    let (w, h) = (48, 36);
+    for (cache_up, ordered) in [(0, true), (3, true), (0, false)] {
+        let params = TraceParams { cache_up, ordered, ..TraceParams::default() };
+        let mut plain = DeformTracer::new(&seq.scene, UpdateMode::Lazy, params.clone()).unwrap();
+        plain.begin_frame(&rec.frames[9]).unwrap();
+        let mut dc0 = DeformCounters::default();
+        let ref_img = render(&plain, &seq.camera, w, h, &mut dc0);
+        let mut tr = DeformTracer::new(&seq.scene, UpdateMode::LazyCache, params).unwrap();
+        tr.set_cache_slots((w * h) as usize);
+        tr.begin_frame(&rec.frames[8]).unwrap();
+        render(&tr, &seq.camera, w, h, &mut DeformCounters::default());
+        for (k, fr) in [&rec.frames[9], &rec.frames[9]].iter().enumerate() {
+            tr.begin_frame(fr).unwrap();
+            let mut dc = DeformCounters::default();
+            let img = render(&tr, &seq.camera, w, h, &mut dc);
+            same_hits(&ref_img, &img).unwrap();
+            let hits = img.iter().flatten().count() as u64;
+            eprintln!(
+                "cache_up {cache_up} ordered {ordered} frame {k}: cache hits {}/{} lookups ({hits} hit pixels), sphere tests {} vs {} uncached, leaf tests {} vs {}",
+                dc.cache_hits, dc.cache_lookups, dc.sphere_tests, dc0.sphere_tests, dc.leaf_tests, dc0.leaf_tests
+            );
+            if k == 1 {
+                assert!(dc.cache_hits as f64 >= 0.95 * dc.cache_lookups as f64, "{dc:?}");
+                assert!(dc.leaf_tests <= dc0.leaf_tests, "{dc:?} vs {dc0:?}");
+            }
+        }
+    }
+}
