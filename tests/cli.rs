@@ -211,3 +211,58 @@ fn bad_lod_options_are_one_line_exit_2() {
     ]);
     assert_eq!(code, 2, "{err}");
 }
+
+#[test]
+fn animate_writes_frames_and_per_frame_stats() {
+    let d = tmp("animate");
+    let j = d.join("a.json");
+    let (code, _, err) = lodtrace(&[
+        "animate",
+        "heads",
+        "--frames",
+        "3",
+        "--detail",
+        "0.05",
+        "--width",
+        "48",
+        "--height",
+        "36",
+        "--update",
+        "lazy-cache",
+        "--quiet",
+        "--out",
+        d.to_str().unwrap(),
+        "--stats",
+        j.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    for f in 0..3 {
+        assert!(d.join(format!("frame_{f:04}.png")).is_file());
+    }
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&j).unwrap()).unwrap();
+    assert_eq!(v["frames"], 3);
+    assert_eq!(v["per_frame"].as_array().unwrap().len(), 3);
+    let total: f64 = v["per_frame"].as_array().unwrap().iter().map(|r| r["seconds"].as_f64().unwrap()).sum();
+    assert!((total - v["render_seconds"].as_f64().unwrap()).abs() < 1e-9);
+    assert!(v["per_frame"][0]["sphere_tests"].as_u64().unwrap() > 0);
+}
+
+#[test]
+fn bad_animate_input_is_one_line_exit_2() {
+    let d = tmp("animatebad");
+    let bad_ply = d.join("bad.off");
+    std::fs::write(&bad_ply, "OFF\n3 1 0\n0 0 0\nnan 0 0\n0 1 0\n3 0 1 2\n").unwrap();
+    for args in [
+        &["animate", "heads", "--frames", "0"][..],
+        &["animate", "heads", "--update", "sometimes"],
+        &["animate", "no-such-sequence"],
+        &["animate", "heads", "--detail", "0"],
+        &["animate", "heads", "--width", "0"],
+        &["animate", bad_ply.to_str().unwrap(), "--frames", "1"],
+        &["animate", "heads", "--frames", "1", "--stats", "/nonexistent/dir/a.json"],
+    ] {
+        let (code, _, err) = lodtrace(args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+    }
+}

@@ -1,6 +1,7 @@
 //! The command line of DESIGN.md (a contract). One file per subcommand; `main.rs` is thin.
 //! Every error is printed as one line; bad input or usage exits 2, a failed check exits 1.
 
+pub mod animate;
 pub mod compare;
 pub mod render;
 pub mod scenes;
@@ -27,6 +28,8 @@ pub enum Command {
     Compare(compare::CompareArgs),
     /// Run several methods on the same scenes and print a side-by-side table.
     Bench(crate::experiment::bench::BenchArgs),
+    /// Ray trace a deforming point-sampled scene frame by frame (Adams et al.): a built-in sequence or a mesh dropped onto a floor.
+    Animate(animate::AnimateArgs),
     /// List the built-in scenes.
     Scenes,
     /// The main job: render the built-in scenes with every method, write images, tables, plots and an index page.
@@ -151,6 +154,7 @@ pub fn run(cli: Cli) -> i32 {
         Command::Verify(a) => verify::run(&a),
         Command::Compare(a) => compare::run(&a),
         Command::Bench(a) => crate::experiment::bench::run(&a).map(|_| 0),
+        Command::Animate(a) => animate::run(&a).map(|_| 0),
         Command::Scenes => scenes::run().map(|_| 0),
         Command::Demo(a) => crate::experiment::demo::run(&a).map(|_| 0),
     };

@@ -98,11 +98,80 @@ pub fn run(a: &DemoArgs) -> Result<()> {
         bench::print_table(&report);
         sections.push((job, report));
     }
-    let html = index_html(&sections);
+    let deform = deform_section(a)?;
+    let mut html = index_html(&sections);
+    html = html.replace("</body></html>", &format!("{deform}</body></html>"));
     let p = a.out.join("index.html");
     crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, html).map_err(|e| Error::io(&p, e)))?;
     eprintln!("demo: open {}", p.display());
     Ok(())
+}
+
+/// Adams et al.: every built-in sequence in the three update modes (same recorded motion),
+/// the per-frame time curves (the paper's Fig. 5), radius ratios (Fig. 3) and test counts.
+fn deform_section(a: &DemoArgs) -> Result<String> {
+    use crate::cli::animate::{animate, AnimateArgs};
+    let (w, h, frames, detail) = if a.quick { (192, 144, 8, 0.15) } else { (384, 288, 16, 0.4) };
+    let mut h_out = String::from("<h2>Adams et al.: deforming point-sampled surfaces</h2><p>Each sequence rendered with the hierarchy rebuilt every frame (naive), updated lazily, and lazily with per-ray caching; the same recorded motion. Per-frame time curves like the paper's Fig. 5.</p><table><tr><th>sequence</th><th>update</th><th>surfels</th><th>ms/frame</th><th>vs naive</th><th>sphere tests/frame</th><th>MLS iterations</th><th>root radius ratio</th><th>mean radius ratio</th></tr>");
+    for seq in crate::deform::Sequence::BUILTIN {
+        let dir = a.out.join("deform").join(seq);
+        let mut series = Vec::new();
+        let mut naive_ms = None;
+        for mode in ["naive", "lazy", "lazy-cache"] {
+            let args = AnimateArgs {
+                scene: seq.to_string(),
+                frames: Some(frames),
+                update: mode.into(),
+                width: w,
+                height: h,
+                out: (mode == "lazy-cache").then(|| dir.clone()),
+                stats: None,
+                detail,
+                no_shadows: false,
+                threads: a.threads,
+                quiet: false,
+            };
+            let st = match animate(&args) {
+                Ok(s) => s,
+                Err(e) => {
+                    eprintln!("demo: skipping {seq} ({e})");
+                    break;
+                }
+            };
+            let ms = 1e3 * st.render_seconds / st.frames.max(1) as f64;
+            let n0 = *naive_ms.get_or_insert(ms);
+            let spheres = st.per_frame.iter().map(|r| r.sphere_tests).sum::<u64>() / st.frames.max(1) as u64;
+            let mls = st.per_frame.iter().map(|r| r.mls_iterations_mean).sum::<f64>() / st.frames.max(1) as f64;
+            let root = st.radius_ratios.first().map(|r| r.mean_ratio).unwrap_or(0.0);
+            let tot: u64 = st.radius_ratios.iter().map(|r| r.sampled).sum();
+            let mean =
+                if tot > 0 { st.radius_ratios.iter().map(|r| r.mean_ratio * r.sampled as f64).sum::<f64>() / tot as f64 } else { 0.0 };
+            let _ = write!(
+                h_out,
+                "<tr><td>{seq}</td><td>{mode}</td><td>{}</td><td>{ms:.1}</td><td>{:.2}×</td><td>{spheres}</td><td>{mls:.2}</td><td>{}</td><td>{}</td></tr>",
+                st.surfels,
+                n0 / ms.max(1e-9),
+                if mode == "naive" { "1 (rebuilt)".to_string() } else { format!("{root:.2}") },
+                if mode == "naive" { "1 (rebuilt)".to_string() } else { format!("{mean:.2}") },
+            );
+            series.push((mode.to_string(), st.per_frame.iter().map(|r| (r.frame as f64, 1e3 * r.seconds)).collect::<Vec<_>>()));
+        }
+        if !series.is_empty() {
+            std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+            super::plot::line_chart(&dir.join("frame-times.png"), &format!("{seq}: time per frame"), "frame", "ms", &series)?;
+        }
+    }
+    h_out.push_str("</table>");
+    for seq in crate::deform::Sequence::BUILTIN {
+        let d = Path::new("deform").join(seq);
+        let _ = write!(
+            h_out,
+            "<figure><img src=\"{}\"><figcaption>{seq}, last frame</figcaption></figure><figure><img src=\"{}\"><figcaption>{seq}: ms per frame</figcaption></figure>",
+            d.join(format!("frame_{:04}.png", frames - 1)).display(),
+            d.join("frame-times.png").display()
+        );
+    }
+    Ok(h_out)
 }
 
 fn esc(s: &str) -> String {
