@@ -111,6 +111,13 @@ pub struct RenderOutput {
     pub threads: usize,
 }
 
+impl RenderOutput {
+    /// The output of a render that started at `start` with the process at `cpu0` CPU seconds.
+    pub fn timed(film: Film, counters: Counters, start: Instant, cpu0: f64, threads: usize) -> Self {
+        RenderOutput { film, counters, seconds: start.elapsed().as_secs_f64(), cpu_seconds: process_cpu_seconds() - cpu0, threads }
+    }
+}
+
 /// User + system CPU seconds of this process so far (Linux `/proc/self/stat`, 10 ms
 /// resolution), 0 where unavailable.
 pub fn process_cpu_seconds() -> f64 {
@@ -188,7 +195,7 @@ pub fn render(ctx: &TraceCtx, cam: &CameraFrame, opts: &RenderOpts) -> Result<Re
         Integrator::Whitted => whitted(ctx, cam, opts),
         Integrator::Distributed => distributed(ctx, cam, opts),
     });
-    Ok(RenderOutput { film, counters, seconds: start.elapsed().as_secs_f64(), cpu_seconds: process_cpu_seconds() - cpu0, threads })
+    Ok(RenderOutput::timed(film, counters, start, cpu0, threads))
 }
 
 fn scatter(film: &mut Film, results: Vec<(Vec<PixelOut>, Counters)>) -> Counters {

@@ -452,7 +452,7 @@ pub fn render(tr: &mut LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> Resul
     let start = Instant::now();
     let cpu0 = crate::baseline::render::process_cpu_seconds();
     let (film, counters, maps, p1) = pool.install(|| two_pass(tr, cam, opts));
-    Ok(LodRender { out: RenderOutput { film, counters, seconds: start.elapsed().as_secs_f64(), cpu_seconds: crate::baseline::render::process_cpu_seconds() - cpu0, threads }, maps, pass1_seconds: p1 })
+    Ok(LodRender { out: RenderOutput::timed(film, counters, start, cpu0, threads), maps, pass1_seconds: p1 })
 }
 
 /// Both passes run over image rows in parallel (rayon's work stealing balances them), each

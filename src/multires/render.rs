@@ -83,14 +83,5 @@ pub fn render(ms: &MultiresScene, tp: &TraceParams, cam: &CameraFrame, opts: &Re
         }
     }
     let finished = !abort.load(Ordering::Relaxed);
-    Ok(ConeRender {
-        out: RenderOutput {
-            film,
-            counters,
-            seconds: start.elapsed().as_secs_f64(),
-            cpu_seconds: crate::baseline::render::process_cpu_seconds() - cpu0,
-            threads,
-        },
-        finished,
-    })
+    Ok(ConeRender { out: RenderOutput::timed(film, counters, start, cpu0, threads), finished })
 }

@@ -733,7 +733,7 @@ pub fn assets_dir() -> PathBuf {
 }
 
 /// Loads an asset mesh normalised by [`normalize_mesh`], or says to run tools/setup.
-fn asset_mesh(scene: &str, file: &str, mat: u32) -> Result<Mesh> {
+pub(crate) fn asset_mesh(scene: &str, file: &str, mat: u32) -> Result<Mesh> {
     let p = assets_dir().join(file);
     if !p.is_file() {
         return Err(Error::Scene(format!("scene '{scene}' needs the mesh {} (not found): run tools/setup", p.display())));

@@ -13,9 +13,9 @@
 //! The paper gives only the pictures; sizes, materials and layout are ours. Everything is
 //! real geometry; pieces are instanced (one unique pawn, one unique tile, ...).
 
-use super::builtin::{cube_mesh, normalize_mesh};
+use super::builtin::cube_mesh;
 use super::{Camera, Light, Material, Mesh, Scene, Target};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use glam::{Affine3A, Quat, Vec3};
 
 /// A surface of revolution about +y: `profile` is (radius, height) from bottom to top,
@@ -400,16 +400,6 @@ pub fn cabinet() -> Scene {
     s
 }
 
-fn asset(scene: &str, file: &str, mat: u32) -> Result<Mesh> {
-    let p = super::builtin::assets_dir().join(file);
-    if !p.is_file() {
-        return Err(Error::Scene(format!("scene '{scene}' needs the mesh {} (not found): run tools/setup", p.display())));
-    }
-    let mut m = super::load::load_off(&p, mat)?;
-    normalize_mesh(&mut m);
-    Ok(m)
-}
-
 /// Papaioannou et al. Fig. 5: detailed models seen in curved reflectors. Needs
 /// `assets/armadillo.off`, `bunny00.off` and `cow.off` (`tools/setup`).
 pub fn reflector() -> Result<Scene> {
@@ -443,9 +433,9 @@ pub fn reflector() -> Result<Scene> {
     });
     let board = s.add_mesh(super::builtin::checkerboard(24, 24.0, 0, dark));
     s.instance(Target::Mesh(board), Affine3A::IDENTITY, None);
-    let arma = s.add_mesh(asset("reflector", "armadillo.off", 0)?);
-    let bunny = s.add_mesh(asset("reflector", "bunny00.off", 0)?);
-    let cow = s.add_mesh(asset("reflector", "cow.off", 0)?);
+    let arma = s.add_mesh(super::builtin::asset_mesh("reflector", "armadillo.off", 0)?);
+    let bunny = s.add_mesh(super::builtin::asset_mesh("reflector", "bunny00.off", 0)?);
+    let cow = s.add_mesh(super::builtin::asset_mesh("reflector", "cow.off", 0)?);
     let put = |sc: f32, rot: f32, t: Vec3| Affine3A::from_scale_rotation_translation(Vec3::splat(sc), Quat::from_rotation_y(rot), t);
     s.instance(Target::Mesh(arma), put(2.2, 3.4, Vec3::new(-2.6, 0.0, 2.6)), Some(clay));
     s.instance(Target::Mesh(bunny), put(2.0, 0.6, Vec3::new(2.8, 0.0, 2.8)), Some(jade));
