@@ -113,6 +113,8 @@ fn deform_section(a: &DemoArgs) -> Result<String> {
     use crate::cli::animate::{animate, AnimateArgs};
     let (w, h, frames, detail) = if a.quick { (192, 144, 8, 0.15) } else { (384, 288, 16, 0.4) };
     let mut h_out = String::from("<h2>Adams et al.: deforming point-sampled surfaces</h2><p>Each sequence rendered with the hierarchy rebuilt every frame (naive), updated lazily, and lazily with per-ray caching; the same recorded motion. Per-frame time curves like the paper's Fig. 5.</p><table><tr><th>sequence</th><th>update</th><th>surfels</th><th>ms/frame</th><th>vs naive</th><th>sphere tests/frame</th><th>MLS iterations</th><th>root radius ratio</th><th>mean radius ratio</th></tr>");
+    // Fig. 3: updated radius / tightest radius per tree level, after the last frame (lazy).
+    let mut ratios: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     for seq in crate::deform::Sequence::BUILTIN {
         let dir = a.out.join("deform").join(seq);
         let mut series = Vec::new();
@@ -155,6 +157,13 @@ fn deform_section(a: &DemoArgs) -> Result<String> {
                 if mode == "naive" { "1 (rebuilt)".to_string() } else { format!("{mean:.2}") },
             );
             series.push((mode.to_string(), st.per_frame.iter().map(|r| (r.frame as f64, 1e3 * r.seconds)).collect::<Vec<_>>()));
+            if mode == "lazy" {
+                let pts: Vec<(f64, f64)> =
+                    st.radius_ratios.iter().filter(|r| r.sampled > 0).map(|r| (r.level as f64, r.mean_ratio)).collect();
+                if !pts.is_empty() {
+                    ratios.push((seq.to_string(), pts));
+                }
+            }
         }
         if !series.is_empty() {
             std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
@@ -162,6 +171,18 @@ fn deform_section(a: &DemoArgs) -> Result<String> {
         }
     }
     h_out.push_str("</table>");
+    if !ratios.is_empty() {
+        let dir = a.out.join("deform");
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        super::plot::line_chart(
+            &dir.join("radius-ratio.png"),
+            "Updated / tightest sphere radius per level (lazy, last frame)",
+            "tree level (0 = root)",
+            "radius ratio",
+            &ratios,
+        )?;
+        h_out.push_str("<p><img src=\"deform/radius-ratio.png\" style=\"max-width:640px\"> (the paper's Fig. 3)</p>");
+    }
     for seq in crate::deform::Sequence::BUILTIN {
         let d = Path::new("deform").join(seq);
         let _ = write!(
