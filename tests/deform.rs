@@ -641,3 +641,30 @@ fn cache_hits_on_repeated_frames() {
         }
     }
 }
+
+/// A mesh dropped onto the floor deforms on impact but keeps its shape (an elastic body,
+/// not a puddle): after 60 frames its nodes still span most of their rest height.
+#[test]
+fn dropped_mesh_keeps_its_shape() {
+    // The bunny (tools/setup) slumped into a puddle with the first soft settings.
+    let bunny = lodtrace::scene::builtin::assets_dir().join("bunny00.off");
+    let mut m = match lodtrace::scene::load::load_mesh(&bunny, 0) {
+        Ok(m) => m,
+        Err(_) => lodtrace::scene::builtin::icosphere(3, 0),
+    };
+    lodtrace::scene::builtin::normalize_mesh(&mut m);
+    let opts = SequenceOptions { detail: 0.2, ..Default::default() };
+    let mut seq = Sequence::from_mesh(&m, &opts).unwrap();
+    let height = |f: &FrameNodes| {
+        let ys = f.iter().flatten().map(|p| p.y);
+        let (lo, hi) = ys.fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), y| (a.min(y), b.max(y)));
+        hi - lo
+    };
+    let h0 = height(&seq.current());
+    let rec = seq.record(60).unwrap();
+    let h1 = height(rec.frames.last().unwrap());
+    assert!(h1 > 0.7 * h0, "rest height {h0}, after 60 frames {h1}");
+    // It landed: the lowest node is near the floor, none below it.
+    let low = rec.frames.last().unwrap().iter().flatten().map(|p| p.y).fold(f32::INFINITY, f32::min);
+    assert!((-1e-3..0.2).contains(&low), "lowest node at {low}");
+}
