@@ -211,6 +211,44 @@ fn scatter(film: &mut Film, results: Vec<(Vec<PixelOut>, Counters)>) -> Counters
     total
 }
 
+/// Pixel-centre rays of row `j`, columns `x0..x1`, K at a time (`packet` 8: one
+/// [`Accel::intersect8`] call per K; 1: single rays), counted as primary rays and samples;
+/// `f(i, ray, hit, counters)` sees each pixel in order. Shared by the Whitted and the LOD
+/// tracer so both shoot bit-identical primary rays.
+pub(crate) fn primary_row(
+    accel: &dyn super::accel::Accel,
+    cam: &CameraFrame,
+    j: u32,
+    x0: u32,
+    x1: u32,
+    packet: u32,
+    c: &mut Counters,
+    mut f: impl FnMut(u32, &Ray, Option<&Hit>, &mut Counters),
+) {
+    let mut i0 = x0;
+    while i0 < x1 {
+        let n = (x1 - i0).min(K as u32) as usize;
+        let mut rays = [Ray::new(cam.eye, Vec3::Z); K];
+        for (l, r) in rays.iter_mut().enumerate().take(n) {
+            *r = Ray::new(cam.eye, cam.pixel_center_dir(i0 + l as u32, j));
+        }
+        let mut hits = [None; K];
+        if packet == 8 {
+            accel.intersect8(&rays, ((1u32 << n) - 1) as u8, &mut hits, c);
+        } else {
+            for l in 0..n {
+                hits[l] = accel.intersect1(&rays[l], c);
+            }
+        }
+        c.add(Counter::rays_primary, n as u64);
+        c.add(Counter::samples, n as u64);
+        for l in 0..n {
+            f(i0 + l as u32, &rays[l], hits[l].as_ref(), c);
+        }
+        i0 += n as u32;
+    }
+}
+
 /// Depth and normal of the pixel-centre ray's hit.
 fn aov_of(ctx: &TraceCtx, ray: &Ray, hit: Option<&Hit>) -> (f32, Vec3) {
     match hit {
@@ -232,35 +270,14 @@ fn whitted(ctx: &TraceCtx, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Count
             for j in t.y0..t.y1 {
                 if opts.spp == 1 {
                     // Pixel-centre rays, K at a time along the row.
-                    let mut i0 = t.x0;
-                    while i0 < t.x1 {
-                        let n = (t.x1 - i0).min(K as u32) as usize;
-                        let mut rays = [Ray::new(cam.eye, Vec3::Z); K];
-                        for l in 0..n {
-                            rays[l] = Ray::new(cam.eye, cam.pixel_center_dir(i0 + l as u32, j));
-                        }
-                        let mut hits = [None; K];
-                        let valid = ((1u32 << n) - 1) as u8;
-                        if opts.packet == 8 {
-                            ctx.accel.intersect8(&rays, valid, &mut hits, &mut c);
-                        } else {
-                            for l in 0..n {
-                                hits[l] = ctx.accel.intersect1(&rays[l], &mut c);
-                            }
-                        }
-                        c.add(Counter::rays_primary, n as u64);
-                        c.add(Counter::samples, n as u64);
-                        for l in 0..n {
-                            let color = match &hits[l] {
-                                Some(h) => ctx.shade(&rays[l], h, 0, None, &mut c),
-                                None => ctx.scene.background,
-                            };
-                            let (depth, normal) =
-                                if opts.aov { aov_of(ctx, &rays[l], hits[l].as_ref()) } else { (f32::INFINITY, Vec3::ZERO) };
-                            out.push(PixelOut { idx: (j * w + i0 + l as u32) as usize, color, depth, normal });
-                        }
-                        i0 += n as u32;
-                    }
+                    primary_row(ctx.accel, cam, j, t.x0, t.x1, opts.packet, &mut c, |i, ray, hit, c| {
+                        let color = match hit {
+                            Some(h) => ctx.shade(ray, h, 0, None, c),
+                            None => ctx.scene.background,
+                        };
+                        let (depth, normal) = if opts.aov { aov_of(ctx, ray, hit) } else { (f32::INFINITY, Vec3::ZERO) };
+                        out.push(PixelOut { idx: (j * w + i) as usize, color, depth, normal });
+                    });
                 } else {
                     for i in t.x0..t.x1 {
                         let pix = j * w + i;

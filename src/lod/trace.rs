@@ -41,8 +41,8 @@
 //!   balancing of §4 (an idle worker takes half of a busy worker's remaining range).
 
 use super::chain::{level_of, LodScenes};
-use crate::baseline::accel::{Accel, Hit, InstFilter, Ray, K};
-use crate::baseline::render::{Progress, RenderOpts, RenderOutput};
+use crate::baseline::accel::{Accel, Hit, InstFilter, Ray};
+use crate::baseline::render::{primary_row, Progress, RenderOpts, RenderOutput};
 use crate::baseline::shade::{secondary, surface_eps, TraceCtx};
 use crate::core::luminance;
 use crate::core::rng::Sampler;
@@ -484,36 +484,16 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
             let j = j as u32;
             let mut c = Counters::default();
             if spp == 1 {
-                let mut i0 = 0;
-                while i0 < w {
-                    let n = (w - i0).min(K as u32) as usize;
-                    let mut rays = [Ray::new(cam.eye, Vec3::Z); K];
-                    for (l, r) in rays.iter_mut().enumerate().take(n) {
-                        *r = Ray::new(cam.eye, cam.pixel_center_dir(i0 + l as u32, j));
+                primary_row(ctx0.accel, cam, j, 0, w, opts.packet, &mut c, |i, ray, hit, c| {
+                    let i = i as usize;
+                    cells[i] = tr.pass1_cell(*ray, hit.copied(), c);
+                    if opts.aov {
+                        (depth[i], normal[i]) = match hit {
+                            Some(hh) => (hh.t, ctx0.surface(ray, hh).ns),
+                            None => (f32::INFINITY, Vec3::ZERO),
+                        };
                     }
-                    let mut hits = [None; K];
-                    let valid = ((1u32 << n) - 1) as u8;
-                    if opts.packet == 8 {
-                        ctx0.accel.intersect8(&rays, valid, &mut hits, &mut c);
-                    } else {
-                        for l in 0..n {
-                            hits[l] = ctx0.accel.intersect1(&rays[l], &mut c);
-                        }
-                    }
-                    c.add(Counter::rays_primary, n as u64);
-                    c.add(Counter::samples, n as u64);
-                    for l in 0..n {
-                        let i = (i0 as usize) + l;
-                        cells[i] = tr.pass1_cell(rays[l], hits[l], &mut c);
-                        if opts.aov {
-                            (depth[i], normal[i]) = match &hits[l] {
-                                Some(hh) => (hh.t, ctx0.surface(&rays[l], hh).ns),
-                                None => (f32::INFINITY, Vec3::ZERO),
-                            };
-                        }
-                    }
-                    i0 += n as u32;
-                }
+                });
             } else {
                 for i in 0..w {
                     let pix = j * w + i;
