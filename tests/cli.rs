@@ -266,3 +266,30 @@ fn bad_animate_input_is_one_line_exit_2() {
         one_error_line(&err);
     }
 }
+
+/// `bench` on deforming sequences: one row per update mode, identical images, Fig. 5 and 3
+/// plots; surfel specs cannot be mixed with image methods.
+#[test]
+fn bench_deforming_sequences() {
+    let d = tmp("deformbench");
+    let m = ["naive", "lazy-cache", "refit"].map(|u| format!("surfel:update={u}:detail=0.03:frames=4")).join(",");
+    let (code, out, err) =
+        lodtrace(&["bench", "elastic-balls", "--methods", &m, "--width", "40", "--height", "30", "--quiet", "--out", d.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("Deforming sequences"), "{out}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("bench.json")).unwrap()).unwrap();
+    let rows = v["deform"].as_array().unwrap();
+    assert_eq!(rows.len(), 3);
+    for r in rows {
+        assert_eq!(r["same_image_as_first"], true, "{r}");
+        assert_eq!(r["frames"], 4);
+        assert!(r["sphere_tests_per_frame"].as_f64().unwrap() > 0.0);
+    }
+    assert!(rows[1]["cache_lookups"].as_u64().unwrap() > 0);
+    for f in ["elastic-balls-frame-times.png", "elastic-balls-sphere-tests.png", "radius-ratio.png", "bench.md"] {
+        assert!(d.join(f).is_file(), "{f}");
+    }
+    let (code, _, err) = lodtrace(&["bench", "heads", "--methods", "surfel:update=lazy,whitted:bvh", "--width", "8", "--height", "8"]);
+    assert_eq!(code, 2);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+}

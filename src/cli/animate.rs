@@ -1,4 +1,4 @@
-//! `lodtrace animate SCENE --frames N [--update naive|lazy|lazy-cache]`: ray tracing a
+//! `lodtrace animate SCENE --frames N [--update naive|lazy|lazy-cache|refit]`: ray tracing a
 //! deforming point-sampled scene (Adams et al. 2005) frame by frame.
 //!
 //! SCENE is a built-in sequence (`armadillo-ball`, `bend`, `heads`, `elastic-balls`) or a
@@ -28,7 +28,7 @@ pub struct AnimateArgs {
     pub scene: String,
     #[arg(long)]
     pub frames: Option<u32>,
-    /// Hierarchy update: rebuild every frame (naive), lazy (§4.1), lazy with per-ray caching (§4.2.2).
+    /// Hierarchy update: rebuild every frame (naive), lazy (§4.1), lazy with per-ray caching (§4.2.2), or an obvhs BVH2 refitted every frame (refit).
     #[arg(long, default_value = "lazy-cache")]
     pub update: String,
     #[arg(long, default_value_t = 512)]
@@ -87,6 +87,9 @@ pub struct AnimateStats {
     /// Updated radius / tightest radius per level after the last frame (Fig. 3).
     pub radius_ratios: Vec<crate::deform::LevelRatio>,
     pub counters: std::collections::BTreeMap<String, u64>,
+    /// The last frame rendered (for image comparisons across update modes).
+    #[serde(skip)]
+    pub last_frame: Film,
 }
 
 fn derr(e: DeformError) -> Error {
@@ -97,7 +100,7 @@ fn derr(e: DeformError) -> Error {
 }
 
 pub fn parse_mode(s: &str) -> Result<UpdateMode> {
-    s.parse::<UpdateMode>().map_err(|_| Error::Usage(format!("--update {s}: naive, lazy or lazy-cache")))
+    s.parse::<UpdateMode>().map_err(|_| Error::Usage(format!("--update {s}: naive, lazy, lazy-cache or refit")))
 }
 
 pub fn run(a: &AnimateArgs) -> Result<()> {
@@ -184,6 +187,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     let mut total = Counters::default();
     let mut render_seconds = 0.0;
     let (w, h) = (a.width as usize, a.height as usize);
+    let mut last_frame = Film::new(a.width, a.height);
     for (f, nodes) in rec.frames.iter().enumerate() {
         let t = Instant::now();
         tracer.begin_frame(nodes).map_err(derr)?;
@@ -231,6 +235,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         if let Some(d) = &a.out {
             io::write_png(&d.join(format!("frame_{f:04}.png")), &film)?;
         }
+        last_frame = film;
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -251,6 +256,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         per_frame: rows,
         radius_ratios: tracer.radius_ratios(64),
         counters: total.to_map(),
+        last_frame,
     };
     if let Some(p) = &a.stats {
         let json = serde_json::to_string_pretty(&stats).expect("stats serialise");

@@ -11,6 +11,13 @@
 //!   slot k (e.g. pixel k) in the previous frame is tested first, so its hit bounds the
 //!   traversal from the root.
 //!
+//! - `Refit` (not in the paper; the alternative a user would try today): an obvhs BVH2 (PLOC,
+//!   up to 8 surfels per leaf) built once over the undeformed surfels; every frame all
+//!   surfels are deformed and the boxes refitted bottom-up (`Bvh2::refit_all`). Leaf boxes
+//!   bound each surfel's leaf *ball* (not just its ellipse), so an MLS hit, which lies in its
+//!   leaf ball, is never culled: hits equal the other modes'. Box tests are counted as
+//!   `sphere_tests` (bounding-volume tests).
+//!
 //! Shadow rays (`occluded`) use the §4.4 optimisation: at a hit parent, a child that is
 //! already current is visited before one that would need an update; any accepted hit ends the
 //! ray. Accepted hits pass the clipping test of §4.3 against the two nearest surfels of every
@@ -40,7 +47,8 @@ use super::tree::{child_bound, leaf_sphere, sphere_test_1, sphere_test_spheres, 
 use super::DeformError;
 use crate::baseline::accel::Ray;
 use crate::core::stats::{Counter, Counters};
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
+use obvhs::{aabb::Aabb, bvh2::Bvh2};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering::*};
 use std::sync::Arc;
@@ -53,15 +61,17 @@ pub enum UpdateMode {
     Naive,
     Lazy,
     LazyCache,
+    Refit,
 }
 
 impl UpdateMode {
-    pub const ALL: [UpdateMode; 3] = [UpdateMode::Naive, UpdateMode::Lazy, UpdateMode::LazyCache];
+    pub const ALL: [UpdateMode; 4] = [UpdateMode::Naive, UpdateMode::Lazy, UpdateMode::LazyCache, UpdateMode::Refit];
     pub fn name(self) -> &'static str {
         match self {
             UpdateMode::Naive => "naive",
             UpdateMode::Lazy => "lazy",
             UpdateMode::LazyCache => "lazy-cache",
+            UpdateMode::Refit => "refit",
         }
     }
 }
@@ -73,7 +83,8 @@ impl std::str::FromStr for UpdateMode {
             "naive" => Ok(UpdateMode::Naive),
             "lazy" => Ok(UpdateMode::Lazy),
             "lazy-cache" | "lazycache" | "cache" => Ok(UpdateMode::LazyCache),
-            _ => Err(DeformError::Invalid(format!("unknown update mode '{s}' (naive, lazy, lazy-cache)"))),
+            "refit" => Ok(UpdateMode::Refit),
+            _ => Err(DeformError::Invalid(format!("unknown update mode '{s}' (naive, lazy, lazy-cache, refit)"))),
         }
     }
 }
@@ -98,6 +109,9 @@ pub struct TraceParams {
     /// Take the smaller of the paper's Eq. 9 bound and the re-centred bound (see `tree`);
     /// off = the paper's bound alone.
     pub recentred_bound: bool,
+    /// In the re-centred bound, also factor out each node's own rotation (the paper's §6
+    /// "hierarchical approach" to the rigid transform, per node; see `tree`).
+    pub node_rotation: bool,
 }
 
 impl Default for TraceParams {
@@ -111,6 +125,7 @@ impl Default for TraceParams {
             cache_up: 0,
             ordered: true,
             recentred_bound: true,
+            node_rotation: true,
         }
     }
 }
@@ -272,6 +287,7 @@ struct Instance {
     surf: SurfelState,
     nodes: NodeState,
     naive: Option<Topology>,
+    refit: Option<Bvh2>,
 }
 
 #[derive(Clone, Copy)]
@@ -324,6 +340,7 @@ impl DeformTracer {
                 surf: SurfelState { stamp: atomics(ns), data: atomics(ns * SURF_F) },
                 nodes: NodeState::new(nn),
                 naive: None,
+                refit: (mode == UpdateMode::Refit).then(|| refit_build(&obj)),
                 obj,
             });
         }
@@ -377,6 +394,21 @@ impl DeformTracer {
                 let ext: Vec<f32> = def.iter().map(|d| d.extent()).collect();
                 i.naive = Some(Topology::build(&pts, &ext));
             }
+        } else if self.mode == UpdateMode::Refit {
+            for i in self.inst.iter_mut() {
+                let (obj, field, surf) = (&i.obj, &i.field, &i.surf);
+                (0..obj.surfel_count()).into_par_iter().for_each(|s| store_surfel(surf, s, &deform_surfel(obj, field, s), frame));
+                let bvh = i.refit.as_mut().expect("refit tree");
+                let prims = &bvh.primitive_indices;
+                bvh.nodes.par_iter_mut().filter(|n| n.is_leaf()).for_each(|n| {
+                    let mut b = Aabb::empty();
+                    for &s in &prims[n.first_index as usize..(n.first_index + n.prim_count) as usize] {
+                        b = b.union(&ball_box(&load_surfel(surf, s as usize)));
+                    }
+                    n.set_aabb(b);
+                });
+                bvh.refit_all();
+            }
         } else {
             for i in self.inst.iter_mut() {
                 i.naive = None;
@@ -426,7 +458,7 @@ impl DeformTracer {
         let (c, r) = if tree.topo.right[n] == LEAF {
             leaf_sphere(&self.surfel(ii, tree.topo.surfel[n] as usize))
         } else {
-            tree.update_eq9(n, &ii.field, &ii.obj.nodes.rest, self.params.recentred_bound)
+            tree.update_eq9(n, &ii.field, &ii.obj.nodes.rest, self.params.recentred_bound, self.params.node_rotation)
         };
         st.store(n, c, r, self.frame);
         (c, r)
@@ -457,8 +489,15 @@ impl DeformTracer {
     /// Ellipse hit, MLS iteration and clipping at leaf `n` of instance `k`.
     fn leaf(&self, k: usize, n: usize, ray: &Ray, dc: &mut DeformCounters, ctr: &mut Counters) -> Option<SurfelHit> {
         let ii = &self.inst[k];
-        let obj = &ii.obj;
         let s = self.topo(ii).surfel[n] as usize;
+        let node = if ii.naive.is_some() { u32::MAX } else { n as u32 };
+        self.leaf_surfel(k, s, node, ray, dc, ctr)
+    }
+
+    /// [`leaf`](Self::leaf) by surfel; `node` is reported in the hit (for the cache).
+    fn leaf_surfel(&self, k: usize, s: usize, node: u32, ray: &Ray, dc: &mut DeformCounters, ctr: &mut Counters) -> Option<SurfelHit> {
+        let ii = &self.inst[k];
+        let obj = &ii.obj;
         let ds = self.surfel(ii, s);
         dc.leaf_tests += 1;
         ctr.inc(Counter::surfel_tests);
@@ -494,7 +533,6 @@ impl DeformTracer {
                         return None;
                     }
                 }
-                let node = if ii.naive.is_some() { u32::MAX } else { n as u32 };
                 Some(SurfelHit { t, p, n: nrm, instance: k as u32, surfel: s as u32, collection: c, node, iterations: iters })
             }
         }
@@ -513,6 +551,10 @@ impl DeformTracer {
             return None;
         }
         let mut best = Best { t: ray.tfar, hit: None };
+        if self.mode == UpdateMode::Refit {
+            self.refit_traverse(ray, &mut best, false, dc, ctr);
+            return best.hit;
+        }
         let slot = if self.mode == UpdateMode::LazyCache { slot.filter(|s| (*s as usize) < self.cache.len()) } else { None };
         let mut skip = (u32::MAX, u32::MAX);
         if let Some(sl) = slot {
@@ -661,6 +703,10 @@ impl DeformTracer {
         if !ray.is_valid() || self.frame == 0 {
             return false;
         }
+        if self.mode == UpdateMode::Refit {
+            let mut best = Best { t: ray.tfar, hit: None };
+            return self.refit_traverse(ray, &mut best, true, dc, ctr);
+        }
         let roots = self.root_hits(ray, ray.tfar, dc, ctr);
         let mut stack: Vec<u32> = Vec::with_capacity(64);
         for (_, k) in roots {
@@ -711,12 +757,75 @@ impl DeformTracer {
         false
     }
 
+    /// Front-to-back traversal of the refitted BVH2s (closest hit into `best`, or with `any`
+    /// the first accepted hit ends it; returns whether one was found).
+    fn refit_traverse(&self, ray: &Ray, best: &mut Best, any: bool, dc: &mut DeformCounters, ctr: &mut Counters) -> bool {
+        let slab = Slab::new(ray);
+        let mut roots: Vec<(f32, usize)> = Vec::new();
+        for (k, ii) in self.inst.iter().enumerate() {
+            let bvh = ii.refit.as_ref().expect("refit tree");
+            dc.sphere_tests += 1;
+            ctr.inc(Counter::node_tests);
+            if let Some(te) = bvh.nodes.first().and_then(|n| slab.test(n.aabb(), best.t)) {
+                roots.push((te, k));
+            }
+        }
+        roots.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut stack: Vec<(u32, f32)> = Vec::with_capacity(64);
+        for (te, k) in roots {
+            if te > best.t {
+                continue;
+            }
+            let bvh = self.inst[k].refit.as_ref().expect("refit tree");
+            stack.clear();
+            stack.push((0, te));
+            while let Some((n, te)) = stack.pop() {
+                if te > best.t {
+                    continue;
+                }
+                let node = &bvh.nodes[n as usize];
+                if node.is_leaf() {
+                    let (a, b) = (node.first_index as usize, (node.first_index + node.prim_count) as usize);
+                    for &s in &bvh.primitive_indices[a..b] {
+                        if let Some(h) = self.leaf_surfel(k, s as usize, u32::MAX, ray, dc, ctr) {
+                            if any {
+                                return true;
+                            }
+                            best.offer(h);
+                        }
+                    }
+                    continue;
+                }
+                let (l, r) = (node.first_index, node.first_index + 1);
+                dc.sphere_tests += 2;
+                ctr.add(Counter::node_tests, 2);
+                let e1 = slab.test(bvh.nodes[l as usize].aabb(), best.t);
+                let e2 = slab.test(bvh.nodes[r as usize].aabb(), best.t);
+                match (e1, e2) {
+                    (Some(a), Some(b)) => {
+                        if a <= b {
+                            stack.push((r, b));
+                            stack.push((l, a));
+                        } else {
+                            stack.push((l, a));
+                            stack.push((r, b));
+                        }
+                    }
+                    (Some(a), None) => stack.push((l, a)),
+                    (None, Some(b)) => stack.push((r, b)),
+                    (None, None) => {}
+                }
+            }
+        }
+        best.hit.is_some()
+    }
+
     /// Updates every node of the lazy hierarchies (Eq. 9 in parallel, then Eq. 11 bottom-up)
     /// and deforms every surfel: a full refit. For checks, statistics and refit comparisons;
     /// a no-op for naive trees (rebuilt in `begin_frame`).
     pub fn update_all(&self) {
         for ii in &self.inst {
-            if ii.naive.is_some() {
+            if ii.naive.is_some() || ii.refit.is_some() {
                 continue;
             }
             (0..ii.obj.surfel_count()).into_par_iter().for_each(|s| {
@@ -753,7 +862,12 @@ impl DeformTracer {
             fs.inner_nodes_total += inner;
             fs.surfels_total += ii.obj.surfel_count() as u64;
             fs.surfels_deformed += ii.surf.stamp.iter().filter(|s| s.load(Relaxed) == self.frame).count() as u64;
-            if ii.naive.is_some() {
+            if let Some(b) = &ii.refit {
+                // The refitted tree replaces the sphere tree in the totals: all its nodes move.
+                let bi = b.nodes.iter().filter(|n| !n.is_leaf()).count() as u64;
+                fs.inner_nodes_total = fs.inner_nodes_total - inner + bi;
+                fs.inner_nodes_updated += bi;
+            } else if ii.naive.is_some() {
                 fs.inner_nodes_updated += inner;
             } else {
                 fs.inner_nodes_updated +=
@@ -773,7 +887,7 @@ impl DeformTracer {
     /// Inner nodes that are current this frame, as (instance, node, level).
     fn current_inner(&self) -> Vec<(usize, usize, u8)> {
         let mut v = Vec::new();
-        for (k, ii) in self.inst.iter().enumerate() {
+        for (k, ii) in self.inst.iter().enumerate().filter(|(_, ii)| ii.refit.is_none()) {
             let topo = self.topo(ii);
             for n in 0..topo.len() {
                 if topo.right[n] != LEAF && (ii.naive.is_some() || ii.nodes.slot[n].stamp.load(Relaxed) == self.frame) {
@@ -831,8 +945,32 @@ impl DeformTracer {
     }
 
     /// Checks that every current node's sphere holds the deformed ellipses of all surfels of
-    /// its subtree (and every leaf its surfel). Returns the worst violation on failure.
+    /// its subtree (and every leaf its surfel); for `Refit`, that every box holds its
+    /// children's boxes and every leaf box its surfels' balls. Returns a violation on failure.
     pub fn check_containment(&self) -> Result<(), String> {
+        for (k, ii) in self.inst.iter().enumerate() {
+            let Some(b) = &ii.refit else { continue };
+            let inside = |o: &Aabb, i: &Aabb| o.min.cmple(i.min).all() && i.max.cmple(o.max).all();
+            for (n, node) in b.nodes.iter().enumerate() {
+                if node.is_leaf() {
+                    let (a, e) = (node.first_index as usize, (node.first_index + node.prim_count) as usize);
+                    for &s in &b.primitive_indices[a..e] {
+                        let d = deform_surfel(&ii.obj, &ii.field, s as usize);
+                        let (c, r) = leaf_sphere(&d);
+                        let ball = Aabb::new(Vec3A::from(c - Vec3::splat(r)), Vec3A::from(c + Vec3::splat(r)));
+                        if !inside(node.aabb(), &ball) {
+                            return Err(format!("instance {k} refit leaf {n}: surfel {s} outside its box"));
+                        }
+                    }
+                } else {
+                    for ch in [node.first_index, node.first_index + 1] {
+                        if !inside(node.aabb(), b.nodes[ch as usize].aabb()) {
+                            return Err(format!("instance {k} refit node {n}: child {ch} outside its box"));
+                        }
+                    }
+                }
+            }
+        }
         let cur = self.current_inner();
         let bad: Option<String> = cur
             .par_iter()
@@ -878,4 +1016,52 @@ fn store_surfel(st: &SurfelState, s: usize, d: &DeformedSurfel, frame: u32) {
         a.store(x.to_bits(), Relaxed);
     }
     st.stamp[s].store(frame, Release);
+}
+
+#[inline]
+fn load_surfel(st: &SurfelState, s: usize) -> DeformedSurfel {
+    let d = &st.data[s * SURF_F..s * SURF_F + SURF_F];
+    let g = |k: usize| f32::from_bits(d[k].load(Relaxed));
+    DeformedSurfel { p: Vec3::new(g(0), g(1), g(2)), u: Vec3::new(g(3), g(4), g(5)), v: Vec3::new(g(6), g(7), g(8)), stretch: g(9) }
+}
+
+/// The box of a surfel's leaf ball, padded against rounding like the sphere tests.
+#[inline]
+fn ball_box(d: &DeformedSurfel) -> Aabb {
+    let (c, r) = leaf_sphere(d);
+    let pad = Vec3::splat(r * 1e-5 + 1e-6 * c.abs().max_element());
+    let e = Vec3A::from(Vec3::splat(r) + pad);
+    Aabb::new(Vec3A::from(c) - e, Vec3A::from(c) + e)
+}
+
+/// The refit baseline's BVH2 over the undeformed surfels (`UpdateMode::Refit`).
+fn refit_build(obj: &SurfelObject) -> Bvh2 {
+    let f = DeformField::identity(&obj.nodes);
+    let boxes: Vec<Aabb> = (0..obj.surfel_count()).into_par_iter().map(|s| ball_box(&deform_surfel(obj, &f, s))).collect();
+    let mut t = std::time::Duration::default();
+    obvhs::bvh2::builder::build_bvh2(&boxes, obvhs::BvhBuildParams::medium_build(), &mut t)
+}
+
+/// Ray–box slab test for the refit baseline (t in multiples of the ray direction), widened
+/// by a relative 4 ulp so rounding never reports a miss for a box the ray meets.
+struct Slab {
+    o: Vec3,
+    inv: Vec3,
+    tnear: f32,
+}
+
+impl Slab {
+    fn new(ray: &Ray) -> Self {
+        Slab { o: ray.org, inv: ray.dir.recip(), tnear: ray.tnear }
+    }
+    /// Entry parameter (≥ tnear) if the box overlaps [tnear, tfar].
+    #[inline]
+    fn test(&self, b: &Aabb, tfar: f32) -> Option<f32> {
+        let t0 = (Vec3::from(b.min) - self.o) * self.inv;
+        let t1 = (Vec3::from(b.max) - self.o) * self.inv;
+        // NaN (0·∞ for a ray in a slab's plane) is dropped by min/max: the slab is unbounded.
+        let lo = t0.min(t1).max_element().max(self.tnear);
+        let hi = t0.max(t1).min_element() * (1.0 + 4.0 * f32::EPSILON);
+        (lo <= hi && lo <= tfar && lo < f32::INFINITY).then_some(lo)
+    }
 }

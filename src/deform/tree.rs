@@ -44,7 +44,7 @@
 
 use super::displace::{DeformField, DeformedSurfel, NodeWeights, SimNodes};
 use super::miniball::miniball;
-use glam::Vec3;
+use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 use wide::f32x8;
 
@@ -305,16 +305,18 @@ impl SphereTree {
     }
 
     /// Eq. 3–4 and 9 for inner node `n`: (deformed centre, radius bound R'), the smaller of
-    /// the paper's bound and the re-centred one (module docs).
+    /// the paper's bound and the re-centred one (module docs). `recentred = false` gives the
+    /// paper's bound alone (ablation). `node_rotation` also factors out a rotation of the
+    /// node itself (the hierarchical rigid transform of the paper's §6; module docs).
     #[inline]
-    /// `recentred = false` gives the paper's bound alone (ablation).
-    pub fn update_eq9(&self, n: usize, f: &DeformField, rest: &[Vec3], recentred: bool) -> (Vec3, f32) {
+    pub fn update_eq9(&self, n: usize, f: &DeformField, rest: &[Vec3], recentred: bool, node_rotation: bool) -> (Vec3, f32) {
         let xc = self.topo.center(n);
         let (s, e) = (self.list_off[n] as usize, self.list_off[n + 1] as usize);
         // v_j: node j's first-order displacement extrapolated to the centre (Eq. 3 summand).
         let mut vbuf = [Vec3::ZERO; 64];
         let small = e - s <= vbuf.len();
         let mut uc = Vec3::ZERO;
+        let mut kbar = Mat3::ZERO;
         for i in s..e {
             let j = self.list_node[i] as usize;
             let v = f.u[j] + f.k[j] * (xc - rest[j]);
@@ -322,19 +324,44 @@ impl SphereTree {
                 vbuf[i - s] = v;
             }
             uc += v * self.list_wc[i];
+            kbar += f.k[j] * self.list_wc[i];
         }
+        // The node's own rotation Q ≈ R + K̄ (Gram–Schmidt; any rotation keeps the bound
+        // valid, a near-optimal one makes it tight); G = Q − R is the part of every K_j that
+        // the rotation absorbs.
+        let g = if recentred && node_rotation { near_rotation(f.rot + kbar) - f.rot } else { Mat3::ZERO };
         let (mut r_paper, mut r_centred) = (0.0f32, 0.0f32);
         for i in s..e {
             let j = self.list_node[i] as usize;
             let v = if small { vbuf[i - s] } else { f.u[j] + f.k[j] * (xc - rest[j]) };
             let (a, kf) = (self.list_a[i], f.kf[j]);
             r_paper += a * (f.u[j] - uc).length() + self.list_b[i] * kf;
-            r_centred += a * (v - uc).length() + self.list_bc[i] * kf;
+            let kg = if node_rotation { frobenius(f.k[j] - g) } else { kf };
+            r_centred += a * (v - uc).length() + self.list_bc[i] * kg;
         }
         let r = self.topo.r[n] + if recentred { r_paper.min(r_centred) } else { r_paper };
         let c = f.rot * xc + f.trans + uc;
         (c, r * (1.0 + RADIUS_PAD) + RADIUS_PAD * c.abs().max_element())
     }
+}
+
+/// Frobenius norm of a 3×3 matrix.
+#[inline]
+pub fn frobenius(m: Mat3) -> f32 {
+    (m.x_axis.length_squared() + m.y_axis.length_squared() + m.z_axis.length_squared()).sqrt()
+}
+
+/// A proper rotation near `m` (Gram–Schmidt on its columns, right-handed); the identity when
+/// `m` is degenerate. Orthonormal to f32 rounding (≈1e-7), far inside `RADIUS_PAD`.
+#[inline]
+pub fn near_rotation(m: Mat3) -> Mat3 {
+    let a = m.x_axis.normalize_or_zero();
+    let b = (m.y_axis - a * a.dot(m.y_axis)).normalize_or_zero();
+    let c = a.cross(b);
+    if a == Vec3::ZERO || b == Vec3::ZERO || !c.is_finite() {
+        return Mat3::IDENTITY;
+    }
+    Mat3::from_cols(a, b, c.normalize())
 }
 
 /// Eq. 11: a second bound from two updated children, `max(‖c − c1‖ + r1, ‖c − c2‖ + r2)`.

@@ -74,6 +74,8 @@ pub struct MethodSpec {
     /// Per-ray LOD options (`lod`).
     #[serde(skip)]
     pub lod: crate::lod::LodArgs,
+    /// Deforming-sequence options (`surfel`).
+    pub surfel: super::deform_bench::SurfelSpec,
 }
 
 impl MethodSpec {
@@ -95,6 +97,7 @@ impl MethodSpec {
             max_depth: None,
             multires: Default::default(),
             lod: Default::default(),
+            surfel: Default::default(),
         };
         for p in parts {
             if let Some((k, v)) = p.split_once('=') {
@@ -132,13 +135,17 @@ impl MethodSpec {
                     "select" => {
                         spec.lod.lod_selector = crate::lod::trace::Selector::from_str(v, true).map_err(|_| bad(format!("select={v}: disparity or cone")))?
                     }
+                    "update" => spec.surfel.update = v.to_string(),
+                    "frames" => spec.surfel.frames = Some(num(v)? as u32),
+                    "detail" => spec.surfel.detail = num(v)? as f32,
+                    "shadows" => spec.surfel.shadows = num(v)? != 0.0,
                     "eigen" => {
                         spec.multires.eigen = crate::multires::trace::EigenMode::from_str(v, true)
                             .map_err(|_| bad(format!("eigen={v}: per-box or exact")))?
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen, tri; lod: f, a, thres, sel, select, levels, dist, force, net)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen, tri; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows)"
                         )))
                     }
                 }
@@ -242,6 +249,9 @@ pub struct BenchReport {
     pub height: u32,
     pub reference: Option<String>,
     pub rows: Vec<BenchRow>,
+    /// `surfel` specs on deforming sequences (Adams et al.).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub deform: Vec<super::deform_bench::DeformRow>,
 }
 
 /// Renders `spec` on `scene` (best of `repeat` renders).
@@ -298,6 +308,28 @@ pub fn run(a: &BenchArgs) -> Result<()> {
 pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
     let specs = parse_list(&a.methods)?;
     let reference = a.reference.as_deref().map(MethodSpec::parse).transpose()?;
+    let surfel = specs.iter().filter(|s| s.method == Method::Surfel).count();
+    if surfel > 0 {
+        // Deforming sequences: a different kind of SCENE, and no reference image.
+        if surfel < specs.len() || reference.is_some() {
+            return Err(Error::Usage(
+                "surfel specs bench deforming sequences: run them without other methods and without --reference".into(),
+            ));
+        }
+        specs.iter().try_for_each(super::deform_bench::validate)?;
+        if a.width == 0 || a.height == 0 || a.width > 16384 || a.height > 16384 {
+            return Err(Error::Usage(format!("image size {}x{} out of range", a.width, a.height)));
+        }
+        if let Some(out) = &a.out {
+            std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+        }
+        let deform = super::deform_bench::run(&a.scenes, &specs, a.width, a.height, a.threads, a.repeat, a.out.as_deref(), a.quiet)?;
+        let report = BenchReport { width: a.width, height: a.height, reference: None, rows: Vec::new(), deform };
+        if let Some(out) = &a.out {
+            write_outputs(out, &report)?;
+        }
+        return Ok(report);
+    }
     // Validate everything before the first (possibly long) render.
     for s in specs.iter().chain(reference.iter()) {
         s.opts(a.width, a.height, a.threads, true).validate()?;
@@ -403,7 +435,7 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
             }
         }
     }
-    let report = BenchReport { width: a.width, height: a.height, reference: a.reference.clone(), rows };
+    let report = BenchReport { width: a.width, height: a.height, reference: a.reference.clone(), rows, deform: Vec::new() };
     if let Some(out) = &a.out {
         write_outputs(out, &report)?;
     }
@@ -417,7 +449,8 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
     let p = out.join("bench.md");
     let md = table_string(report);
     crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, md).map_err(|e| Error::io(&p, e)))?;
-    let bars: Vec<(String, f64)> = report.rows.iter().map(|r| (format!("{} {}", r.scene, r.spec), r.stats.render_seconds)).collect();
+    let mut bars: Vec<(String, f64)> = report.rows.iter().map(|r| (format!("{} {}", r.scene, r.spec), r.stats.render_seconds)).collect();
+    bars.extend(report.deform.iter().map(|r| (format!("{} {}", r.scene, r.spec), r.render_seconds)));
     super::plot::bar_chart(&out.join("bench-time.png"), &format!("Render time, {}x{}", report.width, report.height), "seconds", &bars)?;
     // Error against the reference versus time, one curve per scene: the trade-off a
     // multi-resolution method is meant to win.
@@ -454,6 +487,10 @@ pub fn table_string(report: &BenchReport) -> String {
         report.height,
         report.reference.as_ref().map(|r| format!(", errors against {r}")).unwrap_or_default()
     ));
+    if report.rows.is_empty() && !report.deform.is_empty() {
+        s.push_str(&super::deform_bench::table(&report.deform));
+        return s;
+    }
     s.push_str("| scene | method | thr | build s | render s | Mrays/s | speed-up vs first | RMSE | PSNR dB | FLIP | triangle tests | node tests |\n");
     s.push_str("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for r in &report.rows {

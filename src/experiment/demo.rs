@@ -107,89 +107,56 @@ pub fn run(a: &DemoArgs) -> Result<()> {
     Ok(())
 }
 
-/// Adams et al.: every built-in sequence in the three update modes (same recorded motion),
-/// the per-frame time curves (the paper's Fig. 5), radius ratios (Fig. 3) and test counts.
+/// Adams et al.: every built-in sequence in the four update modes (same recorded motion;
+/// [`super::deform_bench`]), the per-frame time curves (the paper's Fig. 5), radius ratios
+/// (Fig. 3), test counts with and without the per-ray cache.
 fn deform_section(a: &DemoArgs) -> Result<String> {
-    use crate::cli::animate::{animate, AnimateArgs};
     let (w, h, frames, detail) = if a.quick { (192, 144, 8, 0.15) } else { (384, 288, 16, 0.4) };
-    let mut h_out = String::from("<h2>Adams et al.: deforming point-sampled surfaces</h2><p>Each sequence rendered with the hierarchy rebuilt every frame (naive), updated lazily, and lazily with per-ray caching; the same recorded motion. Per-frame time curves like the paper's Fig. 5.</p><table><tr><th>sequence</th><th>update</th><th>surfels</th><th>ms/frame</th><th>vs naive</th><th>sphere tests/frame</th><th>MLS iterations</th><th>root radius ratio</th><th>mean radius ratio</th></tr>");
-    // Fig. 3: updated radius / tightest radius per tree level, after the last frame (lazy).
-    let mut ratios: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    let specs: Vec<super::bench::MethodSpec> = ["naive", "lazy", "lazy-cache", "refit"]
+        .iter()
+        .map(|m| super::bench::MethodSpec::parse(&format!("surfel:update={m}:frames={frames}:detail={detail}")))
+        .collect::<Result<_>>()?;
+    let dir = a.out.join("deform");
+    std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+    let mut rows = Vec::new();
     for seq in crate::deform::Sequence::BUILTIN {
-        let dir = a.out.join("deform").join(seq);
-        let mut series = Vec::new();
-        let mut naive_ms = None;
-        for mode in ["naive", "lazy", "lazy-cache"] {
-            let args = AnimateArgs {
-                scene: seq.to_string(),
-                frames: Some(frames),
-                update: mode.into(),
-                width: w,
-                height: h,
-                out: (mode == "lazy-cache").then(|| dir.clone()),
-                stats: None,
-                detail,
-                no_shadows: false,
-                threads: a.threads,
-                quiet: false,
-            };
-            let st = match animate(&args) {
-                Ok(s) => s,
-                Err(e) => {
-                    eprintln!("demo: skipping {seq} ({e})");
-                    break;
-                }
-            };
-            let ms = 1e3 * st.render_seconds / st.frames.max(1) as f64;
-            let n0 = *naive_ms.get_or_insert(ms);
-            let spheres = st.per_frame.iter().map(|r| r.sphere_tests).sum::<u64>() / st.frames.max(1) as u64;
-            let mls = st.per_frame.iter().map(|r| r.mls_iterations_mean).sum::<f64>() / st.frames.max(1) as f64;
-            let root = st.radius_ratios.first().map(|r| r.mean_ratio).unwrap_or(0.0);
-            let tot: u64 = st.radius_ratios.iter().map(|r| r.sampled).sum();
-            let mean =
-                if tot > 0 { st.radius_ratios.iter().map(|r| r.mean_ratio * r.sampled as f64).sum::<f64>() / tot as f64 } else { 0.0 };
-            let _ = write!(
-                h_out,
-                "<tr><td>{seq}</td><td>{mode}</td><td>{}</td><td>{ms:.1}</td><td>{:.2}×</td><td>{spheres}</td><td>{mls:.2}</td><td>{}</td><td>{}</td></tr>",
-                st.surfels,
-                n0 / ms.max(1e-9),
-                if mode == "naive" { "1 (rebuilt)".to_string() } else { format!("{root:.2}") },
-                if mode == "naive" { "1 (rebuilt)".to_string() } else { format!("{mean:.2}") },
-            );
-            series.push((mode.to_string(), st.per_frame.iter().map(|r| (r.frame as f64, 1e3 * r.seconds)).collect::<Vec<_>>()));
-            if mode == "lazy" {
-                let pts: Vec<(f64, f64)> =
-                    st.radius_ratios.iter().filter(|r| r.sampled > 0).map(|r| (r.level as f64, r.mean_ratio)).collect();
-                if !pts.is_empty() {
-                    ratios.push((seq.to_string(), pts));
-                }
-            }
-        }
-        if !series.is_empty() {
-            std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-            super::plot::line_chart(&dir.join("frame-times.png"), &format!("{seq}: time per frame"), "frame", "ms", &series)?;
+        match super::deform_bench::run(&[seq.to_string()], &specs, w, h, a.threads, 1, Some(&dir), false) {
+            Ok(r) => rows.extend(r),
+            Err(e) => eprintln!("demo: skipping {seq} ({e})"),
         }
     }
-    h_out.push_str("</table>");
-    if !ratios.is_empty() {
-        let dir = a.out.join("deform");
-        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-        super::plot::line_chart(
-            &dir.join("radius-ratio.png"),
-            "Updated / tightest sphere radius per level (lazy, last frame)",
-            "tree level (0 = root)",
-            "radius ratio",
-            &ratios,
-        )?;
-        h_out.push_str("<p><img src=\"deform/radius-ratio.png\" style=\"max-width:640px\"> (the paper's Fig. 3)</p>");
-    }
-    for seq in crate::deform::Sequence::BUILTIN {
-        let d = Path::new("deform").join(seq);
+    let mut h_out = format!(
+        "<h2>Adams et al.: deforming point-sampled surfaces</h2><p>Each sequence ({frames} frames, {w}×{h}, detail {detail}) rendered with the hierarchy rebuilt every frame (naive), updated lazily (§4.1), lazily with per-ray caching (§4.2.2), and — not in the paper — an obvhs BVH2 refitted every frame; the same recorded motion, so the images must be identical (last column). Per-frame time curves like the paper's Fig. 5. Same as <code>lodtrace bench SEQ --methods surfel:update=naive,surfel:update=lazy,...</code>.</p><table><tr><th>sequence</th><th>update</th><th>surfels</th><th>ms/frame</th><th>vs naive</th><th>BV tests/frame</th><th>leaf tests/frame</th><th>cache hits</th><th>MLS iterations</th><th>root radius ratio</th><th>mean radius ratio</th><th>same image</th></tr>"
+    );
+    for r in &rows {
+        let f = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
         let _ = write!(
             h_out,
-            "<figure><img src=\"{}\"><figcaption>{seq}, last frame</figcaption></figure><figure><img src=\"{}\"><figcaption>{seq}: ms per frame</figcaption></figure>",
-            d.join(format!("frame_{:04}.png", frames - 1)).display(),
-            d.join("frame-times.png").display()
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.1}</td><td>{:.2}×</td><td>{:.0}</td><td>{:.0}</td><td>{}</td><td>{:.2}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            r.scene,
+            r.update,
+            r.surfels,
+            r.ms_per_frame,
+            r.speedup_vs_first,
+            r.sphere_tests_per_frame,
+            r.leaf_tests_per_frame,
+            if r.cache_lookups > 0 { format!("{}/{}", r.cache_hits, r.cache_lookups) } else { "-".into() },
+            r.mls_iterations_mean,
+            f(r.root_radius_ratio),
+            f(r.mean_radius_ratio),
+            if r.same_image_as_first { "yes" } else { "NO" },
+        );
+    }
+    h_out.push_str("</table>");
+    if dir.join("radius-ratio.png").is_file() {
+        h_out.push_str("<p><img src=\"deform/radius-ratio.png\" style=\"max-width:640px\"> (the paper's Fig. 3)</p>");
+    }
+    for r in rows.iter().filter(|r| r.update == "lazy-cache") {
+        let seq = &r.scene;
+        let _ = write!(
+            h_out,
+            "<figure><img src=\"deform/{}\"><figcaption>{seq}, last frame</figcaption></figure><figure><img src=\"deform/{seq}-frame-times.png\"><figcaption>{seq}: ms per frame</figcaption></figure><figure><img src=\"deform/{seq}-sphere-tests.png\"><figcaption>{seq}: bounding-volume tests per frame</figcaption></figure>",
+            r.image.as_deref().unwrap_or(""),
         );
     }
     Ok(h_out)

@@ -1,0 +1,258 @@
+//! `lodtrace bench SEQUENCE... --methods surfel:update=naive,surfel:update=lazy,...`: the
+//! comparisons of Adams et al. §5 on deforming sequences.
+//!
+//! Every spec replays the same recorded motion (the simulation is deterministic), so the rows
+//! differ only in how the hierarchy follows the deformation. Per row: time per frame (update +
+//! rays, the paper's Fig. 5 quantity), speed-up against the first spec, bounding-volume and
+//! leaf tests per frame (with and without the per-ray cache: the paper's "27 % fewer
+//! intersection tests"), MLS iterations, nodes updated, the radius ratio updated/tightest at
+//! the root and over all levels (Fig. 3), and whether the last frame is identical to the first
+//! spec's (all modes must render the same image). Outputs in `--out`: `deform.json` rows
+//! inside bench.json, per sequence `SEQ-frame-times.png` (Fig. 5) and `SEQ-sphere-tests.png`,
+//! `radius-ratio.png` (Fig. 3, first lazy spec of each sequence), and each spec's last frame.
+
+use super::bench::MethodSpec;
+use super::plot;
+use crate::cli::animate::{animate, AnimateArgs};
+use crate::deform::LevelRatio;
+use crate::error::{Error, Result};
+use serde::Serialize;
+use std::path::Path;
+
+/// `surfel` spec options (keys `update=`, `frames=`, `detail=`, `shadows=`).
+#[derive(Clone, Debug, Serialize)]
+pub struct SurfelSpec {
+    pub update: String,
+    pub frames: Option<u32>,
+    pub detail: f32,
+    pub shadows: bool,
+}
+
+impl Default for SurfelSpec {
+    fn default() -> Self {
+        SurfelSpec { update: "lazy-cache".into(), frames: None, detail: 1.0, shadows: true }
+    }
+}
+
+/// One (sequence, spec) row.
+#[derive(Clone, Debug, Serialize)]
+pub struct DeformRow {
+    pub scene: String,
+    pub spec: String,
+    pub update: String,
+    pub surfels: u64,
+    pub frames: u32,
+    pub threads: usize,
+    pub build_seconds: f64,
+    /// Total over all frames (update + rays).
+    pub render_seconds: f64,
+    pub ms_per_frame: f64,
+    /// ms/frame of the first spec ÷ this one's (> 1 = faster).
+    pub speedup_vs_first: f64,
+    pub update_ms_per_frame: f64,
+    pub sphere_tests_per_frame: f64,
+    pub leaf_tests_per_frame: f64,
+    pub mls_iterations_mean: f64,
+    pub cache_lookups: u64,
+    pub cache_hits: u64,
+    pub inner_nodes_updated_per_frame: f64,
+    /// Lazy modes: updated / tightest radius at the root and over all sampled nodes, after the
+    /// last frame.
+    pub root_radius_ratio: Option<f64>,
+    pub mean_radius_ratio: Option<f64>,
+    /// The last frame equals the first spec's last frame, pixel for pixel.
+    pub same_image_as_first: bool,
+    pub per_frame_ms: Vec<f64>,
+    pub per_frame_sphere_tests: Vec<u64>,
+    pub radius_ratios: Vec<LevelRatio>,
+    pub image: Option<String>,
+}
+
+/// Runs every spec on every sequence (best of `repeat` runs by total time).
+#[allow(clippy::too_many_arguments)]
+pub fn run(
+    seqs: &[String],
+    specs: &[MethodSpec],
+    width: u32,
+    height: u32,
+    threads: usize,
+    repeat: u32,
+    out: Option<&Path>,
+    quiet: bool,
+) -> Result<Vec<DeformRow>> {
+    let mut rows = Vec::new();
+    for seq in seqs {
+        let mut first: Option<(f64, Vec<[f32; 3]>)> = None;
+        let mut seq_rows: Vec<DeformRow> = Vec::new();
+        for spec in specs {
+            let s = &spec.surfel;
+            let args = AnimateArgs {
+                scene: seq.clone(),
+                frames: s.frames,
+                update: s.update.clone(),
+                width,
+                height,
+                out: None,
+                stats: None,
+                detail: s.detail,
+                no_shadows: !s.shadows,
+                threads: spec.threads.unwrap_or(threads),
+                quiet,
+            };
+            let mut best: Option<crate::cli::animate::AnimateStats> = None;
+            for _ in 0..repeat.max(1) {
+                let st = animate(&args)?;
+                if best.as_ref().is_none_or(|b| st.render_seconds < b.render_seconds) {
+                    best = Some(st);
+                }
+            }
+            let st = best.expect("at least one run");
+            let n = st.frames.max(1) as f64;
+            let ms = 1e3 * st.render_seconds / n;
+            let pixels: Vec<[f32; 3]> = st.last_frame.color.iter().map(|c| [c.x, c.y, c.z]).collect();
+            let (ms0, same) = match &first {
+                None => {
+                    first = Some((ms, pixels));
+                    (ms, true)
+                }
+                Some((m0, p0)) => (*m0, *p0 == pixels),
+            };
+            let lazy = st.update.starts_with("lazy") && st.radius_ratios.iter().any(|r| r.sampled > 0);
+            let tot: u64 = st.radius_ratios.iter().map(|r| r.sampled).sum();
+            let image = match out {
+                Some(o) => {
+                    let name = format!("{}-{}.png", st.scene, spec.slug());
+                    crate::film::io::write_png(&o.join(&name), &st.last_frame)?;
+                    Some(name)
+                }
+                None => None,
+            };
+            let row = DeformRow {
+                scene: st.scene.clone(),
+                spec: spec.text.clone(),
+                update: st.update.clone(),
+                surfels: st.surfels,
+                frames: st.frames,
+                threads: st.threads,
+                build_seconds: st.build_seconds,
+                render_seconds: st.render_seconds,
+                ms_per_frame: ms,
+                speedup_vs_first: ms0 / ms.max(1e-12),
+                update_ms_per_frame: 1e3 * st.per_frame.iter().map(|r| r.update_seconds).sum::<f64>() / n,
+                sphere_tests_per_frame: st.per_frame.iter().map(|r| r.sphere_tests).sum::<u64>() as f64 / n,
+                leaf_tests_per_frame: st.per_frame.iter().map(|r| r.leaf_tests).sum::<u64>() as f64 / n,
+                mls_iterations_mean: st.per_frame.iter().map(|r| r.mls_iterations_mean).sum::<f64>() / n,
+                cache_lookups: st.per_frame.iter().map(|r| r.cache_lookups).sum(),
+                cache_hits: st.per_frame.iter().map(|r| r.cache_hits).sum(),
+                inner_nodes_updated_per_frame: st.per_frame.iter().map(|r| r.inner_nodes_updated).sum::<u64>() as f64 / n,
+                root_radius_ratio: lazy.then(|| st.radius_ratios.first().map(|r| r.mean_ratio)).flatten(),
+                mean_radius_ratio: (lazy && tot > 0)
+                    .then(|| st.radius_ratios.iter().map(|r| r.mean_ratio * r.sampled as f64).sum::<f64>() / tot as f64),
+                same_image_as_first: same,
+                per_frame_ms: st.per_frame.iter().map(|r| 1e3 * r.seconds).collect(),
+                per_frame_sphere_tests: st.per_frame.iter().map(|r| r.sphere_tests).collect(),
+                radius_ratios: st.radius_ratios.clone(),
+                image,
+            };
+            if !quiet {
+                eprintln!("  {} {}: {:.1} ms/frame", row.scene, row.spec, row.ms_per_frame);
+            }
+            seq_rows.push(row);
+        }
+        if let Some(o) = out {
+            plots(o, &seq_rows)?;
+        }
+        rows.extend(seq_rows);
+    }
+    if let Some(o) = out {
+        let ratios: Vec<(String, Vec<(f64, f64)>)> = rows
+            .iter()
+            .filter(|r| r.update == "lazy" || r.update == "lazy-cache")
+            .fold(Vec::<&DeformRow>::new(), |mut v, r| {
+                if !v.iter().any(|x| x.scene == r.scene) {
+                    v.push(r);
+                }
+                v
+            })
+            .into_iter()
+            .map(|r| (r.scene.clone(), r.radius_ratios.iter().filter(|l| l.sampled > 0).map(|l| (l.level as f64, l.mean_ratio)).collect()))
+            .filter(|(_, v): &(String, Vec<(f64, f64)>)| !v.is_empty())
+            .collect();
+        if !ratios.is_empty() {
+            plot::line_chart(
+                &o.join("radius-ratio.png"),
+                "Updated / tightest sphere radius per level (lazy, last frame)",
+                "tree level (0 = root)",
+                "radius ratio",
+                &ratios,
+            )?;
+        }
+    }
+    Ok(rows)
+}
+
+/// Fig. 5 (time per frame) and the bounding-volume tests per frame of one sequence's rows.
+fn plots(out: &Path, rows: &[DeformRow]) -> Result<()> {
+    let Some(seq) = rows.first().map(|r| r.scene.clone()) else { return Ok(()) };
+    let series = |f: &dyn Fn(&DeformRow) -> Vec<f64>| -> Vec<(String, Vec<(f64, f64)>)> {
+        rows.iter().map(|r| (r.spec.clone(), f(r).into_iter().enumerate().map(|(i, y)| (i as f64, y)).collect())).collect()
+    };
+    plot::line_chart(
+        &out.join(format!("{seq}-frame-times.png")),
+        &format!("{seq}: time per frame"),
+        "frame",
+        "ms",
+        &series(&|r| r.per_frame_ms.clone()),
+    )?;
+    plot::line_chart(
+        &out.join(format!("{seq}-sphere-tests.png")),
+        &format!("{seq}: bounding-volume tests per frame"),
+        "frame",
+        "tests",
+        &series(&|r| r.per_frame_sphere_tests.iter().map(|x| *x as f64).collect()),
+    )?;
+    Ok(())
+}
+
+/// The rows as a Markdown table.
+pub fn table(rows: &[DeformRow]) -> String {
+    let mut s = String::from("\nDeforming sequences (Adams et al.):\n\n");
+    s.push_str("| sequence | method | surfels | frames | thr | ms/frame | speed-up vs first | update ms/frame | BV tests/frame | leaf tests/frame | MLS it. | cache hits | inner nodes updated/frame | root ratio | mean ratio | same image |\n");
+    s.push_str("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
+    for r in rows {
+        let f = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
+        s.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {:.1} | {:.2}x | {:.1} | {:.0} | {:.0} | {:.2} | {} | {:.0} | {} | {} | {} |\n",
+            r.scene,
+            r.spec,
+            r.surfels,
+            r.frames,
+            r.threads,
+            r.ms_per_frame,
+            r.speedup_vs_first,
+            r.update_ms_per_frame,
+            r.sphere_tests_per_frame,
+            r.leaf_tests_per_frame,
+            r.mls_iterations_mean,
+            if r.cache_lookups > 0 { format!("{}/{}", r.cache_hits, r.cache_lookups) } else { "-".into() },
+            r.inner_nodes_updated_per_frame,
+            f(r.root_radius_ratio),
+            f(r.mean_radius_ratio),
+            if r.same_image_as_first { "yes" } else { "NO" },
+        ));
+    }
+    s
+}
+
+/// Checks a `surfel` spec's options before any work.
+pub fn validate(spec: &MethodSpec) -> Result<()> {
+    let s = &spec.surfel;
+    crate::cli::animate::parse_mode(&s.update)?;
+    if !(s.detail.is_finite() && s.detail > 0.0 && s.detail <= 10.0) {
+        return Err(Error::Usage(format!("method spec '{}': detail={} out of range (0, 10]", spec.text, s.detail)));
+    }
+    if s.frames == Some(0) || s.frames.is_some_and(|f| f > 100_000) {
+        return Err(Error::Usage(format!("method spec '{}': frames out of range", spec.text)));
+    }
+    Ok(())
+}
