@@ -33,6 +33,19 @@
 //! a ray is the same whatever the radii of the inner nodes (naive, lazy, cached): culling only
 //! skips work.
 //!
+//! **Partition-of-unity bound (addition).** Eq. 9 bounds `‖Σ_j ω̄_ij X_j‖` by `Σ_j A_j X_j`,
+//! which grows with the list length (≈17 entries: Σ_j A_j ≈ 3–6). A surfel's weights are
+//! non-negative and sum to 1, so the same combination is also at most `max_j X_j`, and the
+//! gradient term `Σ_j ω̄_ij ‖K_j‖ (‖x_i − x_c‖ + r_i)` at most `R · max_j ‖K_j‖`; the update
+//! takes the smaller of each pair (same loop, no precomputation). With `--update lazy` on `bend`
+//! this cuts the sphere tests of late frames by about 8 % (the gradient term dominates).
+//!
+//! **Node rotation (addition, the paper's §6 suggestion).** In the re-centred form the linear
+//! part `R + Σ_j ω̄_ij K_j` acts on `x_i − x_c`; splitting off any rotation `Q` (here
+//! Gram–Schmidt of `R + K̄`, K̄ the centre-weighted mean gradient) leaves `‖K_j − (Q − R)‖_F` in
+//! place of `‖K_j‖_F`, since `‖Q (x_i − x_c)‖ = ‖x_i − x_c‖`: bending limbs no longer count their
+//! rotation as deformation (`TraceParams::node_rotation`).
+//!
 //! **Centre (Eq. 3).** `u_c = Σ_j ω̄_cj (û_j + K_j d_cj)` over the node's simulation-node list
 //! with support `h_c = max(R, 1.25·distance to the k-th nearest listed node)` (the paper uses
 //! R; listed nodes may lie outside the sphere — Figure 1, right — so the support is widened
@@ -330,16 +343,30 @@ impl SphereTree {
         // valid, a near-optimal one makes it tight); G = Q − R is the part of every K_j that
         // the rotation absorbs.
         let g = if recentred && node_rotation { near_rotation(f.rot + kbar) - f.rot } else { Mat3::ZERO };
-        let (mut r_paper, mut r_centred) = (0.0f32, 0.0f32);
+        // Sums of the paper's form (Σ A_j X_j, Σ B_j k_j) and, since a surfel's weights are a
+        // partition of unity (ω ≥ 0, Σ_j ω_ij = 1), the maxima max_j X_j and R·max_j k_j,
+        // which bound the same convex combinations (module docs).
+        let (mut sx_p, mut mx_p, mut sk_p) = (0.0f32, 0.0f32, 0.0f32);
+        let (mut sx_c, mut mx_c, mut sk_c, mut mk_c) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
         for i in s..e {
             let j = self.list_node[i] as usize;
             let v = if small { vbuf[i - s] } else { f.u[j] + f.k[j] * (xc - rest[j]) };
             let (a, kf) = (self.list_a[i], f.kf[j]);
-            r_paper += a * (f.u[j] - uc).length() + self.list_b[i] * kf;
+            let xp = (f.u[j] - uc).length();
+            sx_p += a * xp;
+            mx_p = mx_p.max(xp);
+            sk_p += self.list_b[i] * kf;
             let kg = if node_rotation { frobenius(f.k[j] - g) } else { kf };
-            r_centred += a * (v - uc).length() + self.list_bc[i] * kg;
+            let xcn = (v - uc).length();
+            sx_c += a * xcn;
+            mx_c = mx_c.max(xcn);
+            sk_c += self.list_bc[i] * kg;
+            mk_c = mk_c.max(kg);
         }
-        let r = self.topo.r[n] + if recentred { r_paper.min(r_centred) } else { r_paper };
+        let r0 = self.topo.r[n];
+        let r_paper = sx_p.min(mx_p) + sk_p;
+        let r_centred = sx_c.min(mx_c) + sk_c.min(r0 * mk_c);
+        let r = r0 + if recentred { r_paper.min(r_centred) } else { sx_p + sk_p };
         let c = f.rot * xc + f.trans + uc;
         (c, r * (1.0 + RADIUS_PAD) + RADIUS_PAD * c.abs().max_element())
     }
