@@ -1,4 +1,5 @@
-//! Shared machinery: random numbers, counters, small math helpers.
+//! Shared machinery: random numbers, counters, the on-disk cache, small math helpers.
+pub mod cache;
 pub mod eigen2;
 pub mod rng;
 pub mod stats;

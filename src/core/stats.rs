@@ -27,6 +27,8 @@ counters!(
     surfel_tests,
     eigen_decompositions,
     fragments_merged,
+    // Point hierarchies read from the on-disk cache instead of built (multires, per frame).
+    trees_from_cache,
     samples,
     pixels_refined,
     lod_queries,

@@ -61,6 +61,8 @@ pub struct HierarchyStats {
     pub max_depth: u32,
     pub bytes: usize,
     pub seconds: f64,
+    /// Trees read back from the on-disk cache instead of built.
+    pub trees_from_cache: usize,
 }
 
 /// The `--stats` JSON (DESIGN.md): at least method, accel, width, height, spp,
@@ -131,7 +133,8 @@ fn run_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &MultiresArgs)
         return Err(Error::Usage("the cone tracers shoot one cone per pixel: use --spp 1".into()));
     }
     let ms = MultiresScene::build(scene, &bp)?;
-    let mut h = HierarchyStats { trees: ms.trees.len(), seconds: ms.build_seconds, ..Default::default() };
+    let mut h =
+        HierarchyStats { trees: ms.trees.len(), seconds: ms.build_seconds, trees_from_cache: ms.trees_from_cache(), ..Default::default() };
     for t in &ms.trees {
         h.nodes += t.stats.nodes;
         h.points += t.stats.points;

@@ -94,19 +94,8 @@ impl LodChain {
     }
 }
 
-/// The on-disk chain cache: `$LODTRACE_CACHE`, else `$XDG_CACHE_HOME/lodtrace`, else
-/// `~/.cache/lodtrace` (None when none can be made: then chains are rebuilt every run).
-pub fn cache_dir() -> Option<std::path::PathBuf> {
-    let d = if let Some(d) = std::env::var_os("LODTRACE_CACHE") {
-        std::path::PathBuf::from(d)
-    } else if let Some(x) = std::env::var_os("XDG_CACHE_HOME") {
-        std::path::PathBuf::from(x).join("lodtrace")
-    } else {
-        std::path::PathBuf::from(std::env::var_os("HOME")?).join(".cache").join("lodtrace")
-    };
-    std::fs::create_dir_all(&d).ok()?;
-    Some(d)
-}
+/// The on-disk chain cache (shared with the point hierarchies of `multires`).
+pub use crate::core::cache::cache_dir;
 
 /// Cache key of a mesh's chain: a hash of the geometry, the materials, the level count and
 /// the code version (so a changed simplifier never reads old files).
@@ -134,10 +123,8 @@ impl LodChain {
             return c;
         }
         let c = LodChain::build(mesh, n_levels);
-        let tmp = path.with_extension(format!("tmp{}", std::process::id()));
-        if std::fs::write(&tmp, encode_chain(&c)).is_ok() {
-            let _ = std::fs::rename(&tmp, &path);
-        }
+        // Best effort: a failed write only means a rebuild next time.
+        let _ = crate::core::cache::write_atomic(&path, &encode_chain(&c));
         c
     }
 }

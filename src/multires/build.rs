@@ -84,7 +84,7 @@ impl BuildParams {
 /// Octree nodes, struct-of-arrays. The children of a node are the 8 consecutive entries
 /// from `first_child` (octant order x + 2y + 4z); absent children have radius −∞, so every
 /// cone test against them fails without a branch. The hot fields (the sphere) come first.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct NodeSoa {
     /// Bounding sphere of everything in the subtree (points and triangle vertices).
     pub cx: Vec<f32>,
@@ -135,7 +135,7 @@ impl NodeSoa {
 
 /// Quantised point samples, struct-of-arrays: hot (grid position, normal) and cold
 /// (material, ∇n) fields apart.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct PointSoa {
     /// Voxel index in the node's grid (with margin): the position is
     /// `grid_lo + (q + 0.5)·h`, exactly.
@@ -219,8 +219,11 @@ pub struct BuildStats {
     pub triangles_dropped: usize,
     pub samples: u64,
     pub max_depth: u32,
+    /// Wall time of this run's build, or of reading it back when `from_cache`.
     pub seconds: f64,
     pub bytes: usize,
+    /// True when the tree was read from the on-disk cache ([`super::cache`]) instead of built.
+    pub from_cache: bool,
 }
 
 /// The hierarchy of one unique mesh (with one material assignment).

@@ -2,7 +2,8 @@
 //! traced through a multi-resolution octree of prefiltered differential point samples, with a
 //! one-pixel A-buffer per ray.
 //!
-//! - [`build`]: the point hierarchy (§3.1–3.2) and [`quant`]: its quantisation (§3.2);
+//! - [`build`]: the point hierarchy (§3.1–3.2), [`quant`]: its quantisation (§3.2), and
+//!   [`cache`]: its on-disk cache (built once per mesh, materials and parameters, then read back);
 //! - [`cone`]: ray cones, footprints and their construction for every ray kind (§4.1–4.2);
 //! - [`abuffer`]: fragments, merging and alpha compositing (§4.4);
 //! - [`trace`]: the intersection tests (§4.3, 4.5, 4.6), the traversal (§5.1–5.2) and shading;
@@ -12,6 +13,7 @@
 //! Each paper parameter is a named option with the paper's default ([`MultiresArgs`]).
 pub mod abuffer;
 pub mod build;
+pub mod cache;
 pub mod cone;
 pub mod octree_accel;
 pub mod quant;

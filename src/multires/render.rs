@@ -74,6 +74,7 @@ pub fn render(ms: &MultiresScene, tp: &TraceParams, cam: &CameraFrame, opts: &Re
     prog.finish();
     let mut film = Film::new(w, h);
     let mut counters = Counters::default();
+    counters.add(Counter::trees_from_cache, ms.trees_from_cache() as u64);
     for (px, c) in results {
         counters.merge(&c);
         for (k, col, d, n) in px {

@@ -260,12 +260,19 @@ pub struct MultiresScene<'a> {
     pub trees: Vec<PointTree>,
     pub leaves: Vec<MLeaf>,
     pub tlas: Tlas,
+    /// Wall time of [`MultiresScene::build`]: building the trees, or reading them from the cache.
     pub build_seconds: f64,
 }
 
 impl<'a> MultiresScene<'a> {
-    /// Builds one hierarchy per (unique mesh, material override) in parallel.
+    /// Builds one hierarchy per (unique mesh, material override) in parallel, through the
+    /// on-disk cache ([`super::cache`]): a later run reads the trees back instead.
     pub fn build(scene: &'a Scene, bp: &BuildParams) -> Result<Self> {
+        Self::build_in(scene, bp, crate::core::cache::cache_dir().as_deref())
+    }
+
+    /// [`MultiresScene::build`] with the cache in `cache` (None: always build).
+    pub fn build_in(scene: &'a Scene, bp: &BuildParams, cache: Option<&std::path::Path>) -> Result<Self> {
         bp.validate()?;
         let t0 = Instant::now();
         let leaves = scene.leaf_instances()?;
@@ -278,7 +285,7 @@ impl<'a> MultiresScene<'a> {
                 let mesh = &scene.meshes[m as usize];
                 let mats: Vec<&crate::scene::Material> =
                     (0..mesh.tri_count()).map(|t| &scene.materials[ov.unwrap_or(mesh.mat[t]) as usize]).collect();
-                super::build::build(mesh, &mats, bp)
+                super::cache::cached_in(cache, mesh, &mats, bp)
             })
             .collect::<Result<_>>()?;
         let mut mleaves = Vec::with_capacity(leaves.len());
@@ -310,6 +317,11 @@ impl<'a> MultiresScene<'a> {
 
     pub fn memory_bytes(&self) -> usize {
         self.trees.iter().map(|t| t.memory_bytes()).sum::<usize>() + self.leaves.len() * 160 + self.tlas.r.len() * 20
+    }
+
+    /// How many of the hierarchies were read from the on-disk cache (the rest were built).
+    pub fn trees_from_cache(&self) -> usize {
+        self.trees.iter().filter(|t| t.stats.from_cache).count()
     }
 }
 
