@@ -64,7 +64,11 @@
 //!   the ellipse radius term (so leaf hits are never culled by an ancestor).
 //! - Eq. 9 is evaluated twice per node, the paper's form and a form re-centred at the sphere
 //!   centre (same A_j, a second precomputed B'_j), and the smaller is used ([`tree`]).
+//! - Eq. 9 also takes the partition-of-unity maxima (max_j instead of Σ_j A_j) and factors
+//!   out each node's own rotation (the paper's §6 suggestion) when that is smaller ([`tree`]).
 //! - Eq. 11 is re-evaluated at every descent (not once), so tightening propagates upwards.
+//! - Beyond the paper: `UpdateMode::Refit`, an obvhs BVH2 over the surfels' leaf balls,
+//!   refitted every frame — the alternative a user would try today ([`trace`]).
 //! - Centre support (Eq. 3) widened beyond R when fewer than k listed nodes lie within R.
 //! - The median split keeps trees balanced (19 levels for 180k surfels, paper 23 for 170k).
 //! - Sphere tests are conservative (widened by a rounding bound), and ellipse/MLS tests run
@@ -77,20 +81,15 @@
 //!   motion the cached leaf is often missed (surfels move more than their radius per
 //!   frame); `TraceParams::cache_up` caches an ancestor instead (default 0 = the paper's leaf).
 //!
-//! # Measured (2 shared cores, `measure` in `tests/deform.rs`; timings noisy)
-//! `armadillo-ball`, detail 0.2 (35.9k surfels, 238 nodes), 256×192, 20 frames, no shadows:
-//! naive 50.9 ms/frame (of which deform + rebuild 19.4), lazy 65.4, lazy-cache 65.9; sphere
-//! tests 0.84 M / 2.55 M / 2.56 M per frame; radius ratio updated/tightest, mean over
-//! updated nodes 1.32 mid-sequence and 1.58 at the end, root 1.63 / 2.08 (Eq. 11 off:
-//! 2.21 / 3.77, root 6.9 / 10.6, 10.2 M sphere tests, 155 ms; rigid factoring off: root
-//! 1.76 / 2.22); MLS 2.9 iterations on average. Detail 1, 512×384, 16 frames, one shadow
-//! ray per hit: armadillo (180k surfels) 522 / 832 / 795 ms, elastic-balls (40×6k) 774 /
-//! 1095 / 1164, heads (3×83k, clipped) 346 / 531 / 610, bend (100k) 187 / 198 / 218
-//! (naive / lazy / lazy-cache). So the radius and MLS targets hold, but lazy updating does
-//! **not** beat a full rebuild here: the rebuild (parallel, O(n log n), fast miniball) costs
-//! only 20–35% of a naive frame, while the looser lazy spheres cost 1.2–3× the sphere tests
-//! — mostly rays that pass near, but miss, the object and enter the 1.6–2× larger upper
-//! spheres. The paper's 2–3× came from a naive rebuild that dominated its frame time.
+//! # Measured
+//! Current figures and the commands that produce them are in the README ("Adams et al."):
+//! `lodtrace bench SEQ --methods surfel:update=naive,...,surfel:update=refit`. In short, at
+//! 384×288, detail 0.4, 16 frames: lazy runs at 0.70–1.01× the speed of a naive rebuild and
+//! lazy-cache at 0.59–0.89×, while the refitted BVH2 runs at 1.45–1.94×. Our rebuild costs only
+//! 20–45 % of a naive frame (the paper's ≈55 %), and the first-order Eq. 9 bound, mostly its
+//! gradient term, costs 1.1–2.4× the bounding-volume tests of the rebuilt tree (with the lazy
+//! centres and exact radii it would be 1.36×). The radius-ratio (mean 1.16–1.47, root
+//! 1.22–2.42) and MLS (1.8–2.8 iterations) targets hold.
 
 // `!(x > 0.0)` is used on purpose: it also rejects NaN. SoA loops index several arrays.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop, clippy::too_many_arguments)]
