@@ -293,3 +293,33 @@ fn bench_deforming_sequences() {
     assert_eq!(code, 2);
     assert_eq!(err.trim().lines().count(), 1, "{err}");
 }
+
+/// `render SEQ --method surfel`: the first frame of a deforming sequence, PNG and stats.
+#[test]
+fn render_method_surfel() {
+    let d = tmp("rendersurfel");
+    let (png, js) = (d.join("h.png"), d.join("h.json"));
+    let (code, _, err) = lodtrace(&[
+        "render",
+        "heads",
+        "--method",
+        "surfel",
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--quiet",
+        "--out",
+        png.to_str().unwrap(),
+        "--stats",
+        js.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(png.is_file());
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&js).unwrap()).unwrap();
+    assert_eq!(v["method"], "surfel");
+    assert_eq!(v["accel"], "sphere-tree");
+    assert!(v["counters"]["node_tests"].as_u64().unwrap() > 0);
+    let (code, _, err) = lodtrace(&["render", "heads", "--method", "surfel", "--spp", "4", "--out", png.to_str().unwrap()]);
+    assert_eq!((code, err.trim().lines().count()), (2, 1), "{err}");
+}

@@ -72,6 +72,8 @@ pub struct FrameRow {
 pub struct AnimateStats {
     pub scene: String,
     pub method: String,
+    /// The bounding structure: `sphere-tree` (naive, lazy, lazy-cache) or `bvh2` (refit).
+    pub accel: String,
     pub update: String,
     pub width: u32,
     pub height: u32,
@@ -243,6 +245,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     let stats = AnimateStats {
         scene: seq.name.clone(),
         method: "surfel".into(),
+        accel: if mode == UpdateMode::Refit { "bvh2" } else { "sphere-tree" }.into(),
         update: a.update.clone(),
         width: a.width,
         height: a.height,

@@ -97,11 +97,12 @@ pub struct Stats {
 }
 
 fn unsupported(m: Method) -> Error {
-    let issue = match m {
-        Method::Surfel => "Adams et al., issue 4",
-        _ => "",
-    };
-    Error::Usage(format!("--method {} is not implemented yet ({issue}); available: whitted, distributed, multires, cone, lod", m.name()))
+    match m {
+        Method::Surfel => Error::Usage(
+            "--method surfel traces deforming sequences, not triangle scenes: lodtrace render SEQ --method surfel, lodtrace animate or lodtrace bench SEQ --methods surfel:...".into(),
+        ),
+        _ => Error::Usage(format!("--method {} is not available here; available: whitted, distributed, multires, cone, lod", m.name())),
+    }
 }
 
 pub fn run(scene: &Scene, method: Method, accel_kind: AccelKind, opts: &RenderOpts, mr: &MultiresArgs, la: &LodArgs) -> Result<RunResult> {
