@@ -423,9 +423,7 @@ impl DeformTracer {
     #[inline]
     fn surfel(&self, ii: &Instance, s: usize) -> DeformedSurfel {
         if ii.surf.stamp[s].load(Acquire) == self.frame {
-            let d = &ii.surf.data[s * SURF_F..s * SURF_F + SURF_F];
-            let g = |k: usize| f32::from_bits(d[k].load(Relaxed));
-            DeformedSurfel { p: Vec3::new(g(0), g(1), g(2)), u: Vec3::new(g(3), g(4), g(5)), v: Vec3::new(g(6), g(7), g(8)), stretch: g(9) }
+            load_surfel(&ii.surf, s)
         } else {
             let d = deform_surfel(&ii.obj, &ii.field, s);
             store_surfel(&ii.surf, s, &d, self.frame);
