@@ -92,6 +92,66 @@ fn bench_writes_table_json_images_and_plots() {
     image::open(d.join("bench-time.png")).unwrap();
 }
 
+/// `--sweep`: distributed at 1, 2, 4, … spp until it is slower and better than every method;
+/// each method gets its equal-time row; the sweep's error falls with spp; the plot exists.
+#[test]
+fn bench_sweep_gives_equal_time_rows() {
+    let d = tmp("sweep");
+    let (code, out, err) = lodtrace(&[
+        "bench",
+        "spheres",
+        "--methods",
+        "whitted:bvh:spp=8",
+        "--reference",
+        "distributed:bvh:spp=32:vt=0",
+        "--sweep",
+        "distributed:bvh:vt=0",
+        "--sweep-max-spp",
+        "16",
+        "--width",
+        "48",
+        "--height",
+        "36",
+        "--quiet",
+        "--out",
+        d.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("Equal time and equal error against distributed:bvh:vt=0"), "{out}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("bench.json")).unwrap()).unwrap();
+    let rows = v["rows"].as_array().unwrap();
+    let sweep: Vec<&serde_json::Value> = rows.iter().filter(|r| r["sweep"] == true).collect();
+    assert!(sweep.len() >= 2 && sweep.len() <= 5, "{}", sweep.len());
+    assert_eq!(sweep[0]["spec"], "distributed:bvh:vt=0:spp=1");
+    let f = |r: &serde_json::Value| r["flip"].as_f64().unwrap();
+    assert!(f(sweep.last().unwrap()) < f(sweep[0]), "more samples, lower error");
+    let e = &rows[0]["equal_time"];
+    assert_eq!(e["sweep"], "distributed:bvh:vt=0");
+    assert!(e["sweep_max_seconds"].as_f64().unwrap() > 0.0);
+    image::open(d.join("spheres-equal-time.png")).unwrap();
+    for bad in [
+        &["bench", "spheres", "--methods", "whitted:bvh", "--sweep", "distributed:bvh"][..],
+        &["bench", "spheres", "--methods", "whitted:bvh", "--reference", "distributed:bvh:spp=4", "--sweep", "multires"],
+        &["bench", "spheres", "--methods", "whitted:bvh", "--reference", "distributed:bvh:spp=4", "--sweep", "distributed:bvh:spp=4"],
+        &[
+            "bench",
+            "spheres",
+            "--methods",
+            "whitted:bvh",
+            "--reference",
+            "distributed:bvh:spp=4",
+            "--sweep",
+            "distributed:bvh",
+            "--sweep-max-spp",
+            "0",
+        ],
+    ] {
+        let (code, _, err) = lodtrace(bad);
+        assert_eq!(code, 2, "{bad:?}: {err}");
+        one_error_line(&err);
+    }
+}
+
 #[test]
 fn render_writes_exr_aovs() {
     let d = tmp("aov");

@@ -52,6 +52,16 @@ pub struct BenchArgs {
     /// Repeat each render this many times and keep the fastest (rendering only).
     #[arg(long, default_value_t = 1)]
     pub repeat: u32,
+    /// Equal-time comparison: render this stochastic spec (e.g. `distributed:embree`) at
+    /// 1, 2, 4, … samples per pixel until it is both slower and better than every other
+    /// method (or reaches `--sweep-max-spp`), then report for each method the sweep's error
+    /// at the same time and the time the sweep needs to reach the method's error (mean
+    /// FLIP against `--reference`, interpolated in log time). Needs `--reference`.
+    #[arg(long)]
+    pub sweep: Option<String>,
+    /// Largest spp of the sweep.
+    #[arg(long, default_value_t = 256)]
+    pub sweep_max_spp: u32,
     #[arg(long)]
     pub quiet: bool,
 }
@@ -76,7 +86,15 @@ pub struct MethodSpec {
     pub lod: crate::lod::LodArgs,
     /// Deforming-sequence options (`surfel`).
     pub surfel: super::deform_bench::SurfelSpec,
+    /// Random-number seed. The reference is rendered with [`REFERENCE_SEED`]: with the
+    /// same seed as the methods, a distributed render at the reference's spp would share
+    /// its samples and score an error far too low.
+    #[serde(skip)]
+    pub seed: u32,
 }
+
+/// Seed of the `--reference` render (independent of the methods' seed 0).
+pub const REFERENCE_SEED: u32 = 0x5eed_4ef0;
 
 impl MethodSpec {
     pub fn parse(s: &str) -> Result<Self> {
@@ -98,6 +116,7 @@ impl MethodSpec {
             multires: Default::default(),
             lod: Default::default(),
             surfel: Default::default(),
+            seed: 0,
         };
         for p in parts {
             if let Some((k, v)) = p.split_once('=') {
@@ -200,6 +219,81 @@ pub struct BenchRow {
     pub image: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub lod_vs_full: Option<LodComparison>,
+    /// This row against the `--sweep` curve of its scene.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub equal_time: Option<EqualTime>,
+    /// True for the rows the sweep rendered.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub sweep: bool,
+}
+
+/// A method against the stochastic sweep at equal time and at equal error (Wand & Straßer
+/// §6: "the stochastic raytracer needs at least an order of magnitude more time").
+#[derive(Serialize, Debug, Clone)]
+pub struct EqualTime {
+    pub sweep: String,
+    /// The sweep's mean FLIP at this row's render time (interpolated in log time); `None`
+    /// when this row is faster than the sweep's 1-spp render (below its curve).
+    pub sweep_flip_at_equal_time: Option<f64>,
+    /// Samples per pixel the sweep affords in this row's time (interpolated).
+    pub sweep_spp_at_equal_time: Option<f64>,
+    /// Render seconds the sweep needs to reach this row's FLIP; `None` when the sweep did
+    /// not reach it (then `sweep_max_seconds` is a lower bound).
+    pub sweep_seconds_to_match: Option<f64>,
+    /// The sweep's time ÷ this row's time at equal error (> 1: this method is faster).
+    pub time_ratio_at_equal_error: Option<f64>,
+    pub sweep_max_seconds: f64,
+}
+
+/// Interpolates the sweep curve (`(seconds, spp, flip)`, sorted by spp) for a method at
+/// `(t, flip)`: see [`EqualTime`]. Interpolation is linear in log time between the two
+/// neighbouring sweep points; error is interpolated linearly.
+pub fn equal_time(sweep: &[(f64, f64, f64)], t: f64, flip: f64, name: &str) -> EqualTime {
+    let lt = |x: f64| x.max(1e-9).ln();
+    let mut at_t = None;
+    for w in sweep.windows(2) {
+        let ((t0, s0, f0), (t1, s1, f1)) = (w[0], w[1]);
+        if t >= t0 && t <= t1 {
+            let a = if lt(t1) > lt(t0) { (lt(t) - lt(t0)) / (lt(t1) - lt(t0)) } else { 0.0 };
+            at_t = Some((f0 + a * (f1 - f0), (lt(s0) + a * (lt(s1) - lt(s0))).exp()));
+            break;
+        }
+    }
+    if at_t.is_none() {
+        if let Some(&(tl, sl, fl)) = sweep.last() {
+            if t > tl {
+                // Slower than the whole sweep: its last point is the best known bound.
+                at_t = Some((fl, sl));
+            }
+        }
+        if sweep.len() == 1 && (sweep[0].0 - t).abs() < 1e-12 {
+            at_t = Some((sweep[0].2, sweep[0].1));
+        }
+    }
+    let mut to_match = None;
+    if let Some(&(t0, _, f0)) = sweep.first() {
+        if f0 <= flip {
+            to_match = Some(t0);
+        }
+    }
+    if to_match.is_none() {
+        for w in sweep.windows(2) {
+            let ((t0, _, f0), (t1, _, f1)) = (w[0], w[1]);
+            if f0 > flip && f1 <= flip {
+                let a = (f0 - flip) / (f0 - f1);
+                to_match = Some((lt(t0) + a * (lt(t1) - lt(t0))).exp());
+                break;
+            }
+        }
+    }
+    EqualTime {
+        sweep: name.to_string(),
+        sweep_flip_at_equal_time: at_t.map(|x| x.0),
+        sweep_spp_at_equal_time: at_t.map(|x| x.1),
+        sweep_seconds_to_match: to_match,
+        time_ratio_at_equal_error: to_match.map(|m| m / t.max(1e-12)),
+        sweep_max_seconds: sweep.iter().map(|x| x.0).fold(0.0, f64::max),
+    }
 }
 
 /// A `lod` row against its full-detail Whitted counterpart (Papaioannou et al. Fig. 4).
@@ -272,7 +366,8 @@ pub fn run_spec(
     } else {
         scene
     };
-    let opts = spec.opts(width, height, threads, quiet);
+    let mut opts = spec.opts(width, height, threads, quiet);
+    opts.seed = spec.seed;
     let mut best: Option<run::RunResult> = None;
     for _ in 0..repeat.max(1) {
         let r = run::run(scene, spec.method, spec.accel, &opts, &spec.multires, &spec.lod)?;
@@ -307,7 +402,28 @@ pub fn run(a: &BenchArgs) -> Result<()> {
 /// Runs the whole bench and writes its outputs; returns the report.
 pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
     let specs = parse_list(&a.methods)?;
-    let reference = a.reference.as_deref().map(MethodSpec::parse).transpose()?;
+    let mut reference = a.reference.as_deref().map(MethodSpec::parse).transpose()?;
+    if let Some(r) = &mut reference {
+        r.seed = REFERENCE_SEED;
+    }
+    let sweep = a.sweep.as_deref().map(MethodSpec::parse).transpose()?;
+    if let Some(sw) = &sweep {
+        if reference.is_none() {
+            return Err(Error::Usage("--sweep compares errors: it needs --reference".into()));
+        }
+        if !matches!(sw.method, Method::Distributed | Method::Whitted) {
+            return Err(Error::Usage(format!(
+                "--sweep '{}': only a stochastic method (distributed, whitted) can be swept over spp",
+                sw.text
+            )));
+        }
+        if sw.text.split(':').any(|p| p.starts_with("spp=")) {
+            return Err(Error::Usage(format!("--sweep '{}': the sweep sets spp itself; leave it out", sw.text)));
+        }
+        if a.sweep_max_spp == 0 || a.sweep_max_spp > 65536 {
+            return Err(Error::Usage(format!("--sweep-max-spp {} out of range (1–65536)", a.sweep_max_spp)));
+        }
+    }
     let surfel = specs.iter().filter(|s| s.method == Method::Surfel).count();
     if surfel > 0 {
         // Deforming sequences: a different kind of SCENE, and no reference image.
@@ -331,7 +447,7 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
         return Ok(report);
     }
     // Validate everything before the first (possibly long) render.
-    for s in specs.iter().chain(reference.iter()) {
+    for s in specs.iter().chain(reference.iter()).chain(sweep.iter()) {
         s.opts(a.width, a.height, a.threads, true).validate()?;
     }
     if let Some(out) = &a.out {
@@ -397,41 +513,43 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
                 }
             }
             let t0 = *first_time.get_or_insert(stats.render_seconds);
-            let (rmse, psnr, flip) = match &ref_film {
-                Some(r) => {
-                    let (x, y, z, map) = errors(&film, r)?;
-                    if let Some(out) = &a.out {
-                        crate::film::io::write_rgb8_png(&out.join(format!("{}-{}-flip.png", scene.name, spec.slug())), &map)?;
-                    }
-                    // PSNR is +inf for an identical image; JSON has no infinity.
-                    (Some(x), y.is_finite().then_some(y), Some(z))
-                }
-                None => (None, None, None),
-            };
-            let image = match &a.out {
-                Some(out) => {
-                    let name = format!("{}-{}.png", scene.name, spec.slug());
-                    crate::film::io::write_png(&out.join(&name), &film)?;
-                    Some(name)
-                }
-                None => None,
-            };
-            if !a.quiet {
-                eprintln!("  {} {}: render {:.3} s", scene.name, spec.text, stats.render_seconds);
-            }
-            rows.push(BenchRow {
-                scene: scene.name.clone(),
-                spec: spec.text.clone(),
-                speedup_vs_first: t0 / stats.render_seconds.max(1e-12),
-                stats,
-                rmse,
-                psnr,
-                flip,
-                image,
-                lod_vs_full,
-            });
+            let mut row = finish_row(scene, spec, &film, stats, ref_film.as_ref(), a.out.as_deref(), a.quiet)?;
+            row.speedup_vs_first = t0 / row.stats.render_seconds.max(1e-12);
+            row.lod_vs_full = lod_vs_full;
+            rows.push(row);
             if spec.method == Method::Whitted {
                 full.push((spec.clone(), film, rows.last().expect("row").stats.clone()));
+            }
+        }
+        if let (Some(sw), Some(rf)) = (&sweep, &ref_film) {
+            let first = rows.len() - specs.len();
+            let t0 = first_time.unwrap_or(1.0);
+            let others: Vec<(f64, f64)> = rows[first..].iter().filter_map(|r| r.flip.map(|f| (r.stats.render_seconds, f))).collect();
+            let t_slowest = others.iter().map(|o| o.0).fold(0.0, f64::max);
+            let f_best = others.iter().map(|o| o.1).fold(f64::INFINITY, f64::min);
+            let mut curve = Vec::new();
+            let mut spp = 1u32;
+            loop {
+                let mut spec = sw.clone();
+                spec.spp = spp;
+                spec.first_pass_spp = spec.first_pass_spp.min(spp);
+                spec.text = format!("{}:spp={spp}", sw.text);
+                let (film, stats, _) = run_spec(scene, &spec, a.width, a.height, a.threads, a.repeat, a.quiet)?;
+                let mut row = finish_row(scene, &spec, &film, stats, Some(rf), a.out.as_deref(), a.quiet)?;
+                row.speedup_vs_first = t0 / row.stats.render_seconds.max(1e-12);
+                row.sweep = true;
+                let (t, f) = (row.stats.render_seconds, row.flip.unwrap_or(0.0));
+                curve.push((t, spp as f64, f));
+                rows.push(row);
+                if (t >= t_slowest && f <= f_best) || spp.saturating_mul(2) > a.sweep_max_spp {
+                    break;
+                }
+                spp *= 2;
+            }
+            for r in &mut rows[first..first + specs.len()] {
+                if let Some(f) = r.flip {
+                    r.equal_time = Some(equal_time(&curve, r.stats.render_seconds, f, &sw.text));
+                }
             }
         }
     }
@@ -440,6 +558,53 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
         write_outputs(out, &report)?;
     }
     Ok(report)
+}
+
+/// The row of one render: errors against the reference (and the FLIP map), the image.
+fn finish_row(
+    scene: &Scene,
+    spec: &MethodSpec,
+    film: &Film,
+    stats: run::Stats,
+    reference: Option<&Film>,
+    out: Option<&Path>,
+    quiet: bool,
+) -> Result<BenchRow> {
+    let (rmse, psnr, flip) = match reference {
+        Some(r) => {
+            let (x, y, z, map) = errors(film, r)?;
+            if let Some(out) = out {
+                crate::film::io::write_rgb8_png(&out.join(format!("{}-{}-flip.png", scene.name, spec.slug())), &map)?;
+            }
+            // PSNR is +inf for an identical image; JSON has no infinity.
+            (Some(x), y.is_finite().then_some(y), Some(z))
+        }
+        None => (None, None, None),
+    };
+    let image = match out {
+        Some(out) => {
+            let name = format!("{}-{}.png", scene.name, spec.slug());
+            crate::film::io::write_png(&out.join(&name), film)?;
+            Some(name)
+        }
+        None => None,
+    };
+    if !quiet {
+        eprintln!("  {} {}: render {:.3} s", scene.name, spec.text, stats.render_seconds);
+    }
+    Ok(BenchRow {
+        scene: scene.name.clone(),
+        spec: spec.text.clone(),
+        speedup_vs_first: 1.0,
+        stats,
+        rmse,
+        psnr,
+        flip,
+        image,
+        lod_vs_full: None,
+        equal_time: None,
+        sweep: false,
+    })
 }
 
 fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
@@ -453,20 +618,46 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
     bars.extend(report.deform.iter().map(|r| (format!("{} {}", r.scene, r.spec), r.render_seconds)));
     super::plot::bar_chart(&out.join("bench-time.png"), &format!("Render time, {}x{}", report.width, report.height), "seconds", &bars)?;
     // Error against the reference versus time, one curve per scene: the trade-off a
-    // multi-resolution method is meant to win.
-    let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    // multi-resolution method is meant to win. With a sweep, each scene gets its own plot:
+    // the sweep as a curve, every other method as a point on it or off it.
+    let mut scenes: Vec<&str> = Vec::new();
     for r in &report.rows {
-        if let Some(flip) = r.flip {
-            match series.iter_mut().find(|(n, _)| *n == r.scene) {
-                Some((_, v)) => v.push((r.stats.render_seconds, flip)),
-                None => series.push((r.scene.clone(), vec![(r.stats.render_seconds, flip)])),
+        if !scenes.contains(&r.scene.as_str()) {
+            scenes.push(&r.scene);
+        }
+    }
+    let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    for sc in &scenes {
+        let rows = report.rows.iter().filter(|r| r.scene == *sc && r.flip.is_some());
+        if report.rows.iter().any(|r| r.scene == *sc && r.sweep) {
+            let mut per: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+            let mut curve = Vec::new();
+            for r in rows {
+                let p = (r.stats.render_seconds, r.flip.unwrap_or(0.0));
+                if r.sweep {
+                    curve.push(p);
+                } else {
+                    per.push((r.spec.clone(), vec![p]));
+                }
+            }
+            let name = report.rows.iter().find_map(|r| r.equal_time.as_ref().map(|e| e.sweep.clone())).unwrap_or("sweep".into());
+            per.insert(0, (format!("{name}, spp 1, 2, 4, ..."), curve));
+            super::plot::line_chart(
+                &out.join(format!("{sc}-equal-time.png")),
+                &format!("{sc}: mean FLIP against the reference vs render time"),
+                "render time (s)",
+                "mean FLIP",
+                &per,
+            )?;
+        } else {
+            let mut v: Vec<(f64, f64)> = rows.map(|r| (r.stats.render_seconds, r.flip.unwrap_or(0.0))).collect();
+            if !v.is_empty() {
+                v.sort_by(|a, b| a.0.total_cmp(&b.0));
+                series.push((sc.to_string(), v));
             }
         }
     }
     if !series.is_empty() {
-        for (_, v) in &mut series {
-            v.sort_by(|a, b| a.0.total_cmp(&b.0));
-        }
         super::plot::line_chart(
             &out.join("bench-error.png"),
             "Error against the reference vs render time",
@@ -510,6 +701,39 @@ pub fn table_string(report: &BenchReport) -> String {
             r.stats.counters.get("triangle_tests").copied().unwrap_or(0),
             r.stats.counters.get("node_tests").copied().unwrap_or(0),
         ));
+    }
+    let eq: Vec<&BenchRow> = report.rows.iter().filter(|r| r.equal_time.is_some()).collect();
+    if !eq.is_empty() {
+        s.push_str(&format!(
+            "\nEqual time and equal error against {} (mean FLIP against the reference):\n\n",
+            eq[0].equal_time.as_ref().map(|e| e.sweep.as_str()).unwrap_or("the sweep")
+        ));
+        s.push_str("| scene | method | render s | FLIP | sweep FLIP at equal time (spp) | sweep time to match FLIP | time ratio at equal error |\n");
+        s.push_str("|---|---|---:|---:|---:|---:|---:|\n");
+        for r in eq {
+            let e = r.equal_time.as_ref().expect("filtered");
+            let at = match (e.sweep_flip_at_equal_time, e.sweep_spp_at_equal_time) {
+                (Some(f), Some(n)) => format!("{f:.4} ({n:.1})"),
+                _ => "faster than 1 spp".into(),
+            };
+            let (m, q) = match (e.sweep_seconds_to_match, e.time_ratio_at_equal_error) {
+                (Some(m), Some(q)) => (format!("{m:.3} s"), format!("{q:.2}x")),
+                _ => (
+                    format!("> {:.3} s (not reached)", e.sweep_max_seconds),
+                    format!("> {:.2}x", e.sweep_max_seconds / r.stats.render_seconds.max(1e-12)),
+                ),
+            };
+            s.push_str(&format!(
+                "| {} | {} | {:.3} | {:.4} | {} | {} | {} |\n",
+                r.scene,
+                r.spec,
+                r.stats.render_seconds,
+                r.flip.unwrap_or(0.0),
+                at,
+                m,
+                q
+            ));
+        }
     }
     let lod: Vec<&BenchRow> = report.rows.iter().filter(|r| r.lod_vs_full.is_some()).collect();
     if !lod.is_empty() {
@@ -559,5 +783,28 @@ mod tests {
         assert!(parse_list("nope").is_err());
         assert!(parse_list("whitted:gpu").is_err());
         assert!(parse_list("whitted:spp=x").is_err());
+    }
+
+    #[test]
+    fn equal_time_interpolates_in_log_time() {
+        // (seconds, spp, flip): 1 spp in 1 s at 0.4, 4 spp in 4 s at 0.1.
+        let c = [(1.0, 1.0, 0.4), (4.0, 4.0, 0.1)];
+        let e = equal_time(&c, 2.0, 0.25, "d");
+        // 2 s is halfway in log time: flip halfway, spp the geometric mean.
+        assert!((e.sweep_flip_at_equal_time.unwrap() - 0.25).abs() < 1e-9);
+        assert!((e.sweep_spp_at_equal_time.unwrap() - 2.0).abs() < 1e-9);
+        // Flip 0.25 is reached halfway: at 2 s, so the ratio is 1.
+        assert!((e.sweep_seconds_to_match.unwrap() - 2.0).abs() < 1e-9);
+        assert!((e.time_ratio_at_equal_error.unwrap() - 1.0).abs() < 1e-9);
+        // Better than the whole sweep: not reached; slower than the sweep: its last point.
+        let e = equal_time(&c, 8.0, 0.05, "d");
+        assert_eq!(e.sweep_seconds_to_match, None);
+        assert_eq!(e.sweep_flip_at_equal_time, Some(0.1));
+        assert_eq!(e.sweep_max_seconds, 4.0);
+        // Faster than 1 spp: no equal-time point; worse than 1 spp: matched by its time.
+        let e = equal_time(&c, 0.5, 0.5, "d");
+        assert_eq!(e.sweep_flip_at_equal_time, None);
+        assert_eq!(e.sweep_seconds_to_match, Some(1.0));
+        assert!((e.time_ratio_at_equal_error.unwrap() - 2.0).abs() < 1e-9);
     }
 }

@@ -24,6 +24,8 @@ struct Job {
     height: u32,
     methods: String,
     reference: Option<String>,
+    /// Stochastic spec swept over spp for the equal-time comparison (`bench --sweep`).
+    sweep: Option<String>,
 }
 
 fn jobs(quick: bool) -> Vec<Job> {
@@ -34,15 +36,15 @@ fn jobs(quick: bool) -> Vec<Job> {
         m.push(format!("whitted:{a}"));
     }
     m.push(format!("whitted:{a0}:threads=1"));
-    m.push(format!("distributed:{a0}:spp=6"));
-    m.push(format!("distributed:{a0}:spp=27"));
     // Wand & Straßer: the same-code-basis baseline (conventional tracer on the octree) and
     // the multi-resolution cone tracer.
     m.push("whitted:octree".into());
     m.push("multires".into());
     let methods = m.join(",");
-    let fx = format!("whitted:{a0},multires,distributed:{a0}:spp=27");
-    let (sw, sh, cw, ch, sref, cref) = if quick { (256, 256, 320, 240, 66, 27) } else { (512, 512, 640, 480, 258, 102) };
+    let fx = format!("whitted:{a0},multires");
+    // Distributed ray tracing at 1, 2, 4, … spp: the equal-time and equal-error comparison.
+    let sw = Some(format!("distributed:{a0}"));
+    let (swd, sh, cw, ch, sref, cref) = if quick { (256, 256, 320, 240, 66, 27) } else { (512, 512, 640, 480, 258, 102) };
     let r = |spp: u32| Some(format!("distributed:{a0}:spp={spp}:vt=0"));
     // Papaioannou et al.: per-ray LOD against the full-detail tracer, 2×2 supersampling as
     // in the paper, on both back-ends; the chessboard also at one thread (speed-up per
@@ -56,13 +58,13 @@ fn jobs(quick: bool) -> Vec<Job> {
     let lod = lod.join(",");
     let (lw, lh) = if quick { (256, 256) } else { (512, 512) };
     vec![
-        Job { scene: "spheres", width: sw, height: sh, methods: methods.clone(), reference: r(sref) },
-        Job { scene: "complex", width: cw, height: ch, methods, reference: r(cref) },
+        Job { scene: "spheres", width: swd, height: sh, methods: methods.clone(), reference: r(sref), sweep: sw.clone() },
+        Job { scene: "complex", width: cw, height: ch, methods, reference: r(cref), sweep: sw.clone() },
         // Fig. 8: soft shadows, depth of field, blurry reflections at three roughnesses.
-        Job { scene: "effects", width: sw, height: sh, methods: fx, reference: r(sref) },
-        Job { scene: "chessboard", width: lw, height: lh, methods: lod_cb, reference: None },
-        Job { scene: "cabinet", width: lw, height: lh, methods: lod.clone(), reference: None },
-        Job { scene: "reflector", width: lw, height: lh, methods: lod, reference: None },
+        Job { scene: "effects", width: swd, height: sh, methods: fx, reference: r(sref), sweep: sw },
+        Job { scene: "chessboard", width: lw, height: lh, methods: lod_cb, reference: None, sweep: None },
+        Job { scene: "cabinet", width: lw, height: lh, methods: lod.clone(), reference: None, sweep: None },
+        Job { scene: "reflector", width: lw, height: lh, methods: lod, reference: None, sweep: None },
     ]
 }
 
@@ -93,6 +95,8 @@ pub fn run(a: &DemoArgs) -> Result<()> {
             threads: a.threads,
             repeat: 1,
             quiet: false,
+            sweep: job.sweep.clone(),
+            sweep_max_spp: if a.quick { 64 } else { 128 },
         };
         let report = bench::bench(&args)?;
         bench::print_table(&report);
@@ -204,7 +208,8 @@ fn index_html(sections: &[(Job, BenchReport)]) -> String {
                 esc(reference)
             );
         }
-        for row in &r.rows {
+        // The sweep's images are in the folder; the page shows the curve instead.
+        for row in r.rows.iter().filter(|row| !row.sweep) {
             if let Some(img) = &row.image {
                 let _ = write!(
                     h,
@@ -215,6 +220,33 @@ fn index_html(sections: &[(Job, BenchReport)]) -> String {
                     row.flip.map(|v| format!("{v:.4}")).unwrap_or("-".into())
                 );
             }
+        }
+        let eq: Vec<_> = r.rows.iter().filter_map(|row| row.equal_time.as_ref().map(|e| (row, e))).collect();
+        if let Some((_, e0)) = eq.first() {
+            let _ = write!(
+                h,
+                "<h3>Equal time and equal error against {}</h3><p>The sweep renders it at 1, 2, 4, … samples per pixel; its error at each method's time and the time it needs to reach each method's error are interpolated in log time (time ratio &gt; 1: the method reaches that error faster).</p><table><tr><th>method</th><th>render s</th><th>mean FLIP</th><th>sweep FLIP at equal time</th><th>sweep spp at equal time</th><th>sweep time to match</th><th>time ratio at equal error</th></tr>",
+                esc(&e0.sweep)
+            );
+            for (row, e) in &eq {
+                let o = |x: Option<f64>, p: usize| x.map(|v| format!("{v:.p$}")).unwrap_or_else(|| "-".into());
+                let _ = write!(
+                    h,
+                    "<tr><td>{}</td><td>{:.3}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                    esc(&row.spec),
+                    row.stats.render_seconds,
+                    o(row.flip, 4),
+                    o(e.sweep_flip_at_equal_time, 4),
+                    o(e.sweep_spp_at_equal_time, 1),
+                    e.sweep_seconds_to_match.map(|v| format!("{v:.3} s")).unwrap_or_else(|| format!("&gt; {:.3} s", e.sweep_max_seconds)),
+                    o(e.time_ratio_at_equal_error, 2)
+                );
+            }
+            let _ = write!(
+                h,
+                "</table><p><img src=\"{}\" style=\"max-width:800px\"></p>",
+                dir.join(format!("{}-equal-time.png", job.scene)).display()
+            );
         }
         let lod: Vec<_> = r.rows.iter().filter_map(|row| row.lod_vs_full.as_ref().map(|c| (row, c))).collect();
         if !lod.is_empty() {

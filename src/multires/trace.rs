@@ -1126,6 +1126,23 @@ impl<'s, 'a> Tracer<'s, 'a> {
             let cos_el = (1.0 - sin_el * sin_el).max(0.0).sqrt();
             (R_CUT * gmax * cos_el + half_depth) / sin_el.max(0.2) + eps
         };
+        // Shadow cones start where they leave the surface's own footprint. A shadow cone's
+        // cross-section at the surface is the surface footprint projected across the light
+        // direction (§4.2), so a point of the tangent plane at distance x from `p` along the
+        // light's projection stays inside it until t = x·cos(el): the footprint (R_CUT·gmax)
+        // is cleared at t = R_CUT·gmax·cos(el), with no 1/sin(el) growth. On top, the
+        // surface's thickness: points sit up to h/2 off the surface, and the LOD rule uses
+        // points only where h ≤ lod_scale·σ_min, so h/2 ≤ lod_scale·σ_min/2, cleared along
+        // the light at 1/sin(el). (The paper uses one threshold "based on the angle and the
+        // diameter" for all outgoing cones, §7. `t_self` below, with its 1/sin(el) footprint
+        // term and the merged fragment's depth interval, skipped whole leaf clusters of
+        // `complex`'s plants, which then lost their self-shadowing: mean FLIP 0.159 → 0.150
+        // against 64 spp at 320×240.)
+        let thick = 0.5 * self.p.lod_scale * f0.length().min(f1.length());
+        let t_shadow = |d: Vec3| -> f32 {
+            let sin_el = d.dot(n).abs().min(1.0);
+            R_CUT * gmax * (1.0 - sin_el * sin_el).sqrt() + thick / sin_el.max(0.2) + eps
+        };
         let v = -cone.dir;
         let mut l = scene.ambient * color * kd;
         {
@@ -1148,7 +1165,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                     1.0
                 } else {
                     let (mut sh, dist) = cone::shadow(p, n, f0, f1, lp, ax_a, ax_b);
-                    sh.tmin = t_self(ldir);
+                    sh.tmin = t_shadow(ldir);
                     sh.tmax = dist * (1.0 - 1e-4);
                     if sh.tmin >= sh.tmax {
                         1.0
