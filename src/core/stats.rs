@@ -24,6 +24,8 @@ counters!(
     node_tests,
     instance_tests,
     triangle_tests,
+    // Triangle bounding spheres tested before the full cone–triangle test (multires).
+    triangle_bound_tests,
     surfel_tests,
     eigen_decompositions,
     fragments_merged,

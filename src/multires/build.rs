@@ -237,6 +237,56 @@ pub struct PointTree {
     pub k: u32,
     pub ranges: MatRanges,
     pub stats: BuildStats,
+    /// Derived (not cached): the stored triangles' geometry in `tri_index` order.
+    pub tris: TriSoa,
+}
+
+/// The triangles of a tree in `tri_index` order, for the traversal: bounding spheres as
+/// struct-of-arrays (8 at a time through [`super::trace::tri_bound_x8`]; padded with 7
+/// empty lanes, r = −1, so an 8-wide load never runs off the end) and the three vertices
+/// contiguous (no index chasing through the mesh in the hot loop).
+#[derive(Clone, Debug, Default)]
+pub struct TriSoa {
+    pub cx: Vec<f32>,
+    pub cy: Vec<f32>,
+    pub cz: Vec<f32>,
+    pub r: Vec<f32>,
+    pub verts: Vec<[Vec3; 3]>,
+}
+
+impl TriSoa {
+    pub fn of(mesh: &Mesh, tri_index: &[u32]) -> TriSoa {
+        let n = tri_index.len();
+        let mut t = TriSoa {
+            cx: Vec::with_capacity(n + 7),
+            cy: Vec::with_capacity(n + 7),
+            cz: Vec::with_capacity(n + 7),
+            r: Vec::with_capacity(n + 7),
+            verts: Vec::with_capacity(n),
+        };
+        for &i in tri_index {
+            let v = mesh.tri_verts(i as usize);
+            let c = (v[0] + v[1] + v[2]) / 3.0;
+            let r = v.iter().map(|p| (*p - c).length()).fold(0.0f32, f32::max);
+            // Rounding slack: the sphere must contain the vertices as the tests compute them.
+            let r = r * (1.0 + 1e-5) + 1e-6 * (1.0 + c.abs().max_element());
+            t.cx.push(c.x);
+            t.cy.push(c.y);
+            t.cz.push(c.z);
+            t.r.push(r);
+            t.verts.push(v);
+        }
+        for _ in 0..7 {
+            t.cx.push(0.0);
+            t.cy.push(0.0);
+            t.cz.push(0.0);
+            t.r.push(-1.0);
+        }
+        t
+    }
+    pub fn bytes(&self) -> usize {
+        self.r.len() * 16 + self.verts.len() * 36
+    }
 }
 
 impl PointTree {
@@ -345,6 +395,7 @@ pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<Po
             k: params.k,
             ranges,
             stats: BuildStats { nodes: 1, triangles_dropped: dropped, ..Default::default() },
+            tris: TriSoa::of(mesh, &[]),
         });
     }
     let side = (hi - lo).max_element().max(1e-6) * 1.001;
@@ -400,7 +451,8 @@ pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<Po
     }
     stats.nodes = nodes.len();
     stats.points = points.len();
-    let mut tree = PointTree { nodes, points, tri_index, root_side: side, k: params.k, ranges, stats };
+    let tris = TriSoa::of(mesh, &tri_index);
+    let mut tree = PointTree { nodes, points, tri_index, root_side: side, k: params.k, ranges, stats, tris };
     tree.stats.bytes = tree.memory_bytes();
     tree.stats.seconds = t0.elapsed().as_secs_f64();
     Ok(tree)

@@ -54,6 +54,7 @@ pub fn cached_in(dir: Option<&Path>, mesh: &Mesh, mats: &[&Material], params: &B
     let key = key(mesh, mats, params);
     let path = cache_path(dir, key);
     if let Some(mut t) = std::fs::read(&path).ok().and_then(|b| decode(&b, key, mesh.tri_count(), params)) {
+        t.tris = super::build::TriSoa::of(mesh, &t.tri_index);
         t.stats.seconds = t0.elapsed().as_secs_f64();
         return Ok(t);
     }
@@ -325,6 +326,7 @@ pub fn decode(b: &[u8], key: u64, n_tris: usize, params: &BuildParams) -> Option
         k,
         ranges: MatRanges { color_hi, props },
         stats: BuildStats { triangles_dropped, samples, max_depth, from_cache: true, ..Default::default() },
+        tris: Default::default(), // derived from the mesh by the caller
     };
     t.stats.nodes = t.nodes.len();
     t.stats.points = t.points.len();

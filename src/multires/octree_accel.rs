@@ -113,7 +113,6 @@ impl OctreeAccel<'_> {
             let li = ch & !(1 << 31);
             let leaf = &ms.leaves[li as usize];
             let tree = &ms.trees[leaf.tree as usize];
-            let mesh = &ms.scene.meshes[leaf.mesh as usize];
             let o = leaf.inv.transform_point3(ray.org);
             let d = leaf.inv.transform_vector3(ray.dir);
             let shear = RayShear::new(o, d);
@@ -132,9 +131,9 @@ impl OctreeAccel<'_> {
                 let ts = nodes.tri_start[n] as usize;
                 let tc = nodes.tri_count[n] as usize;
                 c.add(Counter::triangle_tests, tc as u64);
-                for &tri in &tree.tri_index[ts..ts + tc] {
-                    let [i0, i1, i2] = mesh.tris[tri as usize];
-                    if let Some((t, u, v)) = intersect_watertight(&shear, mesh.pos(i0), mesh.pos(i1), mesh.pos(i2), tnear, tfar) {
+                // The tree's contiguous vertex copy, as the cone tracer reads it.
+                for (&tri, pv) in tree.tri_index[ts..ts + tc].iter().zip(&tree.tris.verts[ts..ts + tc]) {
+                    if let Some((t, u, v)) = intersect_watertight(&shear, pv[0], pv[1], pv[2], tnear, tfar) {
                         tfar = t;
                         best = Some(Hit { t, u, v, prim: tri, inst: li });
                         if any {
