@@ -37,8 +37,10 @@ pub fn sphere_1(o: Vec3, d: Vec3, inv_dd: f32, c: Vec3, r: f32) -> Option<f32> {
     }
     let oc = c - o;
     let b = oc.dot(d);
-    let c2 = oc.length_squared() - r * r;
-    let disc = b * b - d.length_squared() * c2;
+    // b² − |d|²(|oc|² − r²) = |d|²r² − |oc × d|² (Lagrange): the cross product keeps the
+    // small sphere far away exact, where |oc|² − r² cancels catastrophically (found by
+    // `lodtrace verify complex --accel octree`: far leaf nodes were missed).
+    let disc = d.length_squared() * r * r - oc.cross(d).length_squared();
     if disc < 0.0 {
         return None;
     }
@@ -51,10 +53,12 @@ pub fn sphere_1(o: Vec3, d: Vec3, inv_dd: f32, c: Vec3, r: f32) -> Option<f32> {
 pub fn spheres_x8(o: Vec3, d: Vec3, tnear: f32, tfar: f32, cx: &[f32], cy: &[f32], cz: &[f32], r: &[f32]) -> (u32, [f32; 8]) {
     let ld = |s: &[f32]| f32x8::from(<[f32; 8]>::try_from(s).expect("8 lanes"));
     let (x, y, z, rr) = (ld(cx) - f32x8::splat(o.x), ld(cy) - f32x8::splat(o.y), ld(cz) - f32x8::splat(o.z), ld(r));
-    let b = x * f32x8::splat(d.x) + y * f32x8::splat(d.y) + z * f32x8::splat(d.z);
-    let c2 = x * x + y * y + z * z - rr * rr;
+    let (dx, dy, dz) = (f32x8::splat(d.x), f32x8::splat(d.y), f32x8::splat(d.z));
+    let b = x * dx + y * dy + z * dz;
     let dd = d.length_squared();
-    let disc = b * b - f32x8::splat(dd) * c2;
+    // As in `sphere_1`: |d|²r² − |oc × d|².
+    let (cx_, cy_, cz_) = (y * dz - z * dy, z * dx - x * dz, x * dy - y * dx);
+    let disc = f32x8::splat(dd) * rr * rr - (cx_ * cx_ + cy_ * cy_ + cz_ * cz_);
     let zero = f32x8::splat(0.0);
     let s = disc.max(zero).sqrt();
     let inv = f32x8::splat(1.0 / dd);
@@ -62,6 +66,22 @@ pub fn spheres_x8(o: Vec3, d: Vec3, tnear: f32, tfar: f32, cx: &[f32], cy: &[f32
     let t1 = (b + s) * inv;
     let ok = disc.simd_ge(zero) & rr.simd_ge(zero) & t1.simd_ge(f32x8::splat(tnear)) & t0.simd_le(f32x8::splat(tfar));
     (ok.to_bitmask(), t0.to_array())
+}
+
+/// Pushes the hit lanes of `m` (entry distances `ts`, slots `f + lane`) far to near, so the
+/// nearest is popped first.
+#[inline]
+fn push_near_last(stack: &mut Vec<(f32, u32)>, m: &mut u32, ts: &[f32; 8], f: usize) {
+    let mut kids = [(0.0f32, 0u32); 8];
+    let mut k = 0;
+    while *m != 0 {
+        let l = m.trailing_zeros() as usize;
+        *m &= *m - 1;
+        kids[k] = (ts[l], (f + l) as u32);
+        k += 1;
+    }
+    kids[..k].sort_unstable_by(|a, b| b.0.total_cmp(&a.0));
+    stack.extend_from_slice(&kids[..k]);
 }
 
 impl OctreeAccel<'_> {
@@ -92,21 +112,10 @@ impl OctreeAccel<'_> {
             let ch = tl.child[n as usize];
             if ch & (1 << 31) == 0 {
                 let f = ch as usize;
-                c.add(Counter::instance_tests, 2);
-                let mut kids = [(0.0f32, 0u32); 2];
-                let mut k = 0;
-                for l in 0..2 {
-                    if let Some(t) = sphere_1(ray.org, ray.dir, inv_dd, Vec3::new(tl.cx[f + l], tl.cy[f + l], tl.cz[f + l]), tl.r[f + l]) {
-                        if t <= tfar {
-                            kids[k] = (t, (f + l) as u32);
-                            k += 1;
-                        }
-                    }
-                }
-                if k == 2 && kids[0].0 < kids[1].0 {
-                    kids.swap(0, 1);
-                }
-                stack.extend_from_slice(&kids[..k]);
+                c.add(Counter::instance_tests, 8);
+                let (mut m, ts) =
+                    spheres_x8(ray.org, ray.dir, tnear, tfar, &tl.cx[f..f + 8], &tl.cy[f..f + 8], &tl.cz[f..f + 8], &tl.r[f..f + 8]);
+                push_near_last(&mut stack, &mut m, &ts, f);
                 continue;
             }
             // An instance: its octree in object space (t is preserved by the affine map).
@@ -149,17 +158,7 @@ impl OctreeAccel<'_> {
                 c.add(Counter::node_tests, 8);
                 let (mut m, ts) =
                     spheres_x8(o, d, tnear, tfar, &nodes.cx[f..f + 8], &nodes.cy[f..f + 8], &nodes.cz[f..f + 8], &nodes.r[f..f + 8]);
-                // Push far to near so the nearest child is popped first.
-                let mut kids = [(0.0f32, 0u32); 8];
-                let mut k = 0;
-                while m != 0 {
-                    let l = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    kids[k] = (ts[l], (f + l) as u32);
-                    k += 1;
-                }
-                kids[..k].sort_unstable_by(|a, b| b.0.total_cmp(&a.0));
-                ostack.extend_from_slice(&kids[..k]);
+                push_near_last(&mut ostack, &mut m, &ts, f);
             }
         }
         best
@@ -185,6 +184,29 @@ impl Accel for OctreeAccel<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A small sphere far along a long (unnormalised) ray: |oc|² − r² loses r² entirely in
+    /// f32, so the textbook discriminant misses it (this dropped far leaf nodes of
+    /// `complex`'s plants); the cross-product form hits, and misses just outside.
+    #[test]
+    fn small_far_sphere_is_hit() {
+        let o = Vec3::new(-253.05855, 88.84945, -260.26956);
+        let d = Vec3::new(258.98398, -88.269165, 199.83253);
+        let side = d.cross(Vec3::Y).normalize();
+        for (off, hit) in [(0.0f32, true), (0.009, true), (0.011, false)] {
+            let c = o + d * 0.99 + side * off;
+            let r = 0.01;
+            let got = sphere_1(o, d, 1.0 / d.length_squared(), c, r);
+            assert_eq!(got.is_some(), hit, "offset {off}: {got:?}");
+            if let Some(t) = got {
+                assert!(t <= 0.99 && t > 0.98, "entry {t}");
+            }
+            let pad = |v: f32| [v, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+            let (m, _) = spheres_x8(o, d, 0.0, 2.0, &pad(c.x), &pad(c.y), &pad(c.z), &[r, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0]);
+            assert_eq!(m & 1 == 1, hit, "x8, offset {off}");
+        }
+    }
+
     #[test]
     fn spheres_x8_matches_scalar() {
         let mut s = crate::core::rng::Sampler::new(1, 2, 3);
