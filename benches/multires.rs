@@ -3,6 +3,9 @@
 //!
 //! - `node_test`: one cone against the 8 child spheres of a node (§4.6) — [`node_test_1`]
 //!   (lane by lane) vs [`node_test_x8`]; 512 cones × 8 spheres, throughput in cone–sphere tests.
+//! - `tri_bound`: the exact triangle prefilter (a cone against 8 triangle bounding spheres) —
+//!   [`tri_bound_1`] lane by lane vs [`tri_bound_x8`]; the same 512 × 8 inputs as `node_test`
+//!   (empty lanes r = −∞), throughput in cone–sphere tests.
 //! - `point_q_per_box` / `point_q_exact`: the ray–point test (§4.3) of a node's point block,
 //!   with the node's one eigen-decomposition (§5.2, the default) or one per point —
 //!   [`point_q_ref`] (the reference: writes every point's q and footprint to a Vec) vs
@@ -25,7 +28,7 @@ use lodtrace::core::eigen2::{eigen_1, Eigen2};
 use lodtrace::core::rng::Sampler;
 use lodtrace::multires::cone::{Cone, Fp};
 use lodtrace::multires::octree_accel::{sphere_1, spheres_x8};
-use lodtrace::multires::trace::{node_test_1, node_test_x8, point_q_ref, point_q_x8, PointBlock, Q_CUT};
+use lodtrace::multires::trace::{node_test_1, node_test_x8, point_q_ref, point_q_x8, tri_bound_1, tri_bound_x8, PointBlock, Q_CUT};
 use std::hint::black_box;
 use wide::f32x8;
 
@@ -101,6 +104,35 @@ fn node_test(cr: &mut Criterion) {
             for x in black_box(&inp) {
                 let h = node_test_x8(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, CLAMP, FLOOR);
                 acc += h.mask as f32 + h.t_near[0];
+            }
+            black_box(acc)
+        })
+    });
+    g.finish();
+}
+
+fn tri_bound(cr: &mut Criterion) {
+    let inp = node_inputs(512);
+    let hits: u32 = inp.iter().map(|x| tri_bound_x8(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, FLOOR).count_ones()).sum();
+    eprintln!("tri_bound: {:.1}% of the tests pass", 100.0 * hits as f64 / (8 * inp.len()) as f64);
+    let mut g = cr.benchmark_group("tri_bound");
+    g.throughput(Throughput::Elements(8 * inp.len() as u64));
+    g.bench_function("scalar", |b| {
+        b.iter(|| {
+            let mut acc = 0u32;
+            for x in black_box(&inp) {
+                for l in 0..8 {
+                    acc += tri_bound_1(&x.cone, x.cx[l], x.cy[l], x.cz[l], x.r[l], FLOOR) as u32;
+                }
+            }
+            black_box(acc)
+        })
+    });
+    g.bench_function("x8", |b| {
+        b.iter(|| {
+            let mut acc = 0u32;
+            for x in black_box(&inp) {
+                acc += tri_bound_x8(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, FLOOR).count_ones();
             }
             black_box(acc)
         })
@@ -317,5 +349,5 @@ fn cone_sigma(cr: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, node_test, point_q, octree_spheres, cone_sigma);
+criterion_group!(benches, node_test, tri_bound, point_q, octree_spheres, cone_sigma);
 criterion_main!(benches);

@@ -642,12 +642,14 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
             }
             let name = report.rows.iter().find_map(|r| r.equal_time.as_ref().map(|e| e.sweep.clone())).unwrap_or("sweep".into());
             per.insert(0, (format!("{name}, spp 1, 2, 4, ..."), curve));
-            super::plot::line_chart(
+            // Fast, noisy renders sit top left and the converged sweep bottom right.
+            super::plot::line_chart_legend(
                 &out.join(format!("{sc}-equal-time.png")),
                 &format!("{sc}: mean FLIP against the reference vs render time"),
                 "render time (s)",
                 "mean FLIP",
                 &per,
+                plotters::chart::SeriesLabelPosition::MiddleRight,
             )?;
         } else {
             let mut v: Vec<(f64, f64)> = rows.map(|r| (r.stats.render_seconds, r.flip.unwrap_or(0.0))).collect();

@@ -181,6 +181,18 @@ pub fn bar_chart(path: &Path, title: &str, ylabel: &str, bars: &[(String, f64)])
 /// A line chart, one line (with point markers and a legend entry) per named series.
 /// Non-finite points are skipped.
 pub fn line_chart(path: &Path, title: &str, xlabel: &str, ylabel: &str, series: &[(String, Vec<(f64, f64)>)]) -> Result<()> {
+    line_chart_legend(path, title, xlabel, ylabel, series, SeriesLabelPosition::UpperLeft)
+}
+
+/// [`line_chart`] with the legend box at `legend` (where the data leaves room).
+pub fn line_chart_legend(
+    path: &Path,
+    title: &str,
+    xlabel: &str,
+    ylabel: &str,
+    series: &[(String, Vec<(f64, f64)>)],
+    legend: SeriesLabelPosition,
+) -> Result<()> {
     let pts = || series.iter().flat_map(|s| s.1.iter()).filter(|p| p.0.is_finite() && p.1.is_finite());
     if pts().next().is_none() {
         return Err(Error::Usage(format!("{}: line chart needs at least one finite point", path.display())));
@@ -229,7 +241,7 @@ pub fn line_chart(path: &Path, title: &str, xlabel: &str, ylabel: &str, series: 
                 .label_font((FAMILY, 14))
                 .background_style(WHITE.mix(0.85))
                 .border_style(BLACK)
-                .position(SeriesLabelPosition::UpperLeft)
+                .position(legend)
                 .draw()
                 .map_err(|x| e(&x))?;
         }
