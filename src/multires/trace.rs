@@ -489,19 +489,7 @@ pub fn triangle_weight_per_box(
     let e1 = (sg.a * co * co + 2.0 * sg.b * co * sn + sg.c * sn * sn).max(0.0).sqrt().max(lf);
     let e2 = (sg.a * sn * sn - 2.0 * sg.b * co * sn + sg.c * co * co).max(0.0).sqrt().max(clamp * e1).max(lf);
     let q = dv.map(|d| glam::Vec2::new(d.dot(a1) / e1, d.dot(a2) / e2));
-    let lo = q[0].min(q[1]).min(q[2]);
-    let hi = q[0].max(q[1]).max(q[2]);
-    if lo.x > R_CUT || lo.y > R_CUT || hi.x < -R_CUT || hi.y < -R_CUT || !(lo.x <= hi.x) {
-        return None;
-    }
-    let (d, b1, b2) = closest_to_origin(q[0], q[1], q[2]);
-    if !d.is_finite() {
-        return None;
-    }
-    let w = tri_w(mode, d, q);
-    if w < 0.02 {
-        return None;
-    }
+    let (w, b1, b2) = weight_2d(q, mode)?;
     Some((w, b1, b2, tv[0] * (1.0 - b1 - b2) + tv[1] * b1 + tv[2] * b2))
 }
 
@@ -681,23 +669,27 @@ pub fn triangle_weight(pv: [Vec3; 3], ev: [Eigen2; 3]) -> Option<(f32, f32, f32,
         let (x, y) = (pv[i].x, pv[i].y);
         glam::Vec2::new((e.cos * x + e.sin * y) / e.s1, (e.cos * y - e.sin * x) / e.s2)
     });
-    // Quick reject: the triangle's 2-D bounds miss the cut-off disc.
+    let (w, b1, b2) = weight_2d(q, TriWeight::Paper)?;
+    let t = pv[0].z * (1.0 - b1 - b2) + pv[1].z * b1 + pv[2].z * b2;
+    Some((w, b1, b2, t))
+}
+
+/// The 2-D part of both triangle tests, on the triangle `q` in footprint units: the quick
+/// reject (its bounds miss the cut-off disc), the closest point to the origin with its
+/// barycentrics, and the weight; None below the 2% cut-off.
+#[inline]
+fn weight_2d(q: [glam::Vec2; 3], mode: TriWeight) -> Option<(f32, f32, f32)> {
     let lo = q[0].min(q[1]).min(q[2]);
     let hi = q[0].max(q[1]).max(q[2]);
     if lo.x > R_CUT || lo.y > R_CUT || hi.x < -R_CUT || hi.y < -R_CUT || !(lo.x <= hi.x) {
         return None;
     }
-    // Closest point of the 2-D triangle to the origin, with barycentrics.
     let (d, b1, b2) = closest_to_origin(q[0], q[1], q[2]);
     if !d.is_finite() {
         return None;
     }
-    let w = tri_w(TriWeight::Paper, d, q);
-    if w < 0.02 {
-        return None;
-    }
-    let t = pv[0].z * (1.0 - b1 - b2) + pv[1].z * b1 + pv[2].z * b2;
-    Some((w, b1, b2, t))
+    let w = tri_w(mode, d, q);
+    (w >= 0.02).then_some((w, b1, b2))
 }
 
 /// The triangle weight for footprint distance `d` (0 inside) of the 2-D triangle `q`.
