@@ -261,13 +261,10 @@ pub fn equal_time(sweep: &[(f64, f64, f64)], t: f64, flip: f64, name: &str) -> E
     }
     if at_t.is_none() {
         if let Some(&(tl, sl, fl)) = sweep.last() {
-            if t > tl {
+            if t >= tl {
                 // Slower than the whole sweep: its last point is the best known bound.
                 at_t = Some((fl, sl));
             }
-        }
-        if sweep.len() == 1 && (sweep[0].0 - t).abs() < 1e-12 {
-            at_t = Some((sweep[0].2, sweep[0].1));
         }
     }
     let mut to_match = None;

@@ -177,7 +177,8 @@ impl Accel for OctreeAccel<'_> {
     }
     fn memory_bytes(&self) -> usize {
         // The triangle octree only (the points are not used by this back-end).
-        self.ms.trees.iter().map(|t| t.nodes.len() * 45 + t.tri_index.len() * 4).sum::<usize>() + self.ms.tlas.r.len() * 20
+        self.ms.trees.iter().map(|t| t.nodes.len() * 45 + t.tri_index.len() * 4 + t.tris.verts.len() * 36).sum::<usize>()
+            + self.ms.tlas.r.len() * 20
     }
 }
 

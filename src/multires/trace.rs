@@ -3,10 +3,12 @@
 //! intersections, the A-buffer, compositing and the recursive shading with shadow,
 //! reflected and refracted cones.
 //!
-//! Traversal (§5.1). Instances sit in a binary sphere tree (TLAS); each unique mesh has its
+//! Traversal (§5.1). Instances sit in an 8-wide sphere tree (TLAS); each unique mesh has its
 //! octree ([`super::build`]). Nodes are visited front to back from a min-heap keyed by the
 //! nearest depth of their sphere, so the A-buffer can finalise fragments and terminate the
-//! ray at alpha 1. At each node: (1) the triangles stored there are tested; (2) the minimum
+//! ray at alpha 1. At each node: (1) the triangles stored there are tested (with the
+//! per-box decomposition, their bounding spheres first, 8 at a time: an exact cull derived
+//! from the per-box test, [`tri_bound_1`]); (2) the minimum
 //! footprint (minor semi-axis after the anisotropy clamp) at the node's depth is compared
 //! with the point spacing h; (3) when λ·σ_min ≥ h (λ = `lod_scale`) the node's points are
 //! intersected — with the mipmap blend of §5.1: weight x = log2(λ·σ_min/h) ∈ [0,1] for this
@@ -350,7 +352,7 @@ impl<'a> MultiresScene<'a> {
     }
 
     pub fn memory_bytes(&self) -> usize {
-        self.trees.iter().map(|t| t.memory_bytes()).sum::<usize>() + self.leaves.len() * 160 + self.tlas.r.len() * 20
+        self.trees.iter().map(|t| t.memory_bytes() + t.tris.bytes()).sum::<usize>() + self.leaves.len() * 160 + self.tlas.r.len() * 20
     }
 
     /// How many of the hierarchies were read from the on-disk cache (the rest were built).
