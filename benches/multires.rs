@@ -155,21 +155,9 @@ struct Block {
 }
 
 impl Block {
-    /// The block in ray coordinates, exactly as [`PointBlock::new`] sets it up from a tree.
+    /// The block in ray coordinates, through the constructor [`PointBlock::new`] uses.
     fn view(&self) -> PointBlock<'_> {
-        let (c, h) = (&self.cone, self.h);
-        let base = self.grid_lo + Vec3::splat(0.5 * h) - c.org;
-        PointBlock {
-            qx: &self.qx,
-            qy: &self.qy,
-            qz: &self.qz,
-            x0: base.dot(c.u),
-            y0: base.dot(c.v),
-            t0: base.dot(c.dir),
-            ax: c.u * h,
-            ay: c.v * h,
-            at: c.dir * h,
-        }
+        PointBlock::from_grid(&self.qx, &self.qy, &self.qz, self.grid_lo, self.h, &self.cone)
     }
 }
 

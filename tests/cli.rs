@@ -22,6 +22,18 @@ fn one_error_line(stderr: &str) {
     assert!(lines[0].starts_with("lodtrace: error:"), "{stderr:?}");
 }
 
+/// `lodtrace bench ARGS --width 48 --height 36 --quiet --out DIR` into a fresh folder:
+/// (exit code, stdout, stderr, folder, bench.json when it was written).
+fn small_bench(name: &str, args: &[&str]) -> (i32, String, String, PathBuf, Option<serde_json::Value>) {
+    let d = tmp(name);
+    let mut all = vec!["bench"];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--width", "48", "--height", "36", "--quiet", "--out", d.to_str().unwrap()]);
+    let (code, out, err) = lodtrace(&all);
+    let json = std::fs::read_to_string(d.join("bench.json")).ok().map(|t| serde_json::from_str(&t).unwrap());
+    (code, out, err, d, json)
+}
+
 #[test]
 #[cfg(feature = "embree")]
 fn verify_passes_and_writes_json() {
@@ -52,25 +64,13 @@ fn bad_verify_input_is_one_line_exit_2() {
 
 #[test]
 fn bench_writes_table_json_images_and_plots() {
-    let d = tmp("bench");
-    let (code, out, err) = lodtrace(&[
+    let (code, out, err, d, json) = small_bench(
         "bench",
-        "spheres",
-        "--methods",
-        "whitted:bvh,distributed:bvh:spp=4:vt=0",
-        "--reference",
-        "distributed:bvh:spp=16:vt=0",
-        "--width",
-        "48",
-        "--height",
-        "36",
-        "--quiet",
-        "--out",
-        d.to_str().unwrap(),
-    ]);
+        &["spheres", "--methods", "whitted:bvh,distributed:bvh:spp=4:vt=0", "--reference", "distributed:bvh:spp=16:vt=0"],
+    );
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("| spheres | whitted:bvh |"), "{out}");
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("bench.json")).unwrap()).unwrap();
+    let v = json.unwrap();
     let rows = v["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 2);
     for r in rows {
@@ -96,29 +96,23 @@ fn bench_writes_table_json_images_and_plots() {
 /// each method gets its equal-time row; the sweep's error falls with spp; the plot exists.
 #[test]
 fn bench_sweep_gives_equal_time_rows() {
-    let d = tmp("sweep");
-    let (code, out, err) = lodtrace(&[
-        "bench",
-        "spheres",
-        "--methods",
-        "whitted:bvh:spp=8",
-        "--reference",
-        "distributed:bvh:spp=32:vt=0",
-        "--sweep",
-        "distributed:bvh:vt=0",
-        "--sweep-max-spp",
-        "16",
-        "--width",
-        "48",
-        "--height",
-        "36",
-        "--quiet",
-        "--out",
-        d.to_str().unwrap(),
-    ]);
+    let (code, out, err, d, json) = small_bench(
+        "sweep",
+        &[
+            "spheres",
+            "--methods",
+            "whitted:bvh:spp=8",
+            "--reference",
+            "distributed:bvh:spp=32:vt=0",
+            "--sweep",
+            "distributed:bvh:vt=0",
+            "--sweep-max-spp",
+            "16",
+        ],
+    );
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("Equal time and equal error against distributed:bvh:vt=0"), "{out}");
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("bench.json")).unwrap()).unwrap();
+    let v = json.unwrap();
     let rows = v["rows"].as_array().unwrap();
     let sweep: Vec<&serde_json::Value> = rows.iter().filter(|r| r["sweep"] == true).collect();
     assert!(sweep.len() >= 2 && sweep.len() <= 5, "{}", sweep.len());
@@ -185,26 +179,13 @@ fn render_writes_exr_aovs() {
 
 #[test]
 fn lod_bench_writes_diff_and_distortion_maps() {
-    let d = tmp("lodbench");
-    let (code, out, err) = lodtrace(&[
-        "bench",
-        "cabinet",
-        "--methods",
-        "whitted:bvh,lod:bvh",
-        "--width",
-        "48",
-        "--height",
-        "36",
-        "--quiet",
-        "--out",
-        d.to_str().unwrap(),
-    ]);
+    let (code, out, err, d, json) = small_bench("lodbench", &["cabinet", "--methods", "whitted:bvh,lod:bvh"]);
     assert_eq!(code, 0, "{out}{err}");
     assert!(out.contains("Per-ray LOD against full detail"), "{out}");
     for f in ["cabinet-lod_bvh-diff.png", "cabinet-lod_bvh-disparity-r.png", "cabinet-lod_bvh-disparity-t.png"] {
         assert!(d.join(f).is_file(), "{f} missing");
     }
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("bench.json")).unwrap()).unwrap();
+    let v = json.unwrap();
     let row = &v["rows"][1];
     assert_eq!(row["lod_vs_full"]["against"], "whitted:bvh");
     assert!(row["stats"]["lod"]["triangles_per_level"].as_array().unwrap().len() == 8);

@@ -561,12 +561,17 @@ impl<'t> PointBlock<'t> {
         let h = tree.spacing(tree.nodes.depth[node]);
         let s = tree.nodes.pt_start[node] as usize;
         let n = tree.nodes.pt_count[node] as usize;
-        let base = tree.nodes.grid_lo[node] + Vec3::splat(0.5 * h) - cone.org;
         let p = &tree.points;
+        Self::from_grid(&p.qx[s..s + n], &p.qy[s..s + n], &p.qz[s..s + n], tree.nodes.grid_lo[node], h, cone)
+    }
+    /// A block of grid coordinates `q` (voxel centres at grid_lo + (q + ½)·h) in the ray
+    /// coordinates of `cone`.
+    pub fn from_grid(qx: &'t [u8], qy: &'t [u8], qz: &'t [u8], grid_lo: Vec3, h: f32, cone: &Cone) -> Self {
+        let base = grid_lo + Vec3::splat(0.5 * h) - cone.org;
         PointBlock {
-            qx: &p.qx[s..s + n],
-            qy: &p.qy[s..s + n],
-            qz: &p.qz[s..s + n],
+            qx,
+            qy,
+            qz,
             x0: base.dot(cone.u),
             y0: base.dot(cone.v),
             t0: base.dot(cone.dir),
