@@ -3,7 +3,7 @@
 //! - `node8`: one CWBVH node (8 quantised child boxes) against one ray — our SSE2 test (`wide::f32x8` off x86-64)
 //!   test, obvhs' SSE test and obvhs' scalar reference;
 //! - `triangle`: the watertight test (Woop et al.) against Möller–Trumbore;
-//! - `primary/<scene>`: the DESIGN.md camera's primary rays (160×120) through each back-end:
+//! - `primary/<scene>` (spheres, complex, armadillo): the DESIGN.md camera's primary rays (160×120) through each back-end:
 //!   bvh single rays, Embree single rays, Embree 8-wide packets, Embree streams.
 //!
 //! Run: `cargo bench --bench traversal` (add `-- primary` to pick a group).
@@ -101,14 +101,15 @@ fn triangle(c: &mut Criterion) {
 }
 
 fn primary(c: &mut Criterion) {
-    for name in ["spheres", "complex"] {
+    for name in ["spheres", "complex", "assets/armadillo.off"] {
         let mut scene = lodtrace::scene::load::load_scene(name).expect("scene (run tools/setup)");
         scene.validate().unwrap();
         let (w, h) = (160u32, 120u32);
         let fr = scene.camera.frame(w, h);
         let rays: Vec<Ray> =
             (0..h).flat_map(|j| (0..w).map(move |i| (i, j))).map(|(i, j)| Ray::new(fr.eye, fr.pixel_center_dir(i, j))).collect();
-        let mut g = c.benchmark_group(format!("primary/{name}"));
+        let label = name.trim_start_matches("assets/").trim_end_matches(".off");
+        let mut g = c.benchmark_group(format!("primary/{label}"));
         g.throughput(Throughput::Elements(rays.len() as u64));
         g.sample_size(20);
         let bvh = accel::build(AccelKind::Bvh, &scene).unwrap();

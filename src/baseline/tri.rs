@@ -5,20 +5,21 @@
 
 use glam::Vec3;
 
-/// Per-ray precomputation: the dominant axis permutation and shear.
+/// Per-ray precomputation: the dominant axis permutation and shear, stored as the three rows
+/// of the ray-space matrix (`x' = mx·p`, `y' = my·p`, `z' = mz·p` for `p` relative to the
+/// origin). Each row has one zero, so its dot product is bit-identical to the paper's
+/// `p[kx] − sx·p[kz]` (a sum with one exact zero term does not depend on its order), without
+/// indexing vectors by a run-time axis.
 #[derive(Clone, Copy, Debug)]
 pub struct RayShear {
     pub org: Vec3,
-    kx: usize,
-    ky: usize,
-    kz: usize,
-    sx: f32,
-    sy: f32,
-    sz: f32,
+    mx: Vec3,
+    my: Vec3,
+    mz: Vec3,
 }
 
 impl RayShear {
-    #[inline]
+    #[inline(always)]
     pub fn new(org: Vec3, dir: Vec3) -> Self {
         let a = dir.abs();
         let kz = if a.x > a.y {
@@ -37,7 +38,16 @@ impl RayShear {
         if dir[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        RayShear { org, kx, ky, kz, sx: dir[kx] / dir[kz], sy: dir[ky] / dir[kz], sz: 1.0 / dir[kz] }
+        let (sx, sy, sz) = (dir[kx] / dir[kz], dir[ky] / dir[kz], 1.0 / dir[kz]);
+        let mut mx = Vec3::ZERO;
+        mx[kx] = 1.0;
+        mx[kz] = -sx;
+        let mut my = Vec3::ZERO;
+        my[ky] = 1.0;
+        my[kz] = -sy;
+        let mut mz = Vec3::ZERO;
+        mz[kz] = sz;
+        RayShear { org, mx, my, mz }
     }
 }
 
@@ -48,13 +58,9 @@ pub fn intersect_watertight(s: &RayShear, v0: Vec3, v1: Vec3, v2: Vec3, tnear: f
     let a = v0 - s.org;
     let b = v1 - s.org;
     let c = v2 - s.org;
-    let (kx, ky, kz) = (s.kx, s.ky, s.kz);
-    let ax = a[kx] - s.sx * a[kz];
-    let ay = a[ky] - s.sy * a[kz];
-    let bx = b[kx] - s.sx * b[kz];
-    let by = b[ky] - s.sy * b[kz];
-    let cx = c[kx] - s.sx * c[kz];
-    let cy = c[ky] - s.sy * c[kz];
+    let (ax, ay) = (s.mx.dot(a), s.my.dot(a));
+    let (bx, by) = (s.mx.dot(b), s.my.dot(b));
+    let (cx, cy) = (s.mx.dot(c), s.my.dot(c));
     let mut u = cx * by - cy * bx;
     let mut v = ax * cy - ay * cx;
     let mut w = bx * ay - by * ax;
@@ -71,9 +77,7 @@ pub fn intersect_watertight(s: &RayShear, v0: Vec3, v1: Vec3, v2: Vec3, tnear: f
     if det == 0.0 || !det.is_finite() {
         return None;
     }
-    let az = s.sz * a[kz];
-    let bz = s.sz * b[kz];
-    let cz = s.sz * c[kz];
+    let (az, bz, cz) = (s.mz.dot(a), s.mz.dot(b), s.mz.dot(c));
     let t_scaled = u * az + v * bz + w * cz;
     let inv = 1.0 / det;
     let t = t_scaled * inv;
@@ -139,6 +143,70 @@ mod tests {
             }
         }
         assert!(agree > 19900);
+    }
+
+    /// The paper's formulation, indexing the vertices by the ray's axis permutation, as the
+    /// reference for the matrix-row shear of [`RayShear`].
+    fn watertight_indexed(org: Vec3, dir: Vec3, v: [Vec3; 3]) -> Option<(f32, f32, f32)> {
+        let a = dir.abs();
+        let kz = if a.x > a.y {
+            if a.x > a.z {
+                0
+            } else {
+                2
+            }
+        } else if a.y > a.z {
+            1
+        } else {
+            2
+        };
+        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+        if dir[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let (sx, sy, sz) = (dir[kx] / dir[kz], dir[ky] / dir[kz], 1.0 / dir[kz]);
+        let [a, b, c] = v.map(|p| p - org);
+        let (ax, ay, bx, by, cx, cy) =
+            (a[kx] - sx * a[kz], a[ky] - sy * a[kz], b[kx] - sx * b[kz], b[ky] - sy * b[kz], c[kx] - sx * c[kz], c[ky] - sy * c[kz]);
+        let (mut u, mut v, mut w) = (cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax);
+        if u == 0.0 || v == 0.0 || w == 0.0 {
+            u = (cx as f64 * by as f64 - cy as f64 * bx as f64) as f32;
+            v = (ax as f64 * cy as f64 - ay as f64 * cx as f64) as f32;
+            w = (bx as f64 * ay as f64 - by as f64 * ax as f64) as f32;
+        }
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let det = u + v + w;
+        if det == 0.0 || !det.is_finite() {
+            return None;
+        }
+        let t = (u * (sz * a[kz]) + v * (sz * b[kz]) + w * (sz * c[kz])) * (1.0 / det);
+        (t >= 0.0).then(|| (t, v * (1.0 / det), w * (1.0 / det)))
+    }
+
+    #[test]
+    fn matrix_shear_is_bit_identical_to_indexed_reference() {
+        let mut s = Sampler::new(4, 0, 0);
+        let mut r = || s.next() * 2.0 - 1.0;
+        let mut hits = 0;
+        for k in 0..50000 {
+            let v = [Vec3::new(r(), r(), r()), Vec3::new(r(), r(), r()), Vec3::new(r(), r(), r())];
+            let org = Vec3::new(r(), r(), r()) * 3.0;
+            // Mostly aimed near the triangle (so that many rays hit), some random.
+            let aim = (v[0] + v[1] + v[2]) / 3.0 + Vec3::new(r(), r(), r()) * 0.3;
+            let mut dir = if k % 3 == 0 { Vec3::new(r(), r(), r()) } else { aim - org };
+            // Axis-aligned and negative-axis directions exercise every permutation and swap.
+            if k % 7 == 0 {
+                dir = Vec3::new(0.0, 0.0, r().signum());
+            }
+            let ours = intersect_watertight(&RayShear::new(org, dir), v[0], v[1], v[2], 0.0, f32::INFINITY);
+            let reference = watertight_indexed(org, dir, v);
+            let bits = |h: Option<(f32, f32, f32)>| h.map(|(t, u, w)| (t.to_bits(), u.to_bits(), w.to_bits()));
+            assert_eq!(bits(ours), bits(reference), "ray {org:?} {dir:?} tri {v:?}");
+            hits += ours.is_some() as u32;
+        }
+        assert!(hits > 10000, "too few hits to mean anything: {hits}");
     }
 
     #[test]
