@@ -179,7 +179,7 @@ fn render_writes_exr_aovs() {
 
 #[test]
 fn lod_bench_writes_diff_and_distortion_maps() {
-    let (code, out, err, d, json) = small_bench("lodbench", &["cabinet", "--methods", "whitted:bvh,lod:bvh"]);
+    let (code, out, err, d, json) = small_bench("lodbench", &["cabinet", "--methods", "whitted:bvh,lod:bvh,lod:bvh:force=1"]);
     assert_eq!(code, 0, "{out}{err}");
     assert!(out.contains("Per-ray LOD against full detail"), "{out}");
     for f in ["cabinet-lod_bvh-diff.png", "cabinet-lod_bvh-disparity-r.png", "cabinet-lod_bvh-disparity-t.png"] {
@@ -189,6 +189,19 @@ fn lod_bench_writes_diff_and_distortion_maps() {
     let row = &v["rows"][1];
     assert_eq!(row["lod_vs_full"]["against"], "whitted:bvh");
     assert!(row["stats"]["lod"]["triangles_per_level"].as_array().unwrap().len() == 8);
+    // The floor: the full-detail render again on Embree, with the same samples.
+    #[cfg(feature = "embree")]
+    {
+        let floor = &row["lod_vs_full"]["floor"];
+        assert_eq!(floor["against"], "whitted:bvh on embree", "{floor}");
+        let fmax = floor["max_pixel_diff"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&fmax), "{floor}");
+        // LOD forced to 1 renders exactly full detail: no difference, nothing above the floor.
+        let forced = &v["rows"][2]["lod_vs_full"];
+        assert_eq!(forced["max_pixel_diff"].as_f64(), Some(0.0), "{forced}");
+        assert_eq!(forced["floor"]["lod_pixels_above_floor_max"].as_u64(), Some(0), "{forced}");
+        assert!(out.contains("floor: exact back-ends"), "{out}");
+    }
     // render --aov of the maps.
     let p = d.join("dr.png");
     let (code, _, err) = lodtrace(&[
