@@ -60,6 +60,8 @@ struct NodeIn {
     cy: [f32; 8],
     cz: [f32; 8],
     r: [f32; 8],
+    /// The node's principal axes (for the triangle prefilter): Σ at a depth mid-range.
+    boxe: Eigen2,
 }
 
 /// Spheres scattered around the cone axis at depths −2..18 (as in `node_test_x8_matches_scalar`),
@@ -69,7 +71,8 @@ fn node_inputs(n: usize) -> Vec<NodeIn> {
     (0..n)
         .map(|_| {
             let cone = rnd_cone(&mut s);
-            let mut x = NodeIn { cone, cx: [0.0; 8], cy: [0.0; 8], cz: [0.0; 8], r: [0.0; 8] };
+            let boxe = eigen_1(cone.sigma(s.next() * 16.0), CLAMP, FLOOR);
+            let mut x = NodeIn { cone, cx: [0.0; 8], cy: [0.0; 8], cz: [0.0; 8], r: [0.0; 8], boxe };
             for l in 0..8 {
                 let t = s.next() * 20.0 - 2.0;
                 let off = v3(&mut s) * s.next() * 3.0;
@@ -113,7 +116,7 @@ fn node_test(cr: &mut Criterion) {
 
 fn tri_bound(cr: &mut Criterion) {
     let inp = node_inputs(512);
-    let hits: u32 = inp.iter().map(|x| tri_bound_x8(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, FLOOR).count_ones()).sum();
+    let hits: u32 = inp.iter().map(|x| tri_bound_x8(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, &x.boxe, CLAMP, FLOOR).count_ones()).sum();
     eprintln!("tri_bound: {:.1}% of the tests pass", 100.0 * hits as f64 / (8 * inp.len()) as f64);
     let mut g = cr.benchmark_group("tri_bound");
     g.throughput(Throughput::Elements(8 * inp.len() as u64));
@@ -122,7 +125,7 @@ fn tri_bound(cr: &mut Criterion) {
             let mut acc = 0u32;
             for x in black_box(&inp) {
                 for l in 0..8 {
-                    acc += tri_bound_1(&x.cone, x.cx[l], x.cy[l], x.cz[l], x.r[l], FLOOR) as u32;
+                    acc += tri_bound_1(&x.cone, x.cx[l], x.cy[l], x.cz[l], x.r[l], &x.boxe, CLAMP, FLOOR) as u32;
                 }
             }
             black_box(acc)
@@ -132,7 +135,7 @@ fn tri_bound(cr: &mut Criterion) {
         b.iter(|| {
             let mut acc = 0u32;
             for x in black_box(&inp) {
-                acc += tri_bound_x8(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, FLOOR).count_ones();
+                acc += tri_bound_x8(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, &x.boxe, CLAMP, FLOOR).count_ones();
             }
             black_box(acc)
         })

@@ -497,12 +497,18 @@ pub fn triangle_weight_per_box(
 
 /// Scalar reference of the triangle prefilter: can a triangle inside the sphere (c, r) get a
 /// per-box triangle weight ≥ 2% (§4.5, the cut-off of §4.4)? The per-box test measures the
-/// triangle in footprint units e₁, e₂ ≤ max(√tr Σ(t), floor) at one depth t in the sphere's
-/// range, and rejects beyond R_CUT; Σ(t) is a sum of squares of linear functions of t, so
-/// tr Σ is convex and its maximum over the range sits at an end. So a sphere whose centre is
-/// farther from the axis than R_CUT·max(√tr Σ) + r holds no triangle that passes — the cull
-/// is exact, not a heuristic (tested against the full test). `floor` as in the node test.
-pub fn tri_bound_1(cone: &Cone, cx: f32, cy: f32, cz: f32, r: f32, floor: f32) -> bool {
+/// triangle along the box's fixed principal axes `boxe` (a₁, a₂), in footprint units
+/// e₁ = max(√(a₁ᵀΣ(t)a₁), floor) and e₂ = max(√(a₂ᵀΣ(t)a₂), clamp·e₁, floor) at one depth t
+/// in the sphere's range, and rejects a triangle whose vertices all lie beyond R_CUT along
+/// one axis. Σ(t) is a sum of squares of linear functions of t, so each aᵀΣ(t)a is convex and
+/// its maximum over the range sits at an end. So a sphere whose centre lies farther than
+/// R_CUT·max e_k + r from the axis *along a_k* holds no triangle that passes: the cull is
+/// exact, not a heuristic (tested against the full test) — the paper's bounding-sphere test
+/// in the ellipse's principal axes (§4.5), applied to the triangles stored in a node. (The
+/// first version bounded the footprint by the disc of radius R_CUT·√tr Σ; the box in the
+/// principal axes is tighter wherever the footprint is anisotropic.) `floor` as in the node
+/// test; a relative slack of 1e-5 absorbs the different rounding of the two evaluations.
+pub fn tri_bound_1(cone: &Cone, cx: f32, cy: f32, cz: f32, r: f32, boxe: &Eigen2, clamp: f32, floor: f32) -> bool {
     if !(r >= 0.0) {
         return false;
     }
@@ -512,18 +518,27 @@ pub fn tri_bound_1(cone: &Cone, cx: f32, cy: f32, cz: f32, r: f32, floor: f32) -
     }
     let lo = (p.z - r).max(cone.tmin).max(0.0);
     let hi = (p.z + r).max(cone.tmin).max(0.0);
-    let tr = |t: f32| {
-        let s = cone.sigma(t);
-        s.a + s.c
+    let (co, sn) = (boxe.cos, boxe.sin);
+    // The same operations in the same order as the x8 kernel (bit-identical masks).
+    let (w1, w2) = ([co * co, 2.0 * co * sn, sn * sn], [sn * sn, -2.0 * co * sn, co * co]);
+    let along = |t: f32| {
+        let g = cone.sigma(t);
+        (g.a * w1[0] + g.b * w1[1] + g.c * w1[2], g.a * w2[0] + g.b * w2[1] + g.c * w2[2])
     };
-    let smax = tr(lo).max(tr(hi)).max(0.0).sqrt().max(floor);
-    let d2 = p.x * p.x + p.y * p.y;
-    let reach = R_CUT * smax + r;
-    d2 <= reach * reach
+    let ((l1, l2), (h1, h2)) = (along(lo), along(hi));
+    let e1 = l1.max(h1).max(0.0).sqrt().max(floor);
+    let e2 = l2.max(h2).max(0.0).sqrt().max(clamp * e1).max(floor);
+    let a = co * p.x + sn * p.y;
+    let b = co * p.y - sn * p.x;
+    a.abs() <= (R_CUT * e1 + r) * TRI_BOUND_SLACK && b.abs() <= (R_CUT * e2 + r) * TRI_BOUND_SLACK
 }
 
+/// Relative slack of the triangle prefilter against rounding (see [`tri_bound_1`]).
+const TRI_BOUND_SLACK: f32 = 1.0 + 1e-5;
+
 /// [`tri_bound_1`] for 8 spheres in one f32x8 step; bit l of the result is lane l.
-pub fn tri_bound_x8(cone: &Cone, cx: &[f32; 8], cy: &[f32; 8], cz: &[f32; 8], r: &[f32; 8], floor: f32) -> u8 {
+#[allow(clippy::too_many_arguments)]
+pub fn tri_bound_x8(cone: &Cone, cx: &[f32; 8], cy: &[f32; 8], cz: &[f32; 8], r: &[f32; 8], boxe: &Eigen2, clamp: f32, floor: f32) -> u8 {
     let rv = f32x8::from(*r);
     let dx = f32x8::from(*cx) - f32x8::splat(cone.org.x);
     let dy = f32x8::from(*cy) - f32x8::splat(cone.org.y);
@@ -534,11 +549,27 @@ pub fn tri_bound_x8(cone: &Cone, cx: &[f32; 8], cy: &[f32; 8], cz: &[f32; 8], r:
     let tmin = f32x8::splat(cone.tmin);
     let lo = (t - rv).max(tmin).max(zero);
     let hi = (t + rv).max(tmin).max(zero);
-    let (la, _, lc) = cone.sigma_x8(lo);
-    let (ha, _, hc) = cone.sigma_x8(hi);
-    let smax = (la + lc).max(ha + hc).max(zero).sqrt().max(f32x8::splat(floor));
-    let reach = f32x8::splat(R_CUT) * smax + rv;
-    let ok = (x * x + y * y).simd_le(reach * reach) & (t + rv).simd_ge(tmin) & (t - rv).simd_le(f32x8::splat(cone.tmax)) & rv.simd_ge(zero);
+    let (co, sn) = (boxe.cos, boxe.sin);
+    // a₁ᵀΣa₁ = A·a + B·b + C·c with scalar weights of the box's axes, likewise a₂.
+    let (w1a, w1b, w1c) = (f32x8::splat(co * co), f32x8::splat(2.0 * co * sn), f32x8::splat(sn * sn));
+    let (w2a, w2b, w2c) = (f32x8::splat(sn * sn), f32x8::splat(-2.0 * co * sn), f32x8::splat(co * co));
+    let (la, lb, lc) = cone.sigma_x8(lo);
+    let (ha, hb, hc) = cone.sigma_x8(hi);
+    let l1 = la * w1a + lb * w1b + lc * w1c;
+    let h1 = ha * w1a + hb * w1b + hc * w1c;
+    let l2 = la * w2a + lb * w2b + lc * w2c;
+    let h2 = ha * w2a + hb * w2b + hc * w2c;
+    let fl = f32x8::splat(floor);
+    let e1 = l1.max(h1).max(zero).sqrt().max(fl);
+    let e2 = l2.max(h2).max(zero).sqrt().max(f32x8::splat(clamp) * e1).max(fl);
+    let a = f32x8::splat(co) * x + f32x8::splat(sn) * y;
+    let b = f32x8::splat(co) * y - f32x8::splat(sn) * x;
+    let (rc, sl) = (f32x8::splat(R_CUT), f32x8::splat(TRI_BOUND_SLACK));
+    let ok = a.abs().simd_le((rc * e1 + rv) * sl)
+        & b.abs().simd_le((rc * e2 + rv) * sl)
+        & (t + rv).simd_ge(tmin)
+        & (t - rv).simd_le(f32x8::splat(cone.tmax))
+        & rv.simd_ge(zero);
     ok.to_bitmask() as u8
 }
 
@@ -936,8 +967,8 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 for k in (ts..ts + tcount).step_by(8) {
                     let arr = |v: &Vec<f32>| -> [f32; 8] { v[k..k + 8].try_into().expect("padded to 8") };
                     let rem = (ts + tcount - k).min(8);
-                    let mut m =
-                        tri_bound_x8(&lc, &arr(&tris.cx), &arr(&tris.cy), &arr(&tris.cz), &arr(&tris.r), lf) as u32 & ((1u32 << rem) - 1);
+                    let mut m = tri_bound_x8(&lc, &arr(&tris.cx), &arr(&tris.cy), &arr(&tris.cz), &arr(&tris.r), &boxe, clamp, lf) as u32
+                        & ((1u32 << rem) - 1);
                     c.add(Counter::triangle_bound_tests, rem as u64);
                     while m != 0 {
                         let j = k + m.trailing_zeros() as usize;
@@ -1445,7 +1476,7 @@ mod tests {
                 },
                 &[0],
             );
-            let bound = tri_bound_1(&cone, soa.cx[0], soa.cy[0], soa.cz[0], soa.r[0], lf);
+            let bound = tri_bound_1(&cone, soa.cx[0], soa.cy[0], soa.cz[0], soa.r[0], &boxe, clamp, lf);
             if full.is_some() {
                 passed += 1;
                 assert!(bound, "triangle {pw:?} has weight {full:?} but its sphere was culled");
@@ -1478,9 +1509,11 @@ mod tests {
                 };
             }
             let lf = if i % 3 == 0 { 0.0 } else { 1e-6 };
-            let m = tri_bound_x8(&cone, &a[0], &a[1], &a[2], &a[3], lf);
+            let clamp = [1.0 / 16.0, 0.25, 1.0][i % 3];
+            let boxe = eigen_1(cone.sigma(s.next() * 10.0), clamp, lf);
+            let m = tri_bound_x8(&cone, &a[0], &a[1], &a[2], &a[3], &boxe, clamp, lf);
             for l in 0..8 {
-                let want = tri_bound_1(&cone, a[0][l], a[1][l], a[2][l], a[3][l], lf);
+                let want = tri_bound_1(&cone, a[0][l], a[1][l], a[2][l], a[3][l], &boxe, clamp, lf);
                 hits += want as u32;
                 assert_eq!(m >> l & 1 == 1, want, "lane {l} of case {i}");
             }
