@@ -336,10 +336,6 @@ pub struct DiffFloor {
     /// Pixels where the LOD render differs from full detail by more than `max_pixel_diff`
     /// (0: no pixel differs more than the two exact back-ends do somewhere).
     pub lod_pixels_above_floor_max: u64,
-    /// The same count for the floor pair itself at the LOD render's maximum, for scale:
-    /// pixels where the two exact back-ends differ by more than the LOD render's largest
-    /// difference.
-    pub floor_pixels_above_lod_max: u64,
 }
 
 /// (max, index of max, 99th percentile, mean) of a per-pixel difference.
@@ -545,7 +541,6 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
                             p99_pixel_diff: fp99 as f64,
                             mean_pixel_diff: fmean,
                             lod_pixels_above_floor_max: d.iter().filter(|&&x| x > fmax).count() as u64,
-                            floor_pixels_above_lod_max: fd.iter().filter(|&&x| x > dmax).count() as u64,
                         }
                     });
                     lod_vs_full = Some(LodComparison {

@@ -642,7 +642,14 @@ pub fn point_q_ref(cone: &Cone, blk: &PointBlock, boxe: Option<&Eigen2>, clamp: 
 }
 
 /// Packet version: 8 points per step; exact mode runs the eigen-decompositions 8-wide.
-/// Calls `hit(i, q, e)` for every point with q ≤ Q_CUT.
+/// Calls `hit(i, t, q, e)` (t: the point's depth along the cone) for every point with
+/// q ≤ Q_CUT.
+///
+/// Per-box mode folds the box's rotation into the block's linear maps once per block
+/// (a = a₀ + q·A, b = b₀ + q·B with A = cos·ax + sin·ay, …) and multiplies by 1/s₁², 1/s₂²,
+/// so a point costs three 3-term linear forms and no division; the reference
+/// ([`point_q_ref`]) evaluates the paper's form per point (same value up to rounding,
+/// tested). The eight grid bytes of an axis are one 8-byte load, widened to f32 lanes.
 #[inline]
 pub fn point_q_x8(
     cone: &Cone,
@@ -650,51 +657,78 @@ pub fn point_q_x8(
     boxe: Option<&Eigen2>,
     clamp: f32,
     floor: f32,
-    mut hit: impl FnMut(usize, Vec3, f32, Eigen2),
+    mut hit: impl FnMut(usize, f32, f32, Eigen2),
 ) {
+    #[inline(always)]
+    fn load(s: &[u8], i: usize) -> f32x8 {
+        let b: [u8; 8] = match s.get(i..i + 8) {
+            Some(x) => x.try_into().expect("8 bytes"),
+            None => {
+                let mut b = [0u8; 8];
+                b[..s.len() - i].copy_from_slice(&s[i..]);
+                b
+            }
+        };
+        f32x8::from(b.map(|x| x as f32))
+    }
+    #[inline(always)]
+    fn lin(o: f32, a: Vec3, q: (f32x8, f32x8, f32x8)) -> f32x8 {
+        f32x8::splat(o) + q.0 * f32x8::splat(a.x) + q.1 * f32x8::splat(a.y) + q.2 * f32x8::splat(a.z)
+    }
     let n = blk.qx.len();
-    let load = |s: &[u8], i: usize| -> f32x8 {
-        let mut a = [0.0f32; 8];
-        for l in 0..8 {
-            a[l] = s.get(i + l).copied().unwrap_or(0) as f32;
-        }
-        f32x8::from(a)
-    };
     let qcut = f32x8::splat(Q_CUT);
     let (tmin, tmax) = (f32x8::splat(cone.tmin), f32x8::splat(cone.tmax));
     let mut i = 0;
-    while i < n {
-        let (qx, qy, qz) = (load(blk.qx, i), load(blk.qy, i), load(blk.qz, i));
-        let lin = |o: f32, a: Vec3| f32x8::splat(o) + qx * f32x8::splat(a.x) + qy * f32x8::splat(a.y) + qz * f32x8::splat(a.z);
-        let x = lin(blk.x0, blk.ax);
-        let y = lin(blk.y0, blk.ay);
-        let t = lin(blk.t0, blk.at);
-        let (co, sn, s1, s2) = match boxe {
-            Some(e) => (f32x8::splat(e.cos), f32x8::splat(e.sin), f32x8::splat(e.s1), f32x8::splat(e.s2)),
-            None => {
+    match boxe {
+        Some(e) => {
+            let (co, sn) = (e.cos, e.sin);
+            let (a0, b0) = (co * blk.x0 + sn * blk.y0, co * blk.y0 - sn * blk.x0);
+            let (av, bv) = (blk.ax * co + blk.ay * sn, blk.ay * co - blk.ax * sn);
+            let (i1, i2) = (f32x8::splat(1.0 / (e.s1 * e.s1)), f32x8::splat(1.0 / (e.s2 * e.s2)));
+            while i < n {
+                let g = (load(blk.qx, i), load(blk.qy, i), load(blk.qz, i));
+                let (a, b, t) = (lin(a0, av, g), lin(b0, bv, g), lin(blk.t0, blk.at, g));
+                let q = a * a * i1 + b * b * i2;
+                let mut m = (q.simd_le(qcut) & t.simd_ge(tmin) & t.simd_le(tmax)).to_bitmask() as u32;
+                if n - i < 8 {
+                    m &= (1u32 << (n - i)) - 1;
+                }
+                if m != 0 {
+                    let (ta, qa) = (t.to_array(), q.to_array());
+                    while m != 0 {
+                        let l = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        hit(i + l, ta[l], qa[l], *e);
+                    }
+                }
+                i += 8;
+            }
+        }
+        None => {
+            while i < n {
+                let g = (load(blk.qx, i), load(blk.qy, i), load(blk.qz, i));
+                let (x, y, t) = (lin(blk.x0, blk.ax, g), lin(blk.y0, blk.ay, g), lin(blk.t0, blk.at, g));
                 let (sa, sb, sc) = cone.sigma_x8(t.max(f32x8::splat(0.0)));
                 let e = eigen_x8(sa, sb, sc, clamp, floor);
-                (e.cos, e.sin, e.s1, e.s2)
+                let a = e.cos * x + e.sin * y;
+                let b = e.cos * y - e.sin * x;
+                let q = a * a / (e.s1 * e.s1) + b * b / (e.s2 * e.s2);
+                let mut m = (q.simd_le(qcut) & t.simd_ge(tmin) & t.simd_le(tmax)).to_bitmask() as u32;
+                if n - i < 8 {
+                    m &= (1u32 << (n - i)) - 1;
+                }
+                if m != 0 {
+                    let (ta, qa) = (t.to_array(), q.to_array());
+                    let (ca, sa, s1a, s2a) = (e.cos.to_array(), e.sin.to_array(), e.s1.to_array(), e.s2.to_array());
+                    while m != 0 {
+                        let l = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        hit(i + l, ta[l], qa[l], Eigen2 { cos: ca[l], sin: sa[l], s1: s1a[l], s2: s2a[l] });
+                    }
+                }
+                i += 8;
             }
-        };
-        let a = co * x + sn * y;
-        let b = co * y - sn * x;
-        let q = a * a / (s1 * s1) + b * b / (s2 * s2);
-        let ok = q.simd_le(qcut) & t.simd_ge(tmin) & t.simd_le(tmax);
-        let mut m = ok.to_bitmask() as u32;
-        if n - i < 8 {
-            m &= (1u32 << (n - i)) - 1;
         }
-        if m != 0 {
-            let (xa, ya, ta, qa) = (x.to_array(), y.to_array(), t.to_array(), q.to_array());
-            let (ca, sa, s1a, s2a) = (co.to_array(), sn.to_array(), s1.to_array(), s2.to_array());
-            while m != 0 {
-                let l = m.trailing_zeros() as usize;
-                m &= m - 1;
-                hit(i + l, Vec3::new(xa[l], ya[l], ta[l]), qa[l], Eigen2 { cos: ca[l], sin: sa[l], s1: s1a[l], s2: s2a[l] });
-            }
-        }
-        i += 8;
     }
 }
 
@@ -1066,7 +1100,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let inv_s = 1.0 / s;
         let share = POINT_MARGIN * h * h / (std::f32::consts::PI * MASS_IN_CUT);
         let pts = &tree.points;
-        point_q_x8(lc, &blk, if exact { None } else { Some(boxe) }, self.p.clamp, self.floor * s, |i, p, q, e| {
+        point_q_x8(lc, &blk, if exact { None } else { Some(boxe) }, self.p.clamp, self.floor * s, |i, t, q, e| {
             let j = start + i;
             let n_obj = quant::oct_decode(pts.normal[j]);
             let cos = n_obj.dot(lc.dir).abs();
@@ -1074,7 +1108,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             if !(w > 0.0) {
                 return;
             }
-            let t = p.z * inv_s;
+            let t = t * inv_s;
             let dz = self.p.depth_tol * h * inv_s;
             let mut f = Frag { z0: t - dz, z1: t + dz, w, wt: w * t, best_w: w, ..Default::default() };
             if mode == Collect::Shade {
