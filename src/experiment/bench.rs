@@ -338,6 +338,13 @@ pub struct DiffFloor {
     pub lod_pixels_above_floor_max: u64,
 }
 
+impl DiffFloor {
+    /// "max / 99th / mean" in per cent, for the tables.
+    pub fn summary(&self) -> String {
+        format!("{:.1} % / {:.1} % / {:.2} %", 100.0 * self.max_pixel_diff, 100.0 * self.p99_pixel_diff, 100.0 * self.mean_pixel_diff)
+    }
+}
+
 /// (max, index of max, 99th percentile, mean) of a per-pixel difference.
 fn diff_summary(d: &[f32]) -> (f32, usize, f32, f64) {
     let (imax, dmax) = d.iter().copied().enumerate().fold((0, 0.0f32), |a, (i, x)| if x > a.1 { (i, x) } else { a });
@@ -819,12 +826,7 @@ pub fn table_string(report: &BenchReport) -> String {
                 100.0 * c.max_diff_full_lod_pixels,
                 r.stats.lod.as_ref().map(|l| l.mean_query_level).unwrap_or(0.0),
                 r.stats.counters.get("lod_rays_dropped").copied().unwrap_or(0),
-                c.floor.as_ref().map_or("-".into(), |f| format!(
-                    "{:.1} % / {:.1} % / {:.2} %",
-                    100.0 * f.max_pixel_diff,
-                    100.0 * f.p99_pixel_diff,
-                    100.0 * f.mean_pixel_diff
-                )),
+                c.floor.as_ref().map_or("-".into(), DiffFloor::summary),
                 c.floor.as_ref().map_or("-".into(), |f| f.lod_pixels_above_floor_max.to_string()),
             ));
         }
