@@ -18,26 +18,34 @@ pub struct RayShear {
     mz: Vec3,
 }
 
+/// The watertight test's axes: kz the dominant axis of `dir`, (kx, ky) the other two, swapped
+/// when dir[kz] < 0 so the triangle's winding is preserved.
+#[inline(always)]
+fn axis_permutation(dir: Vec3) -> (usize, usize, usize) {
+    let a = dir.abs();
+    let kz = if a.x > a.y {
+        if a.x > a.z {
+            0
+        } else {
+            2
+        }
+    } else if a.y > a.z {
+        1
+    } else {
+        2
+    };
+    let (kx, ky) = ((kz + 1) % 3, (kz + 2) % 3);
+    if dir[kz] < 0.0 {
+        (ky, kx, kz)
+    } else {
+        (kx, ky, kz)
+    }
+}
+
 impl RayShear {
     #[inline(always)]
     pub fn new(org: Vec3, dir: Vec3) -> Self {
-        let a = dir.abs();
-        let kz = if a.x > a.y {
-            if a.x > a.z {
-                0
-            } else {
-                2
-            }
-        } else if a.y > a.z {
-            1
-        } else {
-            2
-        };
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
-        if dir[kz] < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
+        let (kx, ky, kz) = axis_permutation(dir);
         let (sx, sy, sz) = (dir[kx] / dir[kz], dir[ky] / dir[kz], 1.0 / dir[kz]);
         let mut mx = Vec3::ZERO;
         mx[kx] = 1.0;
@@ -61,10 +69,25 @@ pub fn intersect_watertight(s: &RayShear, v0: Vec3, v1: Vec3, v2: Vec3, tnear: f
     let (ax, ay) = (s.mx.dot(a), s.my.dot(a));
     let (bx, by) = (s.mx.dot(b), s.my.dot(b));
     let (cx, cy) = (s.mx.dot(c), s.my.dot(c));
+    let (u, v, w, det) = edge_functions([ax, ay, bx, by, cx, cy])?;
+    let (az, bz, cz) = (s.mz.dot(a), s.mz.dot(b), s.mz.dot(c));
+    let t_scaled = u * az + v * bz + w * cz;
+    let inv = 1.0 / det;
+    let t = t_scaled * inv;
+    if !(t >= tnear && t <= tfar) {
+        return None;
+    }
+    Some((t, v * inv, w * inv))
+}
+
+/// The 2-D part of the watertight test on the sheared vertices `[ax, ay, bx, by, cx, cy]`:
+/// the edge functions (u, v, w) with the double-precision fallback on an edge (the paper's
+/// recommendation) and their sum, or None when the ray misses or the triangle is degenerate.
+#[inline(always)]
+fn edge_functions([ax, ay, bx, by, cx, cy]: [f32; 6]) -> Option<(f32, f32, f32, f32)> {
     let mut u = cx * by - cy * bx;
     let mut v = ax * cy - ay * cx;
     let mut w = bx * ay - by * ax;
-    // Fall back to double precision on edges (the paper's recommendation).
     if u == 0.0 || v == 0.0 || w == 0.0 {
         u = (cx as f64 * by as f64 - cy as f64 * bx as f64) as f32;
         v = (ax as f64 * cy as f64 - ay as f64 * cx as f64) as f32;
@@ -77,14 +100,7 @@ pub fn intersect_watertight(s: &RayShear, v0: Vec3, v1: Vec3, v2: Vec3, tnear: f
     if det == 0.0 || !det.is_finite() {
         return None;
     }
-    let (az, bz, cz) = (s.mz.dot(a), s.mz.dot(b), s.mz.dot(c));
-    let t_scaled = u * az + v * bz + w * cz;
-    let inv = 1.0 / det;
-    let t = t_scaled * inv;
-    if !(t >= tnear && t <= tfar) {
-        return None;
-    }
-    Some((t, v * inv, w * inv))
+    Some((u, v, w, det))
 }
 
 /// Möller–Trumbore, kept as a second reference for tests (not watertight).
@@ -148,39 +164,13 @@ mod tests {
     /// The paper's formulation, indexing the vertices by the ray's axis permutation, as the
     /// reference for the matrix-row shear of [`RayShear`].
     fn watertight_indexed(org: Vec3, dir: Vec3, v: [Vec3; 3]) -> Option<(f32, f32, f32)> {
-        let a = dir.abs();
-        let kz = if a.x > a.y {
-            if a.x > a.z {
-                0
-            } else {
-                2
-            }
-        } else if a.y > a.z {
-            1
-        } else {
-            2
-        };
-        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
-        if dir[kz] < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
+        let (kx, ky, kz) = axis_permutation(dir);
         let (sx, sy, sz) = (dir[kx] / dir[kz], dir[ky] / dir[kz], 1.0 / dir[kz]);
         let [a, b, c] = v.map(|p| p - org);
-        let (ax, ay, bx, by, cx, cy) =
-            (a[kx] - sx * a[kz], a[ky] - sy * a[kz], b[kx] - sx * b[kz], b[ky] - sy * b[kz], c[kx] - sx * c[kz], c[ky] - sy * c[kz]);
-        let (mut u, mut v, mut w) = (cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax);
-        if u == 0.0 || v == 0.0 || w == 0.0 {
-            u = (cx as f64 * by as f64 - cy as f64 * bx as f64) as f32;
-            v = (ax as f64 * cy as f64 - ay as f64 * cx as f64) as f32;
-            w = (bx as f64 * ay as f64 - by as f64 * ax as f64) as f32;
-        }
-        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
-            return None;
-        }
-        let det = u + v + w;
-        if det == 0.0 || !det.is_finite() {
-            return None;
-        }
+        // The shear indexed by axis; the shared 2-D part is not what this test is about.
+        let sheared =
+            [a[kx] - sx * a[kz], a[ky] - sy * a[kz], b[kx] - sx * b[kz], b[ky] - sy * b[kz], c[kx] - sx * c[kz], c[ky] - sy * c[kz]];
+        let (u, v, w, det) = edge_functions(sheared)?;
         let t = (u * (sz * a[kz]) + v * (sz * b[kz]) + w * (sz * c[kz])) * (1.0 / det);
         (t >= 0.0).then(|| (t, v * (1.0 / det), w * (1.0 / det)))
     }
