@@ -678,6 +678,15 @@ pub fn point_q_x8(
     let n = blk.qx.len();
     let qcut = f32x8::splat(Q_CUT);
     let (tmin, tmax) = (f32x8::splat(cone.tmin), f32x8::splat(cone.tmax));
+    // Lanes with q ≤ Q_CUT inside the cone's depth range, the tail past n masked off.
+    let lanes = |q: f32x8, t: f32x8, i: usize| {
+        let m = (q.simd_le(qcut) & t.simd_ge(tmin) & t.simd_le(tmax)).to_bitmask() as u32;
+        if n - i < 8 {
+            m & ((1u32 << (n - i)) - 1)
+        } else {
+            m
+        }
+    };
     let mut i = 0;
     match boxe {
         Some(e) => {
@@ -689,10 +698,7 @@ pub fn point_q_x8(
                 let g = (load(blk.qx, i), load(blk.qy, i), load(blk.qz, i));
                 let (a, b, t) = (lin(a0, av, g), lin(b0, bv, g), lin(blk.t0, blk.at, g));
                 let q = a * a * i1 + b * b * i2;
-                let mut m = (q.simd_le(qcut) & t.simd_ge(tmin) & t.simd_le(tmax)).to_bitmask() as u32;
-                if n - i < 8 {
-                    m &= (1u32 << (n - i)) - 1;
-                }
+                let mut m = lanes(q, t, i);
                 if m != 0 {
                     let (ta, qa) = (t.to_array(), q.to_array());
                     while m != 0 {
@@ -713,10 +719,7 @@ pub fn point_q_x8(
                 let a = e.cos * x + e.sin * y;
                 let b = e.cos * y - e.sin * x;
                 let q = a * a / (e.s1 * e.s1) + b * b / (e.s2 * e.s2);
-                let mut m = (q.simd_le(qcut) & t.simd_ge(tmin) & t.simd_le(tmax)).to_bitmask() as u32;
-                if n - i < 8 {
-                    m &= (1u32 << (n - i)) - 1;
-                }
+                let mut m = lanes(q, t, i);
                 if m != 0 {
                     let (ta, qa) = (t.to_array(), q.to_array());
                     let (ca, sa, s1a, s2a) = (e.cos.to_array(), e.sin.to_array(), e.s1.to_array(), e.s2.to_array());
