@@ -6,7 +6,7 @@
 //! A method spec is `METHOD[:ACCEL][:key=value...]`, keys: `spp`, `threads`, `packet`,
 //! `fps` (distributed first-pass spp), `vt` (distributed variance threshold), `depth`; for
 //! the cone tracers (`multires`, `cone`): `k`, `c` (oversampling), `clamp`, `lod`, `dtol`,
-//! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage`;
+//! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage`, `term=paper|final`;
 //! for `lod`: `f`, `a` (a_LOD), `thres`, `sel=0` (no selective tracing), `levels`, `dist`
 //! (distance criterion), `force` (fixed LOD), `net=1` (net disparity), `select=cone` (the
 //! ray-cone selector).
@@ -142,6 +142,10 @@ impl MethodSpec {
                     "mip" => spec.multires.no_mipmap = num(v)? == 0.0,
                     "primary" => spec.multires.primary_only = num(v)? != 0.0,
                     "budget" => spec.multires.time_budget = Some(num(v)?),
+                    "term" => {
+                        spec.multires.termination = crate::multires::trace::Termination::from_str(v, true)
+                            .map_err(|_| bad(format!("term={v}: paper or final")))?
+                    }
                     "tri" => {
                         spec.multires.tri_weight = crate::multires::trace::TriWeight::from_str(v, true)
                             .map_err(|_| bad(format!("tri={v}: paper or coverage")))?
@@ -167,7 +171,7 @@ impl MethodSpec {
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen, tri; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen, tri, term; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows)"
                         )))
                     }
                 }

@@ -3,7 +3,10 @@
 //! weight sum and a depth interval. A new sample whose tolerance interval overlaps a fragment
 //! is merged into it (attributes and weights added, intervals united); otherwise it becomes a
 //! new fragment. Fragments are alpha-blended front to back with alpha = min(1, weight sum),
-//! and the ray terminates early once the alpha of the fragments it has passed reaches 1.
+//! and the ray terminates early at alpha 1: by the paper's rule once the alpha of all its
+//! fragments reaches 1 ([`ABuffer::alpha`], checked by the traversal before each node), or
+//! conservatively once the fragments lying wholly before the traversal front reach it
+//! ([`ABuffer::opaque_before`]); `--termination` in [`super::trace::Termination`].
 //!
 //! Bounded memory: at most `cap` fragments (default 16); when full, the two adjacent
 //! fragments with the smallest gap are merged (a documented approximation; it is counted in

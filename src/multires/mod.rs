@@ -62,6 +62,10 @@ pub struct MultiresArgs {
     /// Trace primary cones only (local shading, no shadow or secondary cones).
     #[arg(long)]
     pub primary_only: bool,
+    /// Early ray termination: `paper` stops a cone once the alpha of all its fragments reaches
+    /// one (§4.4); `final` waits until those fragments lie wholly before the traversal front.
+    #[arg(long, value_enum, default_value = "paper")]
+    pub termination: trace::Termination,
     /// Stop rendering after this many seconds (the frame is reported as unfinished).
     #[arg(long)]
     pub time_budget: Option<f64>,
@@ -83,6 +87,7 @@ impl Default for MultiresArgs {
             no_mipmap: !t.mipmap,
             primary_only: t.primary_only,
             time_budget: t.time_budget,
+            termination: t.termination,
         }
     }
 }
@@ -100,6 +105,7 @@ impl MultiresArgs {
             mipmap: !self.no_mipmap,
             primary_only: self.primary_only,
             time_budget: self.time_budget,
+            termination: self.termination,
             points,
             ..Default::default()
         };

@@ -39,7 +39,7 @@
 //! avoided, as in the paper, by a minimum distance from the outgoing cone's footprint size
 //! and angle.
 
-use super::abuffer::{ABuffer, Elem, Frag};
+use super::abuffer::{ABuffer, Elem, Frag, OPAQUE};
 use super::build::{mat_props, BuildParams, PointTree, NO_CHILD};
 use super::cone::{self, Cone, Outgoing};
 use super::quant;
@@ -87,6 +87,20 @@ pub enum TriWeight {
     Coverage,
 }
 
+/// When a cone stops (§4.4, "early ray termination").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Termination {
+    /// The paper's rule: the alpha of the whole ray, all fragments composited front to back,
+    /// is tracked at each intersection event and the ray stops when it reaches one. A fragment
+    /// that straddles the traversal front stops growing then, so its colour is the weighted
+    /// mean of the footprint part swept so far.
+    Paper,
+    /// Conservative: only fragments that end before the traversal front count, so every
+    /// fragment is complete when the ray stops (a grazing cone sweeps its whole footprint).
+    Final,
+}
+
 /// ½·erfc(x) (Abramowitz & Stegun 7.1.26, |error| < 1.5e-7).
 #[inline]
 pub fn half_erfc(x: f32) -> f32 {
@@ -126,6 +140,8 @@ pub struct TraceParams {
     pub primary_only: bool,
     /// Stop the render after this many seconds (the frame is then reported as unfinished).
     pub time_budget: Option<f64>,
+    /// Early ray termination rule (§4.4).
+    pub termination: Termination,
 }
 
 impl Default for TraceParams {
@@ -143,6 +159,7 @@ impl Default for TraceParams {
             min_importance: 1e-3,
             primary_only: false,
             time_budget: None,
+            termination: Termination::Paper,
         }
     }
 }
@@ -919,7 +936,11 @@ impl<'s, 'a> Tracer<'s, 'a> {
         sc.heap.push(Entry { t: root.t_near[0], node: 0, slot: 0, blend: 1.0, kind: K_TLAS });
         let mut steps = 0u32;
         while let Some(e) = sc.heap.pop() {
-            if ab.opaque_before(e.t) {
+            let done = match self.p.termination {
+                Termination::Paper => ab.alpha() >= OPAQUE,
+                Termination::Final => ab.opaque_before(e.t),
+            };
+            if done {
                 break;
             }
             steps += 1;
