@@ -387,7 +387,20 @@ pub struct NodeHits {
     pub mask: u8,
     pub t_near: [f32; 8],
     pub t_centre: [f32; 8],
+    /// The footprint's decomposition at each passing sphere's centre depth, without the
+    /// anisotropy clamp (apply it with [`clamp_eigen`]): the per-box decomposition of §5.2
+    /// when that node is visited, so the visit does not solve it again.
+    pub eig: [Eigen2; 8],
 }
+
+/// The anisotropy clamp (§5.1) applied to a decomposition solved without it: the same as
+/// `eigen_1(Σ, clamp, floor)` given `e = eigen_1(Σ, ε, floor)` with ε ≤ clamp.
+#[inline]
+pub fn clamp_eigen(e: &Eigen2, clamp: f32) -> Eigen2 {
+    Eigen2 { s2: e.s2.max(clamp * e.s1), ..*e }
+}
+
+const NO_EIG: Eigen2 = Eigen2 { cos: 1.0, sin: 0.0, s1: 0.0, s2: 0.0 };
 
 /// Conservative extents of the footprint along the node's principal axes over [t_lo, t_hi].
 #[inline]
@@ -401,7 +414,7 @@ fn ext2(e: &Eigen2, s_lo: Sym2, s_hi: Sym2, clamp: f32) -> (f32, f32) {
 
 /// Scalar reference of the node test (§4.6).
 pub fn node_test_1(cone: &Cone, cx: &[f32], cy: &[f32], cz: &[f32], r: &[f32], clamp: f32, floor: f32) -> NodeHits {
-    let mut out = NodeHits { mask: 0, t_near: [f32::INFINITY; 8], t_centre: [0.0; 8] };
+    let mut out = NodeHits { mask: 0, t_near: [f32::INFINITY; 8], t_centre: [0.0; 8], eig: [NO_EIG; 8] };
     for l in 0..cx.len().min(8) {
         let rr = r[l];
         if !(rr >= 0.0) {
@@ -422,6 +435,7 @@ pub fn node_test_1(cone: &Cone, cx: &[f32], cy: &[f32], cz: &[f32], r: &[f32], c
             out.mask |= 1 << l;
             out.t_near[l] = p.z - rr;
             out.t_centre[l] = p.z;
+            out.eig[l] = e;
         }
     }
     out
@@ -465,11 +479,13 @@ pub fn node_test_x8(cone: &Cone, cx: &[f32; 8], cy: &[f32; 8], cz: &[f32; 8], r:
     let mask = ok.to_bitmask() as u8;
     let tn = (t - rv).to_array();
     let tcs = t.to_array();
-    let mut out = NodeHits { mask, t_near: [f32::INFINITY; 8], t_centre: [0.0; 8] };
+    let (co, sn, s1, s2) = (e.cos.to_array(), e.sin.to_array(), e.s1.to_array(), e.s2.to_array());
+    let mut out = NodeHits { mask, t_near: [f32::INFINITY; 8], t_centre: [0.0; 8], eig: [NO_EIG; 8] };
     for l in 0..8 {
         if mask & (1 << l) != 0 {
             out.t_near[l] = tn[l];
             out.t_centre[l] = tcs[l];
+            out.eig[l] = Eigen2 { cos: co[l], sin: sn[l], s1: s1[l], s2: s2[l] };
         }
     }
     out
@@ -857,6 +873,8 @@ struct Entry {
     slot: u32,
     blend: f32,
     kind: u8,
+    /// Octree nodes: index into `Scratch::eigs` of the node test's decomposition.
+    eig: u32,
 }
 const K_TLAS: u8 = 0;
 const K_OCT: u8 = 1;
@@ -891,11 +909,12 @@ struct Local {
 pub struct Scratch {
     heap: BinaryHeap<Entry>,
     locals: Vec<Local>,
+    eigs: Vec<Eigen2>,
 }
 
 impl Default for Scratch {
     fn default() -> Self {
-        Scratch { heap: BinaryHeap::with_capacity(256), locals: Vec::with_capacity(64) }
+        Scratch { heap: BinaryHeap::with_capacity(256), locals: Vec::with_capacity(64), eigs: Vec::with_capacity(1024) }
     }
 }
 
@@ -926,6 +945,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         }
         sc.heap.clear();
         sc.locals.clear();
+        sc.eigs.clear();
         let clamp = self.p.clamp;
         let floor = self.floor;
         let root = node_test_1(cone, &tl.cx[..1], &tl.cy[..1], &tl.cz[..1], &tl.r[..1], clamp, floor);
@@ -933,7 +953,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         if root.mask & 1 == 0 {
             return;
         }
-        sc.heap.push(Entry { t: root.t_near[0], node: 0, slot: 0, blend: 1.0, kind: K_TLAS });
+        sc.heap.push(Entry { t: root.t_near[0], node: 0, slot: 0, blend: 1.0, kind: K_TLAS, eig: u32::MAX });
         let mut steps = 0u32;
         while let Some(e) = sc.heap.pop() {
             let done = match self.p.termination {
@@ -960,7 +980,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
                     if h.mask & 1 != 0 {
                         sc.locals.push(Local { cone: lc, scale: s, leaf: li });
                         let slot = (sc.locals.len() - 1) as u32;
-                        sc.heap.push(Entry { t: h.t_near[0] / s, node: 0, slot, blend: 1.0, kind: K_OCT });
+                        sc.eigs.push(h.eig[0]);
+                        let eig = (sc.eigs.len() - 1) as u32;
+                        sc.heap.push(Entry { t: h.t_near[0] / s, node: 0, slot, blend: 1.0, kind: K_OCT, eig });
                     }
                 } else {
                     let f = ch as usize;
@@ -971,7 +993,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                     while m != 0 {
                         let l = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        sc.heap.push(Entry { t: h.t_near[l], node: (f + l) as u32, slot: 0, blend: 1.0, kind: K_TLAS });
+                        sc.heap.push(Entry { t: h.t_near[l], node: (f + l) as u32, slot: 0, blend: 1.0, kind: K_TLAS, eig: u32::MAX });
                     }
                 }
                 continue;
@@ -1004,10 +1026,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let n = e.node as usize;
         let nodes = &tree.nodes;
         let clamp = self.p.clamp;
-        let lf = self.floor * s;
-        let tc = lc.coords(Vec3::new(nodes.cx[n], nodes.cy[n], nodes.cz[n])).z.max(0.0);
-        let boxe = eigen_1(lc.sigma(tc), clamp, lf);
-        c.inc(Counter::eigen_decompositions);
+        // The per-box decomposition at the node's centre depth, solved by the node test that
+        // admitted this node; only the anisotropy clamp is left to apply.
+        let boxe = clamp_eigen(&sc.eigs[e.eig as usize], clamp);
         // 3. Triangles stored here: with the per-box decomposition, 8 bounding spheres at a
         // time through the exact prefilter first (most stored triangles are large ones far
         // off the footprint: on `complex` 94% of full tests found no weight).
@@ -1093,7 +1114,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
         while m != 0 {
             let l = m.trailing_zeros() as usize;
             m &= m - 1;
-            sc.heap.push(Entry { t: h.t_near[l] / s, node: (f + l) as u32, slot, blend, kind });
+            sc.eigs.push(h.eig[l]);
+            let eig = (sc.eigs.len() - 1) as u32;
+            sc.heap.push(Entry { t: h.t_near[l] / s, node: (f + l) as u32, slot, blend, kind, eig });
         }
     }
 
@@ -1443,6 +1466,31 @@ mod tests {
         let mut c = Cone::new(Vec3::new(s.next(), s.next(), s.next()), dir, &[(fs, fp)]);
         c.tmin = s.next() * 0.5;
         c
+    }
+
+    /// The visit reuses the node test's unclamped decomposition: clamping it afterwards is
+    /// bit-identical to solving with the clamp, for footprints from round to degenerate and
+    /// floors that bind or not.
+    #[test]
+    fn clamp_after_the_node_test_equals_solving_with_it() {
+        let mut s = Sampler::new(11, 0, 0);
+        for i in 0..5000 {
+            let cone = rnd_cone(&mut s);
+            let t = s.next() * 20.0 - 1.0;
+            let floor = if i % 3 == 0 { 1e-7 } else { s.next() * 0.05 };
+            let clamp = [1.0 / 16.0, 0.125, 0.25, 1.0][i % 4];
+            let m = cone.sigma(t.max(0.0));
+            let want = eigen_1(m, clamp, floor);
+            let got = clamp_eigen(&eigen_1(m, 1.0e-9, floor), clamp);
+            assert_eq!((got.cos, got.sin, got.s1, got.s2), (want.cos, want.sin, want.s1, want.s2), "Σ {m:?} clamp {clamp} floor {floor}");
+        }
+        // And the node tests hand it over for every passing lane.
+        let cone = rnd_cone(&mut s);
+        let c = cone.org + cone.dir * 3.0;
+        let h = node_test_x8(&cone, &[c.x; 8], &[c.y; 8], &[c.z; 8], &[0.5; 8], 0.125, 1e-7);
+        assert_eq!(h.mask, 0xff);
+        let e = eigen_1(cone.sigma(h.t_centre[0].max(0.0)), 1.0e-9, 1e-7);
+        assert!((h.eig[3].s1 - e.s1).abs() <= 1e-5 * e.s1 && (h.eig[3].s2 - e.s2).abs() <= 1e-5 * e.s1);
     }
 
     #[test]
