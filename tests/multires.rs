@@ -123,6 +123,55 @@ fn point_weight_sums_cover_the_surface() {
     assert!(min >= 0.9, "a weight sum of {min} inside the surface ({sums:?})");
 }
 
+/// Area point weights (the default; a documented deviation): a diagonal plane's interior
+/// sums to ≈ 1 like an axis-aligned one, where the paper's whole-voxel weights give about
+/// |n_x| + |n_y| + |n_z| (the voxels a plane crosses per h² of its area).
+#[test]
+fn area_point_weights_sum_to_one_at_any_orientation() {
+    use lodtrace::multires::build::PointWeights;
+    let mean_sum = |weights: PointWeights, tilt: bool| {
+        let mut scene = square_scene(Vec3::splat(0.5), 4.0);
+        if tilt {
+            // The hierarchy is built in mesh space, so turn the vertices themselves: normal
+            // (1, 1, 1)/√3, the worst case for whole-voxel weights (√3). The square's
+            // instance turns +y to +z; undo that here and aim the camera along the normal.
+            let n = Vec3::ONE.normalize();
+            let r = glam::Quat::from_rotation_arc(Vec3::Y, n);
+            let m = &mut scene.meshes[0];
+            for v in 0..m.px.len() {
+                let p = r * Vec3::new(m.px[v], m.py[v], m.pz[v]);
+                (m.px[v], m.py[v], m.pz[v]) = (p.x, p.y, p.z);
+                let q = r * Vec3::new(m.nx[v], m.ny[v], m.nz[v]);
+                (m.nx[v], m.ny[v], m.nz[v]) = (q.x, q.y, q.z);
+            }
+            let root = scene.root as usize;
+            scene.groups[root].children[0].xform = Affine3A::IDENTITY;
+            scene.camera.eye = n * 4.0;
+            scene.camera.up = Vec3::Z;
+        }
+        let ms = MultiresScene::build(&scene, &BuildParams { weights, ..Default::default() }).unwrap();
+        let tp = TraceParams { cone_scale: 6.0, termination: Termination::Final, ..Default::default() };
+        let abort = AtomicBool::new(false);
+        let tr = Tracer { ms: &ms, p: &tp, floor: 1e-7, abort: &abort, deadline: None };
+        let cam = scene.camera.frame(64, 64);
+        let (mut sc, mut c) = (Scratch::default(), Counters::default());
+        let mut sums = vec![];
+        for (i, j) in [(32, 32), (29, 30), (35, 34), (30, 35), (34, 29)] {
+            let mut ab = ABuffer::new(16);
+            tr.traverse(&Cone::primary(&cam, i, j, 6.0), &mut ab, Collect::Alpha, &mut sc, &mut c);
+            sums.push(ab.frags.first().map(|f| f.w).unwrap_or(0.0));
+        }
+        assert!(c.get(lodtrace::core::stats::Counter::surfel_tests) > 0);
+        sums.iter().sum::<f32>() / sums.len() as f32
+    };
+    let (flat, diag) = (mean_sum(PointWeights::Area, false), mean_sum(PointWeights::Area, true));
+    let (vflat, vdiag) = (mean_sum(PointWeights::Voxel, false), mean_sum(PointWeights::Voxel, true));
+    for s in [flat, diag, vflat] {
+        assert!((1.0..1.3).contains(&s), "area {flat} / {diag}, voxel {vflat} / {vdiag}");
+    }
+    assert!(vdiag > 1.3 * diag, "area {flat} / {diag}, voxel {vflat} / {vdiag}");
+}
+
 /// A black-and-white checkerboard seen at a grazing angle: high-contrast edges everywhere.
 fn edge_scene() -> Scene {
     let mut s = Scene::empty("edges");

@@ -55,11 +55,28 @@ pub struct BuildParams {
     /// Depth limit of the octree.
     pub max_depth: u32,
     pub seed: u32,
+    /// What surface area a point's weight stands for (see [`PointWeights`]).
+    pub weights: PointWeights,
+}
+
+/// The surface area behind a point's weight (§4.4: weight sums ≥ 1 inside a surface).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PointWeights {
+    /// *Deviation from the paper:* the area of the node's surface inside the point's voxel,
+    /// counted from the c·A/h² random samples (samples in the voxel / c, in h²). Weight sums
+    /// are then ≈ 1 on surfaces of any orientation, and a voxel holding a small piece of a
+    /// thin or sparse surface (a leaf) weighs as little as that piece: the paper's
+    /// overestimated opacity of coarse foliage and silhouettes (its §7) shrinks.
+    Area,
+    /// As the paper: every point stands for a whole voxel face h² (sums ≈ 1 on axis-aligned
+    /// planes, up to √3 on diagonal ones; a leaf corner in a voxel counts as a full face).
+    Voxel,
 }
 
 impl Default for BuildParams {
     fn default() -> Self {
-        BuildParams { k: 4, c: 100.0, stay_reps: 3, max_depth: 20, seed: 0 }
+        BuildParams { k: 4, c: 100.0, stay_reps: 3, max_depth: 20, seed: 0, weights: PointWeights::Area }
     }
 }
 
@@ -144,6 +161,8 @@ pub struct PointSoa {
     pub qz: Vec<u8>,
     /// Average normal, octahedral 2×16 bit.
     pub normal: Vec<[u16; 2]>,
+    /// Surface area the point stands for, in h² ([`quant::encode_cover`]).
+    pub cover: Vec<u8>,
     /// Average colour (square-root 8-bit code over [0, `MatRanges::color_hi`]).
     pub rgb: Vec<[u8; 3]>,
     /// kd, ks, shininess, reflect, transmit, ior, roughness (8 bit over `MatRanges`).
@@ -160,7 +179,7 @@ impl PointSoa {
         self.qx.is_empty()
     }
     fn bytes(&self) -> usize {
-        self.len() * (3 + 4 + 3 + 7 + 8)
+        self.len() * (3 + 4 + 1 + 3 + 7 + 8)
     }
 }
 
@@ -321,6 +340,7 @@ struct Ctx<'a> {
 struct RawPoint {
     g: [u8; 3],
     normal: [u16; 2],
+    cover: u8,
     rgb: [u8; 3],
     mat: [u8; 7],
     grad: [u16; 4],
@@ -434,6 +454,7 @@ pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<Po
             points.qy.push(p.g[1]);
             points.qz.push(p.g[2]);
             points.normal.push(p.normal);
+            points.cover.push(p.cover);
             points.rgb.push(p.rgb);
             points.mat.push(p.mat);
             points.grad.push(p.grad);
@@ -651,9 +672,15 @@ fn build_node(ctx: &Ctx, tris: Vec<u32>, cube_lo: Vec3, side: f32, depth: u32) -
             let (gu, gv) = fit_gradient(&mm, &rhs);
             // (u, v) were in voxel units: divide by h for ∂n per unit length.
             let (gu, gv) = (gu / h, gv / h);
+            let area = match ctx.p.weights {
+                // Samples in this voxel at c per h² of surface.
+                PointWeights::Area => (counts[cell as usize + 1] - counts[cell as usize]) as f32 / ctx.p.c,
+                PointWeights::Voxel => 1.0,
+            };
             out.push(RawPoint {
                 g: [cx as u8, cy as u8, cz as u8],
                 normal: ncode,
+                cover: quant::encode_cover(area),
                 rgb: [
                     quant::encode_color(col.x * inv, ctx.ranges.color_hi),
                     quant::encode_color(col.y * inv, ctx.ranges.color_hi),

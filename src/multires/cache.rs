@@ -31,7 +31,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Version of the cached layout *and* of the builder's output: bump on any change to either.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 const MAGIC: [u8; 8] = *b"LTPTREE\0";
 /// magic, version, key, payload length, checksum.
 const HEADER: usize = 8 + 4 + 8 + 8 + 8;
@@ -74,8 +74,8 @@ pub fn key(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> u64 {
     h.write(b"lodtrace-pointtree");
     h.write_u32(FORMAT_VERSION);
     h.write(env!("CARGO_PKG_VERSION").as_bytes());
-    let BuildParams { k, c, stay_reps, max_depth, seed } = params; // every field (a new one fails to compile here)
-    for x in [*k, c.to_bits(), *stay_reps, *max_depth, *seed] {
+    let BuildParams { k, c, stay_reps, max_depth, seed, weights } = params; // every field (a new one fails to compile here)
+    for x in [*k, c.to_bits(), *stay_reps, *max_depth, *seed, *weights as u32] {
         h.write_u32(x);
     }
     for v in [&mesh.px, &mesh.py, &mesh.pz, &mesh.nx, &mesh.ny, &mesh.nz] {
@@ -228,6 +228,7 @@ pub fn encode(t: &PointTree, key: u64) -> Vec<u8> {
         w.u8s(v);
     }
     w.u16s(p.normal.iter().flatten());
+    w.u8s(&p.cover);
     p.rgb.iter().for_each(|c| w.u8s(c));
     p.mat.iter().for_each(|m| w.u8s(m));
     w.u16s(p.grad.iter().flatten());
@@ -287,6 +288,7 @@ pub fn decode(b: &[u8], key: u64, n_tris: usize, params: &BuildParams) -> Option
         qy: r.u8s(np)?,
         qz: r.u8s(np)?,
         normal: r.u16_arrays::<2>(np)?,
+        cover: r.u8s(np)?,
         rgb: r.arrays::<3>(np)?,
         mat: r.arrays::<7>(np)?,
         grad: r.u16_arrays::<4>(np)?,

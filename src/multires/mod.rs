@@ -35,6 +35,11 @@ pub struct MultiresArgs {
     /// Oversampling factor c of the point prefiltering (paper: typically 100).
     #[arg(long, default_value_t = 100.0)]
     pub oversampling: f32,
+    /// Surface area behind a point's weight: `area` (the samples' area in its voxel; the
+    /// default, a deviation that reduces the paper's overestimated opacity of sparse
+    /// geometry) or `voxel` (a whole voxel face, as the paper).
+    #[arg(long, value_enum, default_value = "area")]
+    pub point_weights: build::PointWeights,
     /// Anisotropy limit: the minor footprint axis is at least this fraction of the major (paper: 1/4..1/16).
     #[arg(long, default_value_t = 0.125)]
     pub anisotropy_clamp: f32,
@@ -78,6 +83,7 @@ impl Default for MultiresArgs {
         MultiresArgs {
             k: b.k,
             oversampling: b.c,
+            point_weights: b.weights,
             anisotropy_clamp: t.clamp,
             lod_scale: t.lod_scale,
             depth_tolerance: t.depth_tol,
@@ -94,7 +100,7 @@ impl Default for MultiresArgs {
 
 impl MultiresArgs {
     pub fn params(&self, points: bool) -> Result<(BuildParams, TraceParams)> {
-        let b = BuildParams { k: self.k, c: self.oversampling, ..Default::default() };
+        let b = BuildParams { k: self.k, c: self.oversampling, weights: self.point_weights, ..Default::default() };
         let t = TraceParams {
             clamp: self.anisotropy_clamp,
             lod_scale: self.lod_scale,

@@ -79,6 +79,23 @@ pub fn oct_decode(c: [u16; 2]) -> Vec3 {
     Vec3::new(xx, yy, z).normalize()
 }
 
+/// Largest surface area a point can stand for, in voxel faces h² (foliage folds several
+/// leaves into one voxel; a plane cuts at most √2·h²).
+pub const COVER_MAX: f32 = 4.0;
+
+/// Surface area per point in units of h², 8 bit linear over [0, `COVER_MAX`] (step 1/64).
+#[inline]
+pub fn encode_cover(a: f32) -> u8 {
+    if !a.is_finite() {
+        return 0;
+    }
+    (a / COVER_MAX * 255.0).round().clamp(0.0, 255.0) as u8
+}
+#[inline]
+pub fn decode_cover(c: u8) -> f32 {
+    c as f32 * (COVER_MAX / 255.0)
+}
+
 /// ∇n = (∂n/∂u, ∂n/∂v), each a 2-vector in the point's tangent frame, as four halves.
 #[inline]
 pub fn encode_grad(gu: Vec2, gv: Vec2) -> [u16; 4] {

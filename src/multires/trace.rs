@@ -1151,7 +1151,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             let j = start + i;
             let n_obj = quant::oct_decode(pts.normal[j]);
             let cos = n_obj.dot(lc.dir).abs();
-            let w = (-q).exp() * blend * share * cos / (e.s1 * e.s2);
+            let w = (-q).exp() * blend * share * quant::decode_cover(pts.cover[j]) * cos / (e.s1 * e.s2);
             if !(w > 0.0) {
                 return;
             }
