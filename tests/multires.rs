@@ -125,7 +125,7 @@ fn point_weight_sums_cover_the_surface() {
 
 /// Area point weights (the default; a documented deviation): a diagonal plane's interior
 /// sums to ≈ 1 like an axis-aligned one, where the paper's whole-voxel weights give about
-/// |n_x| + |n_y| + |n_z| (the voxels a plane crosses per h² of its area).
+/// |n_x| + |n_y| + |n_z| or more (measured: 1.09 against 2.65 on the (1, 1, 1) plane).
 #[test]
 fn area_point_weights_sum_to_one_at_any_orientation() {
     use lodtrace::multires::build::PointWeights;
