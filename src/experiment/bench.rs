@@ -6,7 +6,7 @@
 //! A method spec is `METHOD[:ACCEL][:key=value...]`, keys: `spp`, `threads`, `packet`,
 //! `fps` (distributed first-pass spp), `vt` (distributed variance threshold), `depth`; for
 //! the cone tracers (`multires`, `cone`): `k`, `c` (oversampling), `clamp`, `lod`, `dtol`,
-//! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage`, `term=paper|final`, `pw=area|voxel`;
+//! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage|mass`, `term=paper|final`, `pw=area|voxel`;
 //! for `lod`: `f`, `a` (a_LOD), `thres`, `sel=0` (no selective tracing), `levels`, `dist`
 //! (distance criterion), `force` (fixed LOD), `net=1` (net disparity), `select=cone` (the
 //! ray-cone selector).
@@ -152,7 +152,7 @@ impl MethodSpec {
                     }
                     "tri" => {
                         spec.multires.tri_weight = crate::multires::trace::TriWeight::from_str(v, true)
-                            .map_err(|_| bad(format!("tri={v}: paper or coverage")))?
+                            .map_err(|_| bad(format!("tri={v}: paper, coverage or mass")))?
                     }
                     "f" => spec.lod.lod_f = num(v)? as f32,
                     "a" => spec.lod.lod_a = num(v)? as f32,
