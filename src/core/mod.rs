@@ -6,6 +6,18 @@ pub mod stats;
 
 use glam::Vec3;
 
+/// The SIMD level this binary was compiled for (`wide::f32x8` is one AVX register with
+/// AVX, two SSE registers otherwise): part of every benchmark's provenance.
+pub const SIMD_LEVEL: &str = if cfg!(all(target_feature = "avx2", target_feature = "fma")) {
+    "avx2+fma"
+} else if cfg!(target_feature = "avx") {
+    "avx"
+} else if cfg!(target_feature = "sse2") {
+    "sse2"
+} else {
+    "scalar"
+};
+
 /// An orthonormal frame (t, b, n) around a unit normal (Duff et al. 2017, branchless ONB).
 #[inline]
 pub fn onb(n: Vec3) -> (Vec3, Vec3) {

@@ -401,6 +401,8 @@ pub fn diff_image(d: &[f32], w: u32, h: u32) -> image::RgbImage {
 pub struct BenchReport {
     pub width: u32,
     pub height: u32,
+    /// SIMD level of the binary ([`crate::core::SIMD_LEVEL`]).
+    pub simd: &'static str,
     pub reference: Option<String>,
     pub rows: Vec<BenchRow>,
     /// `surfel` specs on deforming sequences (Adams et al.).
@@ -500,7 +502,7 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
             std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
         }
         let deform = super::deform_bench::run(&a.scenes, &specs, a.width, a.height, a.threads, a.repeat, a.out.as_deref(), a.quiet)?;
-        let report = BenchReport { width: a.width, height: a.height, reference: None, rows: Vec::new(), deform };
+        let report = BenchReport { width: a.width, height: a.height, simd: crate::core::SIMD_LEVEL, reference: None, rows: Vec::new(), deform };
         if let Some(out) = &a.out {
             write_outputs(out, &report)?;
         }
@@ -627,7 +629,7 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
             }
         }
     }
-    let report = BenchReport { width: a.width, height: a.height, reference: a.reference.clone(), rows, deform: Vec::new() };
+    let report = BenchReport { width: a.width, height: a.height, simd: crate::core::SIMD_LEVEL, reference: a.reference.clone(), rows, deform: Vec::new() };
     if let Some(out) = &a.out {
         write_outputs(out, &report)?;
     }
@@ -749,9 +751,10 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
 pub fn table_string(report: &BenchReport) -> String {
     let mut s = String::new();
     s.push_str(&format!(
-        "{}x{}{}\n\n",
+        "{}x{}, SIMD {}{}\n\n",
         report.width,
         report.height,
+        report.simd,
         report.reference.as_ref().map(|r| format!(", errors against {r}")).unwrap_or_default()
     ));
     if report.rows.is_empty() && !report.deform.is_empty() {

@@ -87,6 +87,8 @@ pub struct Stats {
     pub mesh_bytes: usize,
     /// Peak resident memory of the process so far (Linux VmHWM), bytes.
     pub peak_rss_bytes: u64,
+    /// SIMD level of the binary ([`crate::core::SIMD_LEVEL`]).
+    pub simd: &'static str,
     /// False when `--time-budget` stopped the render before the last tile.
     pub finished: bool,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -209,6 +211,7 @@ impl RunResult {
             accel_bytes: self.accel_bytes,
             mesh_bytes: scene.mesh_bytes(),
             peak_rss_bytes: peak_rss_bytes(),
+            simd: crate::core::SIMD_LEVEL,
             finished: self.finished,
             hierarchy: self.hierarchy.clone(),
             lod: self.lod.as_ref().map(|l| l.stats.clone()),
