@@ -172,6 +172,68 @@ fn area_point_weights_sum_to_one_at_any_orientation() {
     assert!(vdiag > 1.3 * diag, "area {flat} / {diag}, voxel {vflat} / {vdiag}");
 }
 
+/// Normal spread (the default; a documented deviation): a cloud of small, randomly turned
+/// facets (foliage) seen from far, lit from the side. Its true mean diffuse cosine, normals
+/// flipped to the viewer and spread over that hemisphere, is (1 + v·l)/4 = 1/4; the paper's
+/// single averaged normal lights the aggregate like one surface. Local shading
+/// (`primary_only`, no shadows), so the answer is known.
+#[test]
+fn normal_spread_shades_aggregates_by_their_mean_cosine() {
+    let mut s = Scene::empty("foliage");
+    s.materials[0] = Material::diffuse("leaf", Vec3::splat(0.8));
+    let mut m = Mesh::new("cloud");
+    let mut h = 0x9e37_79b9u32;
+    let mut rnd = || {
+        h ^= h << 13;
+        h ^= h >> 17;
+        h ^= h << 5;
+        h as f32 / u32::MAX as f32
+    };
+    for _ in 0..6000 {
+        let c = Vec3::new(rnd(), rnd(), rnd()) * 2.0 - Vec3::ONE;
+        let a = Vec3::new(rnd(), rnd(), rnd()) * 2.0 - Vec3::ONE;
+        let b = Vec3::new(rnd(), rnd(), rnd()) * 2.0 - Vec3::ONE;
+        let (i, j, k) = (m.push_vertex(c), m.push_vertex(c + a * 0.08), m.push_vertex(c + b * 0.08));
+        m.push_tri(i, j, k, 0);
+    }
+    m.compute_normals();
+    let id = s.add_mesh(m);
+    s.instance(Target::Mesh(id), Affine3A::IDENTITY, None);
+    let d = 12.0;
+    s.camera = Camera { eye: Vec3::new(0.0, 0.0, d), look: Vec3::ZERO, up: Vec3::Y, fovy: 20.0, aperture: 0.0, focal_dist: d };
+    // Light from the side (l ⊥ v), far, irradiance 1 at the cloud.
+    s.lights.push(Light::Point { pos: Vec3::new(1000.0, 0.0, 0.0), intensity: Vec3::splat(1.0e6) });
+    s.ambient = Vec3::ZERO;
+    s.background = Vec3::ZERO;
+    s.validate().unwrap();
+    let ms = MultiresScene::build(&s, &BuildParams::default()).unwrap();
+    let cam = s.camera.frame(32, 32);
+    let shade = |normal_spread: bool| {
+        let tp = TraceParams { cone_scale: 6.0, primary_only: true, normal_spread, ..Default::default() };
+        let abort = AtomicBool::new(false);
+        let tr = Tracer { ms: &ms, p: &tp, floor: 1e-7, abort: &abort, deadline: None };
+        let mut ss = ShadeScratch::new(16, s.max_depth);
+        let mut c = Counters::default();
+        let mut sum = 0.0;
+        let mut n = 0;
+        for j in 12..20 {
+            for i in 12..20 {
+                let r = tr.radiance(&Cone::primary(&cam, i, j, 6.0), 0, 1.0, &mut ss, &mut c);
+                if r.alpha > 0.9 {
+                    sum += r.color.x / r.alpha;
+                    n += 1;
+                }
+            }
+        }
+        assert!(n > 40 && c.get(lodtrace::core::stats::Counter::surfel_tests) > 0);
+        // Mean cosine: radiance = albedo/π · E · cos.
+        sum / n as f32 / (0.8 / std::f32::consts::PI)
+    };
+    let (on, off) = (shade(true), shade(false));
+    assert!((on - 0.25).abs() < 0.08, "mean cosine with spread {on}, without {off}, expected 0.25");
+    assert!((on - 0.25).abs() < (off - 0.25).abs(), "mean cosine with spread {on}, without {off}, expected 0.25");
+}
+
 /// A black-and-white checkerboard seen at a grazing angle: high-contrast edges everywhere.
 fn edge_scene() -> Scene {
     let mut s = Scene::empty("edges");

@@ -6,7 +6,7 @@
 //! A method spec is `METHOD[:ACCEL][:key=value...]`, keys: `spp`, `threads`, `packet`,
 //! `fps` (distributed first-pass spp), `vt` (distributed variance threshold), `depth`; for
 //! the cone tracers (`multires`, `cone`): `k`, `c` (oversampling), `clamp`, `lod`, `dtol`,
-//! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage|mass`, `term=paper|final`, `pw=area|voxel`;
+//! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage|mass`, `term=paper|final`, `pw=area|voxel`, `spread=0`;
 //! for `lod`: `f`, `a` (a_LOD), `thres`, `sel=0` (no selective tracing), `levels`, `dist`
 //! (distance criterion), `force` (fixed LOD), `net=1` (net disparity), `select=cone` (the
 //! ray-cone selector).
@@ -142,6 +142,7 @@ impl MethodSpec {
                     "mip" => spec.multires.no_mipmap = num(v)? == 0.0,
                     "primary" => spec.multires.primary_only = num(v)? != 0.0,
                     "budget" => spec.multires.time_budget = Some(num(v)?),
+                    "spread" => spec.multires.no_normal_spread = num(v)? == 0.0,
                     "pw" => {
                         spec.multires.point_weights = crate::multires::build::PointWeights::from_str(v, true)
                             .map_err(|_| bad(format!("pw={v}: area or voxel")))?
@@ -175,7 +176,7 @@ impl MethodSpec {
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen, tri, term, pw; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen, tri, term, pw, spread; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows)"
                         )))
                     }
                 }

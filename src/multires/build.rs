@@ -163,6 +163,9 @@ pub struct PointSoa {
     pub normal: Vec<[u16; 2]>,
     /// Surface area the point stands for, in h² ([`quant::encode_cover`]).
     pub cover: Vec<u8>,
+    /// Length of the weighted mean of the samples' normals, 8 bit over [0, 1]: 1 on a
+    /// smooth surface, less where the voxel aggregates differently facing pieces (foliage).
+    pub nlen: Vec<u8>,
     /// Average colour (square-root 8-bit code over [0, `MatRanges::color_hi`]).
     pub rgb: Vec<[u8; 3]>,
     /// kd, ks, shininess, reflect, transmit, ior, roughness (8 bit over `MatRanges`).
@@ -179,7 +182,7 @@ impl PointSoa {
         self.qx.is_empty()
     }
     fn bytes(&self) -> usize {
-        self.len() * (3 + 4 + 1 + 3 + 7 + 8)
+        self.len() * (3 + 4 + 1 + 1 + 3 + 7 + 8)
     }
 }
 
@@ -341,6 +344,7 @@ struct RawPoint {
     g: [u8; 3],
     normal: [u16; 2],
     cover: u8,
+    nlen: u8,
     rgb: [u8; 3],
     mat: [u8; 7],
     grad: [u16; 4],
@@ -455,6 +459,7 @@ pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<Po
             points.qz.push(p.g[2]);
             points.normal.push(p.normal);
             points.cover.push(p.cover);
+            points.nlen.push(p.nlen);
             points.rgb.push(p.rgb);
             points.mat.push(p.mat);
             points.grad.push(p.grad);
@@ -681,6 +686,7 @@ fn build_node(ctx: &Ctx, tris: Vec<u32>, cube_lo: Vec3, side: f32, depth: u32) -
                 g: [cx as u8, cy as u8, cz as u8],
                 normal: ncode,
                 cover: quant::encode_cover(area),
+                nlen: quant::encode_unit(nsum.length() / wsum.max(1e-30)),
                 rgb: [
                     quant::encode_color(col.x * inv, ctx.ranges.color_hi),
                     quant::encode_color(col.y * inv, ctx.ranges.color_hi),

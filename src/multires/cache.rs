@@ -31,7 +31,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Version of the cached layout *and* of the builder's output: bump on any change to either.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 const MAGIC: [u8; 8] = *b"LTPTREE\0";
 /// magic, version, key, payload length, checksum.
 const HEADER: usize = 8 + 4 + 8 + 8 + 8;
@@ -229,6 +229,7 @@ pub fn encode(t: &PointTree, key: u64) -> Vec<u8> {
     }
     w.u16s(p.normal.iter().flatten());
     w.u8s(&p.cover);
+    w.u8s(&p.nlen);
     p.rgb.iter().for_each(|c| w.u8s(c));
     p.mat.iter().for_each(|m| w.u8s(m));
     w.u16s(p.grad.iter().flatten());
@@ -289,6 +290,7 @@ pub fn decode(b: &[u8], key: u64, n_tris: usize, params: &BuildParams) -> Option
         qz: r.u8s(np)?,
         normal: r.u16_arrays::<2>(np)?,
         cover: r.u8s(np)?,
+        nlen: r.u8s(np)?,
         rgb: r.arrays::<3>(np)?,
         mat: r.arrays::<7>(np)?,
         grad: r.u16_arrays::<4>(np)?,

@@ -74,6 +74,11 @@ pub struct MultiresArgs {
     /// one (§4.4); `final` waits until those fragments lie wholly before the traversal front.
     #[arg(long, value_enum, default_value = "paper")]
     pub termination: trace::Termination,
+    /// Shade every fragment by its single averaged normal, as the paper (default: aggregates
+    /// of differently facing pieces, such as foliage, blend in the mean cosine of normals
+    /// spread over the hemisphere, by their normal spread).
+    #[arg(long)]
+    pub no_normal_spread: bool,
     /// Stop rendering after this many seconds (the frame is reported as unfinished).
     #[arg(long)]
     pub time_budget: Option<f64>,
@@ -97,6 +102,7 @@ impl Default for MultiresArgs {
             primary_only: t.primary_only,
             time_budget: t.time_budget,
             termination: t.termination,
+            no_normal_spread: !t.normal_spread,
         }
     }
 }
@@ -115,6 +121,7 @@ impl MultiresArgs {
             primary_only: self.primary_only,
             time_budget: self.time_budget,
             termination: self.termination,
+            normal_spread: !self.no_normal_spread,
             points,
             ..Default::default()
         };

@@ -79,6 +79,19 @@ pub fn oct_decode(c: [u16; 2]) -> Vec3 {
     Vec3::new(xx, yy, z).normalize()
 }
 
+/// A value in [0, 1], 8 bit linear.
+#[inline]
+pub fn encode_unit(v: f32) -> u8 {
+    if !v.is_finite() {
+        return 0;
+    }
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+#[inline]
+pub fn decode_unit(c: u8) -> f32 {
+    c as f32 * (1.0 / 255.0)
+}
+
 /// Largest surface area a point can stand for, in voxel faces h² (foliage folds several
 /// leaves into one voxel; a plane cuts at most √2·h²).
 pub const COVER_MAX: f32 = 4.0;
