@@ -503,7 +503,8 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
             std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
         }
         let deform = super::deform_bench::run(&a.scenes, &specs, a.width, a.height, a.threads, a.repeat, a.out.as_deref(), a.quiet)?;
-        let report = BenchReport { width: a.width, height: a.height, simd: crate::core::SIMD_LEVEL, reference: None, rows: Vec::new(), deform };
+        let report =
+            BenchReport { width: a.width, height: a.height, simd: crate::core::SIMD_LEVEL, reference: None, rows: Vec::new(), deform };
         if let Some(out) = &a.out {
             write_outputs(out, &report)?;
         }
@@ -630,7 +631,14 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
             }
         }
     }
-    let report = BenchReport { width: a.width, height: a.height, simd: crate::core::SIMD_LEVEL, reference: a.reference.clone(), rows, deform: Vec::new() };
+    let report = BenchReport {
+        width: a.width,
+        height: a.height,
+        simd: crate::core::SIMD_LEVEL,
+        reference: a.reference.clone(),
+        rows,
+        deform: Vec::new(),
+    };
     if let Some(out) = &a.out {
         write_outputs(out, &report)?;
     }
