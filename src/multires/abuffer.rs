@@ -85,6 +85,9 @@ pub struct ABuffer {
     /// Fragments [0, n_final) lie wholly in front of the traversal front.
     n_final: usize,
     alpha_final: f32,
+    /// Alpha of all fragments, valid unless `dirty` (an insertion since).
+    alpha_all: f32,
+    dirty: bool,
     pub merges: u64,
 }
 
@@ -93,17 +96,28 @@ pub const OPAQUE: f32 = 0.999;
 
 impl ABuffer {
     pub fn new(cap: usize) -> Self {
-        ABuffer { frags: Vec::with_capacity(cap.max(2) + 1), cap: cap.max(2), n_final: 0, alpha_final: 0.0, merges: 0 }
+        ABuffer {
+            frags: Vec::with_capacity(cap.max(2) + 1),
+            cap: cap.max(2),
+            n_final: 0,
+            alpha_final: 0.0,
+            alpha_all: 0.0,
+            dirty: false,
+            merges: 0,
+        }
     }
     pub fn clear(&mut self) {
         self.frags.clear();
         self.n_final = 0;
         self.alpha_final = 0.0;
+        self.alpha_all = 0.0;
+        self.dirty = false;
         self.merges = 0;
     }
 
     /// Inserts one sample (a fragment of a single point or triangle).
     pub fn insert(&mut self, s: Frag) {
+        self.dirty = true;
         // First fragment that does not end before the sample starts.
         let i = self.frags.partition_point(|f| f.z1 < s.z0);
         if i < self.frags.len() && self.frags[i].z0 <= s.z1 {
@@ -162,6 +176,16 @@ impl ABuffer {
         self.alpha_final >= OPAQUE
     }
 
+    /// The paper's early termination test (§4.4): has the alpha of the whole ray reached 1?
+    /// Called before every node; recomposites only after an insertion.
+    pub fn opaque(&mut self) -> bool {
+        if self.dirty {
+            self.alpha_all = self.alpha();
+            self.dirty = false;
+        }
+        self.alpha_all >= OPAQUE
+    }
+
     /// Total alpha of all fragments, front to back.
     pub fn alpha(&self) -> f32 {
         let mut a = 0.0f32;
@@ -206,6 +230,12 @@ mod tests {
         assert!(!ab.opaque_before(3.0), "not final while the front is inside it");
         assert!(ab.opaque_before(3.2));
         assert!((ab.alpha() - 1.0).abs() < 1e-6);
+        let mut ab = ABuffer::new(16);
+        assert!(!ab.opaque());
+        ab.insert(smp(1.0, 0.1, 0.6, Vec3::ONE));
+        assert!(!ab.opaque());
+        ab.insert(smp(1.05, 0.1, 0.6, Vec3::ONE));
+        assert!(ab.opaque(), "merged weight 1.2: the whole ray is opaque even with the front inside");
     }
 
     #[test]

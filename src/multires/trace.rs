@@ -39,7 +39,7 @@
 //! avoided, as in the paper, by a minimum distance from the outgoing cone's footprint size
 //! and angle.
 
-use super::abuffer::{ABuffer, Elem, Frag, OPAQUE};
+use super::abuffer::{ABuffer, Elem, Frag};
 use super::build::{mat_props, BuildParams, PointTree, NO_CHILD};
 use super::cone::{self, Cone, Outgoing};
 use super::quant;
@@ -1038,7 +1038,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let mut steps = 0u32;
         while let Some(e) = sc.heap.pop() {
             let done = match self.p.termination {
-                Termination::Paper => ab.alpha() >= OPAQUE,
+                Termination::Paper => ab.opaque(),
                 Termination::Final => ab.opaque_before(e.t),
             };
             if done {
