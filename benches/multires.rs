@@ -6,13 +6,12 @@
 //! - `tri_bound`: the exact triangle prefilter (a cone against 8 triangle bounding spheres) —
 //!   [`tri_bound_1`] lane by lane vs [`tri_bound_x8`]; the same 512 × 8 inputs as `node_test`
 //!   (empty lanes r = −∞), throughput in cone–sphere tests.
-//! - `point_q_per_box` / `point_q_exact`: the ray–point test (§4.3) of a node's point block,
-//!   with the node's one eigen-decomposition (§5.2, the default) or one per point —
-//!   [`point_q_ref`] (the reference: writes every point's q and footprint to a Vec) vs
-//!   [`point_q_x8`] (calls back the hits only); 96 blocks of 17–64 points (3 618 in all),
-//!   throughput in points. (A scalar loop in the bench with the x8 kernel's call-back contract
-//!   was tried: 35 µs vs the reference's 38 µs per box, but 205 µs vs 136 µs exact, cause not
-//!   investigated; dropped, since it is no kernel of the crate.)
+//! - `point_w_per_box` / `point_w_exact`: the ray–point weight (§4.3) of a node's point block
+//!   (exponent, cut-off, normal decode and cosine, cover, e^(−q)), with the node's one
+//!   eigen-decomposition (§5.2, the default) or one per point — [`point_w_ref`] (the
+//!   reference, point by point) vs [`point_w_x8`] (8 points a step, survivors left-packed);
+//!   both write the same list of hits (index, depth, weight) to a [`PointHits`]; 96 blocks of
+//!   17–64 points (3 618 in all), throughput in points.
 //! - `octree_spheres`: a thin ray against 8 child spheres (`--accel octree`) — [`sphere_1`]
 //!   vs [`spheres_x8`]; 512 rays × 8 spheres, throughput in ray–sphere tests.
 //! - `cone_sigma`: the squared footprint Σ(t) = a + b·t + c·t² — [`Cone::sigma`] vs
@@ -28,7 +27,8 @@ use lodtrace::core::eigen2::{eigen_1, Eigen2};
 use lodtrace::core::rng::Sampler;
 use lodtrace::multires::cone::{Cone, Fp};
 use lodtrace::multires::octree_accel::{sphere_1, spheres_x8};
-use lodtrace::multires::trace::{node_test_1, node_test_x8, point_q_ref, point_q_x8, tri_bound_1, tri_bound_x8, PointBlock, Q_CUT};
+use lodtrace::multires::quant::{encode_cover, oct_encode};
+use lodtrace::multires::trace::{node_test_1, node_test_x8, point_w_ref, point_w_x8, tri_bound_1, tri_bound_x8, PointBlock, PointHits};
 use std::hint::black_box;
 use wide::f32x8;
 
@@ -151,6 +151,8 @@ struct Block {
     qx: Vec<u8>,
     qy: Vec<u8>,
     qz: Vec<u8>,
+    normal: Vec<[u16; 2]>,
+    cover: Vec<u8>,
     grid_lo: Vec3,
     h: f32,
     /// The node's footprint at its centre depth (per-box mode, §5.2).
@@ -159,8 +161,14 @@ struct Block {
 
 impl Block {
     /// The block in ray coordinates, through the constructor [`PointBlock::new`] uses.
+    /// As in the tree, the arrays run on past the block (7 more points), so packets load
+    /// whole.
     fn view(&self) -> PointBlock<'_> {
-        PointBlock::from_grid(&self.qx, &self.qy, &self.qz, self.grid_lo, self.h, &self.cone)
+        let n = self.qx.len() - 7;
+        PointBlock {
+            n,
+            ..PointBlock::from_grid((&self.qx, &self.qy, &self.qz), &self.normal, &self.cover, self.grid_lo, self.h, &self.cone)
+        }
     }
 }
 
@@ -170,6 +178,7 @@ impl Block {
 /// footprint), with random anisotropy up to 1:4. About 70% of the points pass.
 fn point_inputs(n: usize) -> Vec<Block> {
     let mut s = Sampler::new(22, 0, 0);
+    let mut s2 = Sampler::new(22, 1, 0);
     (0..n)
         .map(|_| {
             let h = 0.01 * (1.0 + s.next());
@@ -193,43 +202,51 @@ fn point_inputs(n: usize) -> Vec<Block> {
                 qy.push(q());
                 qz.push(q());
             }
+            // The 7 points past the block, random unit normals (cos to the ray anywhere in
+            // [0, 1]) and covers of ½–2 h² from a second stream (the blocks' geometry stays
+            // that of the first version of this bench).
+            for _ in 0..7 {
+                qx.push(2 + (s2.next() * 4.0) as u8);
+                qy.push(2 + (s2.next() * 4.0) as u8);
+                qz.push(2 + (s2.next() * 4.0) as u8);
+            }
+            let normal = (0..np + 7).map(|_| oct_encode(v3(&mut s2).normalize_or(Vec3::Z))).collect();
+            let cover = (0..np + 7).map(|_| encode_cover(0.5 + 1.5 * s2.next())).collect();
             let boxe = eigen_1(cone.sigma(t), CLAMP, FLOOR);
-            Block { cone, qx, qy, qz, grid_lo, h, boxe }
+            Block { cone, qx, qy, qz, normal, cover, grid_lo, h, boxe }
         })
         .collect()
 }
 
-fn point_q(cr: &mut Criterion) {
+fn point_w(cr: &mut Criterion) {
+    const SCALE: f32 = 1e-4;
     let blocks = point_inputs(96);
-    let npts: usize = blocks.iter().map(|b| b.qx.len()).sum();
+    let npts: usize = blocks.iter().map(|b| b.view().n).sum();
     for exact in [false, true] {
-        let name = if exact { "point_q_exact" } else { "point_q_per_box" };
+        let name = if exact { "point_w_exact" } else { "point_w_per_box" };
         let boxe = |b: &Block| if exact { None } else { Some(b.boxe) };
-        let mut hits = 0;
+        let (mut hits, mut out) = (0, PointHits::default());
         for b in &blocks {
-            point_q_x8(&b.cone, &b.view(), boxe(b).as_ref(), CLAMP, FLOOR, |_, _, _, _| hits += 1);
+            point_w_x8(&b.cone, &b.view(), boxe(b).as_ref(), CLAMP, FLOOR, SCALE, &mut out);
+            hits += out.len;
         }
         eprintln!("{name}: {npts} points, {:.1}% pass", 100.0 * hits as f64 / npts as f64);
         let mut g = cr.benchmark_group(name);
         g.throughput(Throughput::Elements(npts as u64));
-        let mut out = Vec::with_capacity(64);
         g.bench_function("scalar", |bch| {
             bch.iter(|| {
-                let mut acc = 0.0f32;
                 for b in black_box(&blocks) {
-                    point_q_ref(&b.cone, &b.view(), boxe(b).as_ref(), CLAMP, FLOOR, &mut out);
-                    acc += out.iter().filter(|(q, _)| *q <= Q_CUT).map(|(q, e)| q + e.s1).sum::<f32>();
+                    point_w_ref(&b.cone, &b.view(), boxe(b).as_ref(), CLAMP, FLOOR, SCALE, &mut out);
+                    black_box(&mut out);
                 }
-                black_box(acc)
             })
         });
         g.bench_function("x8", |bch| {
             bch.iter(|| {
-                let mut acc = 0.0f32;
                 for b in black_box(&blocks) {
-                    point_q_x8(&b.cone, &b.view(), boxe(b).as_ref(), CLAMP, FLOOR, |_, _, q, e| acc += q + e.s1);
+                    point_w_x8(&b.cone, &b.view(), boxe(b).as_ref(), CLAMP, FLOOR, SCALE, &mut out);
+                    black_box(&mut out);
                 }
-                black_box(acc)
             })
         });
         g.finish();
@@ -340,5 +357,5 @@ fn cone_sigma(cr: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, node_test, tri_bound, point_q, octree_spheres, cone_sigma);
+criterion_group!(benches, node_test, tri_bound, point_w, octree_spheres, cone_sigma);
 criterion_main!(benches);

@@ -1,6 +1,7 @@
 //! Shared machinery: random numbers, counters, the on-disk cache, small math helpers.
 pub mod cache;
 pub mod eigen2;
+pub mod pack;
 pub mod rng;
 pub mod stats;
 
