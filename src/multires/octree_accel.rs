@@ -48,24 +48,50 @@ pub fn sphere_1(o: Vec3, d: Vec3, inv_dd: f32, c: Vec3, r: f32) -> Option<f32> {
     Some(((b - s) * inv_dd, (b + s) * inv_dd)).and_then(|(t0, t1)| (t1 >= 0.0).then_some(t0))
 }
 
+/// A ray splatted across 8 lanes for [`spheres_x8`], set up once per ray (per instance in
+/// object space), as the scalar reference takes 1/|d|² precomputed.
+#[derive(Clone, Copy)]
+pub struct RayX8 {
+    o: [f32x8; 3],
+    d: [f32x8; 3],
+    dd: f32,
+    inv_dd: f32x8,
+}
+
+impl RayX8 {
+    #[inline]
+    pub fn new(o: Vec3, d: Vec3) -> Self {
+        let dd = d.length_squared();
+        let sp = |v: Vec3| [f32x8::splat(v.x), f32x8::splat(v.y), f32x8::splat(v.z)];
+        RayX8 { o: sp(o), d: sp(d), dd, inv_dd: f32x8::splat(1.0 / dd) }
+    }
+}
+
 /// The ray against 8 spheres: bit mask of hits within [tnear, tfar] and entry distances.
 #[inline]
-pub fn spheres_x8(o: Vec3, d: Vec3, tnear: f32, tfar: f32, cx: &[f32], cy: &[f32], cz: &[f32], r: &[f32]) -> (u32, [f32; 8]) {
-    let ld = |s: &[f32]| f32x8::from(<[f32; 8]>::try_from(s).expect("8 lanes"));
-    let (x, y, z, rr) = (ld(cx) - f32x8::splat(o.x), ld(cy) - f32x8::splat(o.y), ld(cz) - f32x8::splat(o.z), ld(r));
-    let (dx, dy, dz) = (f32x8::splat(d.x), f32x8::splat(d.y), f32x8::splat(d.z));
-    let b = x * dx + y * dy + z * dz;
-    let dd = d.length_squared();
+pub fn spheres_x8(ray: &RayX8, tnear: f32, tfar: f32, cx: &[f32; 8], cy: &[f32; 8], cz: &[f32; 8], r: &[f32; 8]) -> (u32, [f32; 8]) {
+    let [ox, oy, oz] = ray.o;
+    let [dx, dy, dz] = ray.d;
+    let (x, y, z, rr) = (f32x8::from(*cx) - ox, f32x8::from(*cy) - oy, f32x8::from(*cz) - oz, f32x8::from(*r));
+    // Fused multiply-adds where the target has them (`mul_add`, `mul_sub`).
+    let b = x.mul_add(dx, y.mul_add(dy, z * dz));
     // As in `sphere_1`: |d|²r² − |oc × d|².
-    let (cx_, cy_, cz_) = (y * dz - z * dy, z * dx - x * dz, x * dy - y * dx);
-    let disc = f32x8::splat(dd) * rr * rr - (cx_ * cx_ + cy_ * cy_ + cz_ * cz_);
+    let (cx_, cy_, cz_) = (y.mul_sub(dz, z * dy), z.mul_sub(dx, x * dz), x.mul_sub(dy, y * dx));
+    let disc = (f32x8::splat(ray.dd) * rr).mul_sub(rr, cx_.mul_add(cx_, cy_.mul_add(cy_, cz_ * cz_)));
     let zero = f32x8::splat(0.0);
     let s = disc.max(zero).sqrt();
-    let inv = f32x8::splat(1.0 / dd);
-    let t0 = (b - s) * inv;
-    let t1 = (b + s) * inv;
-    let ok = disc.simd_ge(zero) & rr.simd_ge(zero) & t1.simd_ge(f32x8::splat(tnear)) & t0.simd_le(f32x8::splat(tfar));
-    (ok.to_bitmask(), t0.to_array())
+    // The interval tests on the unscaled roots b ∓ s against |d|²·[tnear, tfar] (|d|² > 0).
+    let ok = disc.simd_ge(zero)
+        & rr.simd_ge(zero)
+        & (b + s).simd_ge(f32x8::splat(tnear * ray.dd))
+        & (b - s).simd_le(f32x8::splat(tfar * ray.dd));
+    (ok.to_bitmask(), ((b - s) * ray.inv_dd).to_array())
+}
+
+/// 8 consecutive slots of an SoA array.
+#[inline(always)]
+fn lanes8(v: &[f32], f: usize) -> &[f32; 8] {
+    v[f..f + 8].try_into().expect("8 slots")
 }
 
 /// Pushes the hit lanes of `m` (entry distances `ts`, slots `f + lane`) far to near, so the
@@ -98,6 +124,7 @@ impl OctreeAccel<'_> {
         let mut tfar = ray.tfar;
         let mut best: Option<Hit> = None;
         let inv_dd = 1.0 / ray.dir.length_squared();
+        let ray8 = RayX8::new(ray.org, ray.dir);
         // (entry t, TLAS node)
         let mut stack: Vec<(f32, u32)> = Vec::with_capacity(64);
         let mut ostack: Vec<(f32, u32)> = Vec::with_capacity(64);
@@ -113,8 +140,7 @@ impl OctreeAccel<'_> {
             if ch & (1 << 31) == 0 {
                 let f = ch as usize;
                 c.add(Counter::instance_tests, 8);
-                let (mut m, ts) =
-                    spheres_x8(ray.org, ray.dir, tnear, tfar, &tl.cx[f..f + 8], &tl.cy[f..f + 8], &tl.cz[f..f + 8], &tl.r[f..f + 8]);
+                let (mut m, ts) = spheres_x8(&ray8, tnear, tfar, lanes8(&tl.cx, f), lanes8(&tl.cy, f), lanes8(&tl.cz, f), lanes8(&tl.r, f));
                 push_near_last(&mut stack, &mut m, &ts, f);
                 continue;
             }
@@ -127,6 +153,7 @@ impl OctreeAccel<'_> {
             let shear = RayShear::new(o, d);
             let nodes = &tree.nodes;
             let inv_ddl = 1.0 / d.length_squared();
+            let ray8 = RayX8::new(o, d);
             ostack.clear();
             c.inc(Counter::node_tests);
             if let Some(t) = sphere_1(o, d, inv_ddl, Vec3::new(nodes.cx[0], nodes.cy[0], nodes.cz[0]), nodes.r[0]) {
@@ -157,7 +184,7 @@ impl OctreeAccel<'_> {
                 let f = f as usize;
                 c.add(Counter::node_tests, 8);
                 let (mut m, ts) =
-                    spheres_x8(o, d, tnear, tfar, &nodes.cx[f..f + 8], &nodes.cy[f..f + 8], &nodes.cz[f..f + 8], &nodes.r[f..f + 8]);
+                    spheres_x8(&ray8, tnear, tfar, lanes8(&nodes.cx, f), lanes8(&nodes.cy, f), lanes8(&nodes.cz, f), lanes8(&nodes.r, f));
                 push_near_last(&mut ostack, &mut m, &ts, f);
             }
         }
@@ -203,7 +230,8 @@ mod tests {
                 assert!(t <= 0.99 && t > 0.98, "entry {t}");
             }
             let pad = |v: f32| [v, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
-            let (m, _) = spheres_x8(o, d, 0.0, 2.0, &pad(c.x), &pad(c.y), &pad(c.z), &[r, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0]);
+            let (m, _) =
+                spheres_x8(&RayX8::new(o, d), 0.0, 2.0, &pad(c.x), &pad(c.y), &pad(c.z), &[r, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0]);
             assert_eq!(m & 1 == 1, hit, "x8, offset {off}");
         }
     }
@@ -224,7 +252,7 @@ mod tests {
                 cz[l] = s.next() * 4.0 - 2.0;
                 r[l] = if s.next() < 0.1 { f32::NEG_INFINITY } else { s.next() * 0.7 };
             }
-            let (m, t) = spheres_x8(o, d, 0.0, 1.5, &cx, &cy, &cz, &r);
+            let (m, t) = spheres_x8(&RayX8::new(o, d), 0.0, 1.5, &cx, &cy, &cz, &r);
             for l in 0..8 {
                 let one = sphere_1(o, d, 1.0 / d.length_squared(), Vec3::new(cx[l], cy[l], cz[l]), r[l]).filter(|&t0| t0 <= 1.5);
                 assert_eq!(one.is_some(), m & (1 << l) != 0, "lane {l}");
