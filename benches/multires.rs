@@ -29,12 +29,16 @@ use lodtrace::core::rng::Sampler;
 use lodtrace::multires::cone::{Cone, Fp};
 use lodtrace::multires::octree_accel::{sphere_1, spheres_x8, RayX8};
 use lodtrace::multires::quant::{encode_cover, oct_encode};
-use lodtrace::multires::trace::{node_test_1, node_test_x8, point_w_ref, point_w_x8, tri_bound_1, tri_bound_x8, PointBlock, PointHits};
+use lodtrace::multires::trace::{
+    node_test_1, node_test_x8, point_w_ref, point_w_x8, tri_bound_1, tri_bound_x8, PointBlock, PointHits, R_CUT,
+};
 use std::hint::black_box;
 use wide::f32x8;
 
 const CLAMP: f32 = 0.125;
 const FLOOR: f32 = 1e-7;
+/// The node and triangle tests at the paper's cut distance (R_CUT), as first benched.
+const CUT: f32 = R_CUT;
 
 fn v3(s: &mut Sampler) -> Vec3 {
     Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5)
@@ -88,7 +92,7 @@ fn node_inputs(n: usize) -> Vec<NodeIn> {
 
 fn node_test(cr: &mut Criterion) {
     let inp = node_inputs(512);
-    let hits: u32 = inp.iter().map(|x| node_test_x8(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, CLAMP, FLOOR).mask.count_ones()).sum();
+    let hits: u32 = inp.iter().map(|x| node_test_x8(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, CLAMP, FLOOR, CUT).mask.count_ones()).sum();
     eprintln!("node_test: {:.1}% of the cone–sphere tests pass", 100.0 * hits as f64 / (8 * inp.len()) as f64);
     let mut g = cr.benchmark_group("node_test");
     g.throughput(Throughput::Elements(8 * inp.len() as u64));
@@ -96,7 +100,7 @@ fn node_test(cr: &mut Criterion) {
         b.iter(|| {
             let mut acc = 0.0f32;
             for x in black_box(&inp) {
-                let h = node_test_1(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, CLAMP, FLOOR);
+                let h = node_test_1(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, CLAMP, FLOOR, CUT);
                 acc += h.mask as f32 + h.t_near[0];
             }
             black_box(acc)
@@ -106,7 +110,7 @@ fn node_test(cr: &mut Criterion) {
         b.iter(|| {
             let mut acc = 0.0f32;
             for x in black_box(&inp) {
-                let h = node_test_x8(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, CLAMP, FLOOR);
+                let h = node_test_x8(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, CLAMP, FLOOR, CUT);
                 acc += h.mask as f32 + h.t_near[0];
             }
             black_box(acc)
@@ -117,7 +121,7 @@ fn node_test(cr: &mut Criterion) {
 
 fn tri_bound(cr: &mut Criterion) {
     let inp = node_inputs(512);
-    let hits: u32 = inp.iter().map(|x| tri_bound_x8(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, &x.boxe, CLAMP, FLOOR).count_ones()).sum();
+    let hits: u32 = inp.iter().map(|x| tri_bound_x8(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, &x.boxe, CLAMP, FLOOR, CUT).count_ones()).sum();
     eprintln!("tri_bound: {:.1}% of the tests pass", 100.0 * hits as f64 / (8 * inp.len()) as f64);
     let mut g = cr.benchmark_group("tri_bound");
     g.throughput(Throughput::Elements(8 * inp.len() as u64));
@@ -126,7 +130,7 @@ fn tri_bound(cr: &mut Criterion) {
             let mut acc = 0u32;
             for x in black_box(&inp) {
                 for l in 0..8 {
-                    acc += tri_bound_1(&x.cone, x.cx[l], x.cy[l], x.cz[l], x.r[l], &x.boxe, CLAMP, FLOOR) as u32;
+                    acc += tri_bound_1(&x.cone, x.cx[l], x.cy[l], x.cz[l], x.r[l], &x.boxe, CLAMP, FLOOR, CUT) as u32;
                 }
             }
             black_box(acc)
@@ -136,7 +140,7 @@ fn tri_bound(cr: &mut Criterion) {
         b.iter(|| {
             let mut acc = 0u32;
             for x in black_box(&inp) {
-                acc += tri_bound_x8(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, &x.boxe, CLAMP, FLOOR).count_ones();
+                acc += tri_bound_x8(&x.cone, &x.cx, &x.cy, &x.cz, &x.r, &x.boxe, CLAMP, FLOOR, CUT).count_ones();
             }
             black_box(acc)
         })

@@ -92,6 +92,27 @@ pub enum TriWeight {
     Mass,
 }
 
+impl TriWeight {
+    /// The footprint distance d beyond which the weight is below the 2% cut-off (§4.4):
+    /// exp(−(d − ½)²) < 0.02 past ½ + √ln 50 = 2.478 (R_CUT); ½·erfc(d) < 0.02 past
+    /// 1.4522 (`mass` is bounded by `coverage`, see [`weight_2d`]). The triangle prefilter and
+    /// the 2-D quick reject cull at this distance (tested at the boundary).
+    #[inline]
+    pub fn cut(self) -> f32 {
+        match self {
+            TriWeight::Paper => R_CUT,
+            TriWeight::Coverage | TriWeight::Mass => COVERAGE_CUT,
+        }
+    }
+}
+
+/// See [`TriWeight::cut`]: ½·erfc(1.4522) = 0.0200, with a margin.
+const COVERAGE_CUT: f32 = 1.46;
+
+/// Footprint distance of the point weight's cut-off: e^(−q) < 0.02 past q = Q_CUT, √Q_CUT =
+/// 1.9779 (with a margin).
+const POINT_CUT: f32 = 1.978_5;
+
 /// Standard normal CDF Φ(x).
 #[inline]
 fn phi(x: f32) -> f32 {
@@ -241,6 +262,19 @@ impl Default for TraceParams {
 }
 
 impl TraceParams {
+    /// The cut distance of the node (and instance) test, in footprint units: the largest at
+    /// which anything a node holds can still weigh ≥ 2% — its points (√Q_CUT) and, per box,
+    /// its triangles ([`TriWeight::cut`]); a node whose sphere lies farther is skipped, with
+    /// the same image. Exact mode measures triangles with per-vertex footprints and keeps
+    /// R_CUT, as the paper's bound.
+    pub fn node_cut(&self) -> f32 {
+        if self.eigen == EigenMode::Exact {
+            return R_CUT;
+        }
+        let pts = if self.points { POINT_CUT } else { 0.0 };
+        pts.max(self.tri_weight.cut())
+    }
+
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(Error::Usage(m));
         if !(self.clamp > 0.0 && self.clamp <= 1.0) {
@@ -489,7 +523,8 @@ fn ext2(e: &Eigen2, s_lo: Sym2, s_hi: Sym2, clamp: f32) -> (f32, f32) {
 }
 
 /// Scalar reference of the node test (§4.6).
-pub fn node_test_1(cone: &Cone, cx: &[f32], cy: &[f32], cz: &[f32], r: &[f32], clamp: f32, floor: f32) -> NodeHits {
+#[allow(clippy::too_many_arguments)]
+pub fn node_test_1(cone: &Cone, cx: &[f32], cy: &[f32], cz: &[f32], r: &[f32], clamp: f32, floor: f32, cut: f32) -> NodeHits {
     let mut out = NodeHits { mask: 0, t_near: [f32::INFINITY; 8], t_centre: [0.0; 8], eig: [NO_EIG; 8] };
     for l in 0..cx.len().min(8) {
         let rr = r[l];
@@ -507,7 +542,7 @@ pub fn node_test_1(cone: &Cone, cx: &[f32], cy: &[f32], cz: &[f32], r: &[f32], c
         let (x1, x2) = (x1.max(floor), x2.max(floor));
         let a = e.cos * p.x + e.sin * p.y;
         let b = -e.sin * p.x + e.cos * p.y;
-        if a.abs() <= R_CUT * x1 + rr && b.abs() <= R_CUT * x2 + rr {
+        if a.abs() <= cut * x1 + rr && b.abs() <= cut * x2 + rr {
             out.mask |= 1 << l;
             out.t_near[l] = p.z - rr;
             out.t_centre[l] = p.z;
@@ -518,7 +553,8 @@ pub fn node_test_1(cone: &Cone, cx: &[f32], cy: &[f32], cz: &[f32], r: &[f32], c
 }
 
 /// One cone against the 8 child spheres in one f32x8 step (same result as [`node_test_1`]).
-pub fn node_test_x8(cone: &Cone, cx: &[f32; 8], cy: &[f32; 8], cz: &[f32; 8], r: &[f32; 8], clamp: f32, floor: f32) -> NodeHits {
+#[allow(clippy::too_many_arguments)]
+pub fn node_test_x8(cone: &Cone, cx: &[f32; 8], cy: &[f32; 8], cz: &[f32; 8], r: &[f32; 8], clamp: f32, floor: f32, cut: f32) -> NodeHits {
     let (cxv, cyv, czv, rv) = (f32x8::from(*cx), f32x8::from(*cy), f32x8::from(*cz), f32x8::from(*r));
     let dx = cxv - f32x8::splat(cone.org.x);
     let dy = cyv - f32x8::splat(cone.org.y);
@@ -546,7 +582,7 @@ pub fn node_test_x8(cone: &Cone, cx: &[f32; 8], cy: &[f32; 8], cz: &[f32; 8], r:
     let x2 = e2.max(zero).sqrt().max(fl);
     let a = e.cos * x + e.sin * y;
     let b = e.cos * y - e.sin * x;
-    let rc = f32x8::splat(R_CUT);
+    let rc = f32x8::splat(cut);
     let ok = a.abs().simd_le(rc * x1 + rv)
         & b.abs().simd_le(rc * x2 + rv)
         & (t + rv).simd_ge(tmin)
@@ -617,7 +653,8 @@ pub fn triangle_weight_per_box(
 /// first version bounded the footprint by the disc of radius R_CUT·√tr Σ; the box in the
 /// principal axes is tighter wherever the footprint is anisotropic.) `floor` as in the node
 /// test; a relative slack of 1e-5 absorbs the different rounding of the two evaluations.
-pub fn tri_bound_1(cone: &Cone, cx: f32, cy: f32, cz: f32, r: f32, boxe: &Eigen2, clamp: f32, floor: f32) -> bool {
+#[allow(clippy::too_many_arguments)]
+pub fn tri_bound_1(cone: &Cone, cx: f32, cy: f32, cz: f32, r: f32, boxe: &Eigen2, clamp: f32, floor: f32, cut: f32) -> bool {
     if !(r >= 0.0) {
         return false;
     }
@@ -639,7 +676,7 @@ pub fn tri_bound_1(cone: &Cone, cx: f32, cy: f32, cz: f32, r: f32, boxe: &Eigen2
     let e2 = l2.max(h2).max(0.0).sqrt().max(clamp * e1).max(floor);
     let a = co * p.x + sn * p.y;
     let b = co * p.y - sn * p.x;
-    a.abs() <= (R_CUT * e1 + r) * TRI_BOUND_SLACK && b.abs() <= (R_CUT * e2 + r) * TRI_BOUND_SLACK
+    a.abs() <= (cut * e1 + r) * TRI_BOUND_SLACK && b.abs() <= (cut * e2 + r) * TRI_BOUND_SLACK
 }
 
 /// Relative slack of the triangle prefilter against rounding (see [`tri_bound_1`]).
@@ -647,7 +684,17 @@ const TRI_BOUND_SLACK: f32 = 1.0 + 1e-5;
 
 /// [`tri_bound_1`] for 8 spheres in one f32x8 step; bit l of the result is lane l.
 #[allow(clippy::too_many_arguments)]
-pub fn tri_bound_x8(cone: &Cone, cx: &[f32; 8], cy: &[f32; 8], cz: &[f32; 8], r: &[f32; 8], boxe: &Eigen2, clamp: f32, floor: f32) -> u8 {
+pub fn tri_bound_x8(
+    cone: &Cone,
+    cx: &[f32; 8],
+    cy: &[f32; 8],
+    cz: &[f32; 8],
+    r: &[f32; 8],
+    boxe: &Eigen2,
+    clamp: f32,
+    floor: f32,
+    cut: f32,
+) -> u8 {
     let rv = f32x8::from(*r);
     let dx = f32x8::from(*cx) - f32x8::splat(cone.org.x);
     let dy = f32x8::from(*cy) - f32x8::splat(cone.org.y);
@@ -673,7 +720,7 @@ pub fn tri_bound_x8(cone: &Cone, cx: &[f32; 8], cy: &[f32; 8], cz: &[f32; 8], r:
     let e2 = l2.max(h2).max(zero).sqrt().max(f32x8::splat(clamp) * e1).max(fl);
     let a = f32x8::splat(co) * x + f32x8::splat(sn) * y;
     let b = f32x8::splat(co) * y - f32x8::splat(sn) * x;
-    let (rc, sl) = (f32x8::splat(R_CUT), f32x8::splat(TRI_BOUND_SLACK));
+    let (rc, sl) = (f32x8::splat(cut), f32x8::splat(TRI_BOUND_SLACK));
     let ok = a.abs().simd_le((rc * e1 + rv) * sl)
         & b.abs().simd_le((rc * e2 + rv) * sl)
         & (t + rv).simd_ge(tmin)
@@ -985,7 +1032,8 @@ pub fn triangle_weight(pv: [Vec3; 3], ev: [Eigen2; 3]) -> Option<(f32, f32, f32,
 fn weight_2d(q: [glam::Vec2; 3], mode: TriWeight) -> Option<(f32, f32, f32)> {
     let lo = q[0].min(q[1]).min(q[2]);
     let hi = q[0].max(q[1]).max(q[2]);
-    if lo.x > R_CUT || lo.y > R_CUT || hi.x < -R_CUT || hi.y < -R_CUT || !(lo.x <= hi.x) {
+    let cut = mode.cut();
+    if lo.x > cut || lo.y > cut || hi.x < -cut || hi.y < -cut || !(lo.x <= hi.x) {
         return None;
     }
     let (d, b1, b2) = closest_to_origin(q[0], q[1], q[2]);
@@ -1155,7 +1203,8 @@ impl<'s, 'a> Tracer<'s, 'a> {
         sc.eigs.clear();
         let clamp = self.p.clamp;
         let floor = self.floor;
-        let root = node_test_1(cone, &tl.cx[..1], &tl.cy[..1], &tl.cz[..1], &tl.r[..1], clamp, floor);
+        let cut = self.p.node_cut();
+        let root = node_test_1(cone, &tl.cx[..1], &tl.cy[..1], &tl.cz[..1], &tl.r[..1], clamp, floor, cut);
         c.inc(Counter::instance_tests);
         if root.mask & 1 == 0 {
             return;
@@ -1182,7 +1231,8 @@ impl<'s, 'a> Tracer<'s, 'a> {
                     let (lc, s) = cone.to_object(&leaf.inv);
                     let tree = &self.ms.trees[leaf.tree as usize];
                     let lf = floor * s;
-                    let h = node_test_1(&lc, &tree.nodes.cx[..1], &tree.nodes.cy[..1], &tree.nodes.cz[..1], &tree.nodes.r[..1], clamp, lf);
+                    let h =
+                        node_test_1(&lc, &tree.nodes.cx[..1], &tree.nodes.cy[..1], &tree.nodes.cz[..1], &tree.nodes.r[..1], clamp, lf, cut);
                     c.inc(Counter::node_tests);
                     if h.mask & 1 != 0 {
                         sc.locals.push(Local { cone: lc, scale: s, leaf: li });
@@ -1194,7 +1244,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 } else {
                     let f = ch as usize;
                     let arr = |v: &Vec<f32>| -> [f32; 8] { v[f..f + 8].try_into().expect("8 slots") };
-                    let h = node_test_x8(cone, &arr(&tl.cx), &arr(&tl.cy), &arr(&tl.cz), &arr(&tl.r), clamp, floor);
+                    let h = node_test_x8(cone, &arr(&tl.cx), &arr(&tl.cy), &arr(&tl.cz), &arr(&tl.r), clamp, floor, cut);
                     c.add(Counter::instance_tests, 8);
                     let mut m = h.mask as u32;
                     while m != 0 {
@@ -1253,7 +1303,17 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 for k in (ts..ts + tcount).step_by(8) {
                     let arr = |v: &Vec<f32>| -> [f32; 8] { v[k..k + 8].try_into().expect("padded to 8") };
                     let rem = (ts + tcount - k).min(8);
-                    let mut m = tri_bound_x8(&lc, &arr(&tris.cx), &arr(&tris.cy), &arr(&tris.cz), &arr(&tris.r), &boxe, clamp, lf) as u32
+                    let mut m = tri_bound_x8(
+                        &lc,
+                        &arr(&tris.cx),
+                        &arr(&tris.cy),
+                        &arr(&tris.cz),
+                        &arr(&tris.r),
+                        &boxe,
+                        clamp,
+                        lf,
+                        self.p.tri_weight.cut(),
+                    ) as u32
                         & ((1u32 << rem) - 1);
                     c.add(Counter::triangle_bound_tests, rem as u64);
                     while m != 0 {
@@ -1314,6 +1374,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             &arr(&tree.nodes.r),
             self.p.clamp,
             self.floor * s,
+            self.p.node_cut(),
         );
         c.add(Counter::node_tests, 8);
         c.add(Counter::eigen_decompositions, 8);
@@ -1706,7 +1767,7 @@ mod tests {
         // And the node tests hand it over for every passing lane.
         let cone = rnd_cone(&mut s);
         let c = cone.org + cone.dir * 3.0;
-        let h = node_test_x8(&cone, &[c.x; 8], &[c.y; 8], &[c.z; 8], &[0.5; 8], 0.125, 1e-7);
+        let h = node_test_x8(&cone, &[c.x; 8], &[c.y; 8], &[c.z; 8], &[0.5; 8], 0.125, 1e-7, R_CUT);
         assert_eq!(h.mask, 0xff);
         let e = eigen_1(cone.sigma(h.t_centre[0].max(0.0)), 1.0e-9, 1e-7);
         assert!((h.eig[3].s1 - e.s1).abs() <= 1e-5 * e.s1 && (h.eig[3].s2 - e.s2).abs() <= 1e-5 * e.s1);
@@ -1766,7 +1827,7 @@ mod tests {
     #[test]
     fn node_test_x8_matches_scalar() {
         let mut s = Sampler::new(7, 0, 0);
-        for _ in 0..2000 {
+        for i in 0..2000 {
             let cone = rnd_cone(&mut s);
             let mut cx = [0.0; 8];
             let mut cy = [0.0; 8];
@@ -1781,8 +1842,9 @@ mod tests {
                 cz[l] = p.z;
                 r[l] = if s.next() < 0.1 { f32::NEG_INFINITY } else { s.next() * 0.5 };
             }
-            let a = node_test_1(&cone, &cx, &cy, &cz, &r, 0.125, 1e-7);
-            let b = node_test_x8(&cone, &cx, &cy, &cz, &r, 0.125, 1e-7);
+            let cut = [R_CUT, POINT_CUT][i % 2];
+            let a = node_test_1(&cone, &cx, &cy, &cz, &r, 0.125, 1e-7, cut);
+            let b = node_test_x8(&cone, &cx, &cy, &cz, &r, 0.125, 1e-7, cut);
             // Lanes may only differ where the test is within rounding of its boundary.
             let diff = a.mask ^ b.mask;
             assert!(diff.count_ones() <= 1, "scalar {:08b} vs x8 {:08b}", a.mask, b.mask);
@@ -1813,7 +1875,7 @@ mod tests {
             let e = eigen_1(cone.sigma(p.z), 0.125, 1e-7);
             if point_q_1(&e, p.x, p.y) <= Q_CUT {
                 inside += 1;
-                let h = node_test_1(&cone, &[c.x], &[c.y], &[c.z], &[r], 0.125, 1e-7);
+                let h = node_test_1(&cone, &[c.x], &[c.y], &[c.z], &[r], 0.125, 1e-7, POINT_CUT);
                 assert_eq!(h.mask, 1, "point with weight >= 2% outside the node's cone test");
             }
         }
@@ -1852,7 +1914,7 @@ mod tests {
                 },
                 &[0],
             );
-            let bound = tri_bound_1(&cone, soa.cx[0], soa.cy[0], soa.cz[0], soa.r[0], &boxe, clamp, lf);
+            let bound = tri_bound_1(&cone, soa.cx[0], soa.cy[0], soa.cz[0], soa.r[0], &boxe, clamp, lf, mode.cut());
             if full.is_some() {
                 passed += 1;
                 assert!(bound, "triangle {pw:?} has weight {full:?} but its sphere was culled");
@@ -1861,6 +1923,18 @@ mod tests {
             }
         }
         assert!(passed > 500 && culled > 5000, "too few cases exercised: {passed} passed, {culled} culled");
+    }
+
+    /// The cut distances of the triangle weights sit just past the 2% cut-off.
+    #[test]
+    fn triangle_weight_cut_distances() {
+        let w = |m: TriWeight, d: f32| tri_w(m, d, [glam::Vec2::ZERO; 3]);
+        for m in [TriWeight::Paper, TriWeight::Coverage] {
+            let c = m.cut();
+            assert!(w(m, c) < 0.02 && w(m, c - 0.02) >= 0.02, "{m:?}: w({c}) = {}, w({}) = {}", w(m, c), c - 0.02, w(m, c - 0.02));
+            // Monotone beyond the cut.
+            assert!((0..100).all(|k| w(m, c + k as f32 * 0.05) < 0.02));
+        }
     }
 
     #[test]
@@ -1887,9 +1961,10 @@ mod tests {
             let lf = if i % 3 == 0 { 0.0 } else { 1e-6 };
             let clamp = [1.0 / 16.0, 0.25, 1.0][i % 3];
             let boxe = eigen_1(cone.sigma(s.next() * 10.0), clamp, lf);
-            let m = tri_bound_x8(&cone, &a[0], &a[1], &a[2], &a[3], &boxe, clamp, lf);
+            let cut = [R_CUT, COVERAGE_CUT][i % 2];
+            let m = tri_bound_x8(&cone, &a[0], &a[1], &a[2], &a[3], &boxe, clamp, lf, cut);
             for l in 0..8 {
-                let want = tri_bound_1(&cone, a[0][l], a[1][l], a[2][l], a[3][l], &boxe, clamp, lf);
+                let want = tri_bound_1(&cone, a[0][l], a[1][l], a[2][l], a[3][l], &boxe, clamp, lf, cut);
                 hits += want as u32;
                 assert_eq!(m >> l & 1 == 1, want, "lane {l} of case {i}");
             }
