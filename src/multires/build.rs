@@ -274,6 +274,10 @@ pub struct TriSoa {
     pub cz: Vec<f32>,
     pub r: Vec<f32>,
     pub verts: Vec<[Vec3; 3]>,
+    /// The vertices again as struct-of-arrays, `v[3·i + k]` = coordinate k of vertex i,
+    /// padded like the spheres, for the 8-wide footprint prefilter
+    /// ([`super::trace::tri_footprint_x8`]).
+    pub v: [Vec<f32>; 9],
 }
 
 impl TriSoa {
@@ -285,6 +289,7 @@ impl TriSoa {
             cz: Vec::with_capacity(n + 7),
             r: Vec::with_capacity(n + 7),
             verts: Vec::with_capacity(n),
+            v: std::array::from_fn(|_| Vec::with_capacity(n + 7)),
         };
         for &i in tri_index {
             let v = mesh.tri_verts(i as usize);
@@ -297,17 +302,23 @@ impl TriSoa {
             t.cz.push(c.z);
             t.r.push(r);
             t.verts.push(v);
+            for (k, a) in t.v.iter_mut().enumerate() {
+                a.push(v[k / 3][k % 3]);
+            }
         }
         for _ in 0..7 {
             t.cx.push(0.0);
             t.cy.push(0.0);
             t.cz.push(0.0);
             t.r.push(-1.0);
+            for a in &mut t.v {
+                a.push(0.0);
+            }
         }
         t
     }
     pub fn bytes(&self) -> usize {
-        self.r.len() * 16 + self.verts.len() * 36
+        self.r.len() * 52 + self.verts.len() * 36
     }
 }
 
