@@ -1186,23 +1186,6 @@ const K_OCT: u8 = 1;
 /// An octree node reached by the mipmap step: points and triangles only, no descent.
 const K_TERMINAL: u8 = 2;
 
-impl PartialEq for Entry {
-    fn eq(&self, o: &Self) -> bool {
-        self.t == o.t
-    }
-}
-impl Eq for Entry {}
-impl PartialOrd for Entry {
-    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
-        Some(self.cmp(o))
-    }
-}
-impl Ord for Entry {
-    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
-        o.t.total_cmp(&self.t) // min-heap
-    }
-}
-
 struct Local {
     cone: Cone,
     /// object t = scale · world t
@@ -1212,16 +1195,37 @@ struct Local {
 
 /// Per-thread scratch of the traversal.
 pub struct Scratch {
-    heap: BinaryHeap<Entry>,
+    /// The traversal front: 8-byte keys (the entry distance, inverted so the max-heap pops
+    /// the nearest, above the index of the entry in `entries`); sifting moves 8 bytes and
+    /// compares integers instead of 24-byte entries under `f32::total_cmp`.
+    heap: BinaryHeap<u64>,
+    entries: Vec<Entry>,
     locals: Vec<Local>,
     eigs: Vec<Eigen2>,
     hits: PointHits,
+}
+
+impl Scratch {
+    #[inline]
+    fn push(&mut self, e: Entry) {
+        // f32 bits in total order: negatives flipped whole, positives above them.
+        let b = e.t.to_bits();
+        let ordered = if b >> 31 == 1 { !b } else { b | 0x8000_0000 };
+        let i = self.entries.len() as u64;
+        self.entries.push(e);
+        self.heap.push(((!ordered as u64) << 32) | i);
+    }
+    #[inline]
+    fn pop(&mut self) -> Option<Entry> {
+        self.heap.pop().map(|k| self.entries[(k & 0xFFFF_FFFF) as usize])
+    }
 }
 
 impl Default for Scratch {
     fn default() -> Self {
         Scratch {
             heap: BinaryHeap::with_capacity(256),
+            entries: Vec::with_capacity(1024),
             locals: Vec::with_capacity(64),
             eigs: Vec::with_capacity(1024),
             hits: PointHits::default(),
@@ -1255,6 +1259,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             return;
         }
         sc.heap.clear();
+        sc.entries.clear();
         sc.locals.clear();
         sc.eigs.clear();
         let clamp = self.p.clamp;
@@ -1265,9 +1270,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
         if root.mask & 1 == 0 {
             return;
         }
-        sc.heap.push(Entry { t: root.t_near[0], node: 0, slot: 0, blend: 1.0, kind: K_TLAS, eig: u32::MAX });
+        sc.push(Entry { t: root.t_near[0], node: 0, slot: 0, blend: 1.0, kind: K_TLAS, eig: u32::MAX });
         let mut steps = 0u32;
-        while let Some(e) = sc.heap.pop() {
+        while let Some(e) = sc.pop() {
             let done = match self.p.termination {
                 Termination::Paper => ab.opaque(),
                 Termination::Final => ab.opaque_before(e.t),
@@ -1295,7 +1300,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                         let slot = (sc.locals.len() - 1) as u32;
                         sc.eigs.push(h.eig[0]);
                         let eig = (sc.eigs.len() - 1) as u32;
-                        sc.heap.push(Entry { t: h.t_near[0] / s, node: 0, slot, blend: 1.0, kind: K_OCT, eig });
+                        sc.push(Entry { t: h.t_near[0] / s, node: 0, slot, blend: 1.0, kind: K_OCT, eig });
                     }
                 } else {
                     let f = ch as usize;
@@ -1306,7 +1311,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                     while m != 0 {
                         let l = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        sc.heap.push(Entry { t: h.t_near[l], node: (f + l) as u32, slot: 0, blend: 1.0, kind: K_TLAS, eig: u32::MAX });
+                        sc.push(Entry { t: h.t_near[l], node: (f + l) as u32, slot: 0, blend: 1.0, kind: K_TLAS, eig: u32::MAX });
                     }
                 }
                 continue;
@@ -1435,7 +1440,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             m &= m - 1;
             sc.eigs.push(h.eig[l]);
             let eig = (sc.eigs.len() - 1) as u32;
-            sc.heap.push(Entry { t: h.t_near[l] / s, node: (f + l) as u32, slot, blend, kind, eig });
+            sc.push(Entry { t: h.t_near[l] / s, node: (f + l) as u32, slot, blend, kind, eig });
         }
     }
 
