@@ -11,6 +11,7 @@
 use wide::{f32x8, i32x8};
 
 /// Lane indices of each 8-bit mask's set bits, in order, one byte each (unused bytes 0).
+#[cfg(target_feature = "avx2")]
 const LUT: [u64; 256] = {
     let mut t = [0u64; 256];
     let mut m = 0;
