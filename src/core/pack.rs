@@ -59,31 +59,11 @@ pub fn compress_f32(v: f32x8, m: u8, dst: &mut [f32], at: usize) -> usize {
     m.count_ones() as usize
 }
 
-/// [`compress_f32`] for `i32x8` lanes, stored as u32.
+/// [`compress_f32`] for `i32x8` lanes, stored as u32 (the same permute on the lanes' bits).
 #[inline(always)]
 pub fn compress_u32(v: i32x8, m: u8, dst: &mut [u32], at: usize) -> usize {
-    let d: &mut [u32; 8] = (&mut dst[at..at + 8]).try_into().expect("8 slots");
-    #[cfg(target_feature = "avx2")]
-    {
-        use std::arch::x86_64::*;
-        // SAFETY: as in `compress_f32`; i32x8 and __m256i are the same 32 bytes.
-        unsafe {
-            let perm = _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(LUT[m as usize] as i64));
-            let r = _mm256_permutevar8x32_epi32(std::mem::transmute::<i32x8, __m256i>(v), perm);
-            _mm256_storeu_si256(d.as_mut_ptr() as *mut __m256i, r);
-        }
-    }
-    #[cfg(not(target_feature = "avx2"))]
-    {
-        let a = v.to_array();
-        let (mut k, mut mm) = (0, m as u32);
-        while mm != 0 {
-            d[k] = a[mm.trailing_zeros() as usize] as u32;
-            k += 1;
-            mm &= mm - 1;
-        }
-    }
-    m.count_ones() as usize
+    use wide::bytemuck::{cast, cast_slice_mut};
+    compress_f32(cast(v), m, cast_slice_mut(dst), at)
 }
 
 #[cfg(test)]

@@ -644,10 +644,10 @@ pub fn triangle_weight_per_box(
 /// per-box triangle weight ≥ 2% (§4.5, the cut-off of §4.4)? The per-box test measures the
 /// triangle along the box's fixed principal axes `boxe` (a₁, a₂), in footprint units
 /// e₁ = max(√(a₁ᵀΣ(t)a₁), floor) and e₂ = max(√(a₂ᵀΣ(t)a₂), clamp·e₁, floor) at one depth t
-/// in the sphere's range, and rejects a triangle whose vertices all lie beyond R_CUT along
+/// in the sphere's range, and rejects a triangle whose vertices all lie beyond `cut` ([`TriWeight::cut`]) along
 /// one axis. Σ(t) is a sum of squares of linear functions of t, so each aᵀΣ(t)a is convex and
 /// its maximum over the range sits at an end. So a sphere whose centre lies farther than
-/// R_CUT·max e_k + r from the axis *along a_k* holds no triangle that passes: the cull is
+/// cut·max e_k + r from the axis *along a_k* holds no triangle that passes: the cull is
 /// exact, not a heuristic (tested against the full test) — the paper's bounding-sphere test
 /// in the ellipse's principal axes (§4.5), applied to the triangles stored in a node. (The
 /// first version bounded the footprint by the disc of radius R_CUT·√tr Σ; the box in the
