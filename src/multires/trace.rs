@@ -913,8 +913,8 @@ pub fn point_w_ref(cone: &Cone, blk: &PointBlock, boxe: Option<&Eigen2>, clamp: 
 /// e^(−q) for q ≥ 0 (the point weight's Gaussian, where q ≤ Q_CUT matters), 8 lanes:
 /// 2^(−r) · e^f with r = round(q·log₂e), |f| ≤ ln2/2 by the degree-6 Taylor polynomial
 /// (relative error < 3e-7, tested). q is clamped to [0, 80] first, so rejected lanes
-/// (q = ∞ or NaN) stay finite; without `wide`'s overflow and NaN branches this is a third
-/// of `f32x8::exp`'s instructions.
+/// (q = ∞ or NaN) stay finite, and `wide`'s overflow, underflow and NaN handling (with its
+/// branches) is not needed.
 #[inline(always)]
 pub fn exp_neg_x8(q: f32x8) -> f32x8 {
     let x = -q.max(f32x8::splat(0.0)).min(f32x8::splat(80.0));
