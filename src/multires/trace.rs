@@ -809,6 +809,7 @@ pub struct PointBlock<'t> {
 }
 
 impl<'t> PointBlock<'t> {
+    #[inline]
     pub fn new(tree: &'t PointTree, node: usize, cone: &Cone) -> Self {
         let h = tree.spacing(tree.nodes.depth[node]);
         let s = tree.nodes.pt_start[node] as usize;
@@ -820,6 +821,7 @@ impl<'t> PointBlock<'t> {
     }
     /// A block of grid coordinates `q` (voxel centres at grid_lo + (q + ½)·h) in the ray
     /// coordinates of `cone`.
+    #[inline]
     pub fn from_grid(
         q: (&'t [u8], &'t [u8], &'t [u8]),
         normal: &'t [[u16; 2]],
