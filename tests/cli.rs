@@ -311,6 +311,7 @@ fn bad_animate_input_is_one_line_exit_2() {
         &["animate", "heads", "--update", "sometimes"],
         &["animate", "no-such-sequence"],
         &["animate", "heads", "--detail", "0"],
+        &["animate", "heads", "--packet", "4"],
         &["animate", "heads", "--width", "0"],
         &["animate", bad_ply.to_str().unwrap(), "--frames", "1"],
         &["animate", "heads", "--frames", "1", "--stats", "/nonexistent/dir/a.json"],
@@ -326,14 +327,15 @@ fn bad_animate_input_is_one_line_exit_2() {
 #[test]
 fn bench_deforming_sequences() {
     let d = tmp("deformbench");
-    let m = ["naive", "lazy-cache", "refit"].map(|u| format!("surfel:update={u}:detail=0.03:frames=4")).join(",");
+    // The last row traces ray by ray (packet=1): the same image as the packets of the others.
+    let m = ["naive", "lazy-cache", "refit", "lazy:packet=1"].map(|u| format!("surfel:update={u}:detail=0.03:frames=4")).join(",");
     let (code, out, err) =
         lodtrace(&["bench", "elastic-balls", "--methods", &m, "--width", "40", "--height", "30", "--quiet", "--out", d.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("Deforming sequences"), "{out}");
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("bench.json")).unwrap()).unwrap();
     let rows = v["deform"].as_array().unwrap();
-    assert_eq!(rows.len(), 3);
+    assert_eq!(rows.len(), 4);
     for r in rows {
         assert_eq!(r["same_image_as_first"], true, "{r}");
         assert_eq!(r["frames"], 4);

@@ -199,6 +199,77 @@ fn modes_render_identically() {
     }
 }
 
+/// Packets of eight rays (`intersect_x8`, `occluded_x8`: 4×2 pixel tiles, partial tiles at
+/// the image edge, an invalid ray in a packet) give every ray the same closest hit and the
+/// same shadow answer as single rays, in every mode and over frames (so the caches, fed by
+/// both paths, stay equal too).
+#[test]
+fn packets_match_single_rays() {
+    for name in ["heads", "elastic-balls"] {
+        let opts = SequenceOptions { detail: 0.03, ..Default::default() };
+        let mut seq = Sequence::builtin(name, &opts).unwrap();
+        let rec = seq.record(10).unwrap();
+        let (w, h) = (38u32, 29u32); // not multiples of 4 and 2
+        let light = Vec3::new(2.0, 4.0, 3.0);
+        for m in UpdateMode::ALL {
+            let mut single = DeformTracer::new(&seq.scene, m, TraceParams::default()).unwrap();
+            let mut packed = DeformTracer::new(&seq.scene, m, TraceParams::default()).unwrap();
+            single.set_cache_slots((w * h) as usize);
+            packed.set_cache_slots((w * h) as usize);
+            let (mut occluded_some, mut lit_some) = (false, false);
+            for (fi, frame) in rec.frames.iter().enumerate().step_by(3) {
+                single.begin_frame(frame).unwrap();
+                packed.begin_frame(frame).unwrap();
+                let f = seq.camera.frame(w, h);
+                let reference = render(&single, &seq.camera, w, h, &mut DeformCounters::default());
+                let mut got = vec![None; (w * h) as usize];
+                let mut ctr = Counters::default();
+                let mut dc = DeformCounters::default();
+                for j0 in (0..h).step_by(2) {
+                    for i0 in (0..w).step_by(4) {
+                        let mut rays = Vec::new();
+                        let mut slots = Vec::new();
+                        for j in j0..(j0 + 2).min(h) {
+                            for i in i0..(i0 + 4).min(w) {
+                                rays.push(Ray::new(seq.camera.eye, f.pixel_center_dir(i, j)));
+                                slots.push(Some(j * w + i));
+                            }
+                        }
+                        let hits = packed.intersect_x8(&rays, &slots, &mut ctr, &mut dc);
+                        for (k, s) in slots.iter().enumerate() {
+                            got[s.unwrap() as usize] = hits[k];
+                        }
+                        assert!(hits[rays.len()..].iter().all(|x| x.is_none()));
+                        // Shadow rays of the packet's hits, with one invalid ray added.
+                        let mut srays = Vec::new();
+                        let mut active = 0u8;
+                        for (k, hit) in hits.iter().take(rays.len()).enumerate() {
+                            match hit {
+                                Some(hh) => {
+                                    let o = hh.p + hh.n * 1e-3;
+                                    srays.push(Ray::segment(o, light - o, 1e-4, 1.0));
+                                    active |= 1 << k;
+                                }
+                                None => srays.push(Ray::new(Vec3::splat(f32::NAN), Vec3::X)),
+                            }
+                        }
+                        let occ = packed.occluded_x8(&srays, active, &mut ctr, &mut dc);
+                        for (k, sr) in srays.iter().enumerate() {
+                            let want = active & (1 << k) != 0 && single.occluded(sr, &mut ctr);
+                            assert_eq!(occ & (1 << k) != 0, want, "{name} {} frame {fi}: shadow ray {k}", m.name());
+                            occluded_some |= want;
+                            lit_some |= active & (1 << k) != 0 && !want;
+                        }
+                    }
+                }
+                same_hits(&reference, &got).unwrap_or_else(|e| panic!("{name} {} frame {fi}: {e}", m.name()));
+                assert!(got.iter().filter(|x| x.is_some()).count() > 50, "{name}: too few hits");
+            }
+            assert!(occluded_some && lit_some, "{name} {}: shadow test not exercised", m.name());
+        }
+    }
+}
+
 /// The same image for 1 and 2 threads, and shadow rays agree across modes.
 #[test]
 fn deterministic_across_threads_and_shadow_rays_agree() {

@@ -139,6 +139,7 @@ fn render_surfel(a: &RenderArgs, out: &Path) -> Result<()> {
         detail: 1.0,
         no_shadows: false,
         threads: a.threads,
+        packet: a.packet,
         quiet: a.quiet,
     };
     let st = super::animate::animate(&args)?;

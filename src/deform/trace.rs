@@ -43,7 +43,7 @@ use super::displace::{deform_point, DeformField, DeformedSurfel};
 use super::miniball::miniball;
 use super::mls::{clipped_by, ellipse_hit, mls_intersect, MlsOutcome, MlsParams};
 use super::object::SurfelObject;
-use super::tree::{child_bound, leaf_sphere, sphere_test_1, sphere_test_spheres, Topology, LEAF};
+use super::tree::{child_bound, leaf_sphere, sphere_test_1, sphere_test_spheres, RayPacketX8, Topology, LEAF};
 use super::DeformError;
 use crate::baseline::accel::Ray;
 use crate::core::stats::{Counter, Counters};
@@ -53,6 +53,7 @@ use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering::*};
 use std::sync::Arc;
 use std::time::Instant;
+use wide::f32x8;
 
 /// How the hierarchy follows the deformation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -554,26 +555,10 @@ impl DeformTracer {
             return best.hit;
         }
         let slot = if self.mode == UpdateMode::LazyCache { slot.filter(|s| (*s as usize) < self.cache.len()) } else { None };
-        let mut skip = (u32::MAX, u32::MAX);
-        if let Some(sl) = slot {
-            let v = self.cache[sl as usize].load(Relaxed);
-            if v != NO_CACHE {
-                let (k, n) = ((v >> 32) as usize, (v & 0xffff_ffff) as usize);
-                if k < self.inst.len() && n < self.inst[k].obj.tree.len() {
-                    dc.cache_lookups += 1;
-                    skip = (k as u32, n as u32);
-                    let (c, r) = self.sphere(&self.inst[k], n);
-                    dc.sphere_tests += 1;
-                    ctr.inc(Counter::node_tests);
-                    if let Some(te) = sphere_test_1(ray.org, ray.dir, c, r, ray.tnear, best.t) {
-                        self.closest_in(k, ray, n as u32, te, &mut best, u32::MAX, dc, ctr);
-                        if best.hit.is_some() {
-                            dc.cache_hits += 1;
-                        }
-                    }
-                }
-            }
-        }
+        let skip = match slot {
+            Some(sl) => self.search_cached(sl, ray, &mut best, dc, ctr),
+            None => (u32::MAX, u32::MAX),
+        };
         let roots = self.root_hits(ray, best.t, dc, ctr);
         for (te, k) in roots {
             if te > best.t {
@@ -583,23 +568,52 @@ impl DeformTracer {
             self.closest_in(k, ray, 0, te, &mut best, sk, dc, ctr);
         }
         if let Some(sl) = slot {
-            let v = match best.hit {
-                Some(h) => {
-                    let topo = &self.inst[h.instance as usize].obj.tree.topo;
-                    let mut n = h.node;
-                    for _ in 0..self.params.cache_up {
-                        match topo.parent[n as usize] {
-                            u32::MAX => break,
-                            p => n = p,
-                        }
-                    }
-                    ((h.instance as u64) << 32) | n as u64
-                }
-                None => NO_CACHE,
-            };
-            self.cache[sl as usize].store(v, Relaxed);
+            self.store_cache(sl, best.hit);
         }
         best.hit
+    }
+
+    /// §4.2.2: searches the subtree cached in `slot` (if any) into `best`; returns the
+    /// (instance, node) that the traversal from the root must then leave out.
+    fn search_cached(&self, sl: u32, ray: &Ray, best: &mut Best, dc: &mut DeformCounters, ctr: &mut Counters) -> (u32, u32) {
+        let v = self.cache[sl as usize].load(Relaxed);
+        if v == NO_CACHE {
+            return (u32::MAX, u32::MAX);
+        }
+        let (k, n) = ((v >> 32) as usize, (v & 0xffff_ffff) as usize);
+        if k >= self.inst.len() || n >= self.inst[k].obj.tree.len() {
+            return (u32::MAX, u32::MAX);
+        }
+        dc.cache_lookups += 1;
+        let (c, r) = self.sphere(&self.inst[k], n);
+        dc.sphere_tests += 1;
+        ctr.inc(Counter::node_tests);
+        if let Some(te) = sphere_test_1(ray.org, ray.dir, c, r, ray.tnear, best.t) {
+            self.closest_in(k, ray, n as u32, te, best, u32::MAX, dc, ctr);
+            if best.hit.is_some() {
+                dc.cache_hits += 1;
+            }
+        }
+        (k as u32, n as u32)
+    }
+
+    /// Remembers the node of `hit` (`cache_up` levels above its leaf) for the slot's next frame.
+    fn store_cache(&self, sl: u32, hit: Option<SurfelHit>) {
+        let v = match hit {
+            Some(h) => {
+                let topo = &self.inst[h.instance as usize].obj.tree.topo;
+                let mut n = h.node;
+                for _ in 0..self.params.cache_up {
+                    match topo.parent[n as usize] {
+                        u32::MAX => break,
+                        p => n = p,
+                    }
+                }
+                ((h.instance as u64) << 32) | n as u64
+            }
+            None => NO_CACHE,
+        };
+        self.cache[sl as usize].store(v, Relaxed);
     }
 
     /// Root spheres of all instances, 8 per f32x8 step: (entry, instance) of those hit,
@@ -753,6 +767,244 @@ impl DeformTracer {
             }
         }
         false
+    }
+
+    // -- packets of eight rays -------------------------------------------------------------
+
+    /// Closest hits of up to eight rays (`slots` as in [`intersect`](Self::intersect), one
+    /// per ray), traversed together: a node's sphere is fetched (and lazily updated) once and
+    /// tested against all rays still active in it in one [`RayPacketX8`] step; leaves are
+    /// tested ray by ray. The hits equal [`intersect_ex`](Self::intersect_ex)'s for every ray
+    /// (the closest accepted hit does not depend on the traversal order, module docs), so
+    /// images are identical; `sphere_tests` counts one per active ray and sphere, as there.
+    /// The children are visited nearer-first by the smallest entry over the rays that hit
+    /// them. `Refit` traces the rays one by one.
+    pub fn intersect_x8(&self, rays: &[Ray], slots: &[Option<u32>], ctr: &mut Counters, dc: &mut DeformCounters) -> [Option<SurfelHit>; 8] {
+        assert!(rays.len() <= 8 && slots.len() == rays.len(), "a packet holds at most 8 rays, one slot each");
+        let mut out = [None; 8];
+        if self.mode == UpdateMode::Refit || self.frame == 0 {
+            for (i, r) in rays.iter().enumerate() {
+                out[i] = self.intersect_ex(r, slots[i], ctr, dc);
+            }
+            return out;
+        }
+        let valid = valid_mask(rays);
+        if valid == 0 {
+            return out;
+        }
+        let mut best = [Best { t: f32::NEG_INFINITY, hit: None }; 8];
+        for i in lanes(valid) {
+            best[i].t = rays[i].tfar;
+        }
+        // §4.2.2: each ray's cached node first, as in `intersect_ex`.
+        let mut skip = [(u32::MAX, u32::MAX); 8];
+        let mut slot = [None; 8];
+        if self.mode == UpdateMode::LazyCache {
+            for i in lanes(valid) {
+                slot[i] = slots[i].filter(|s| (*s as usize) < self.cache.len());
+                if let Some(sl) = slot[i] {
+                    skip[i] = self.search_cached(sl, &rays[i], &mut best[i], dc, ctr);
+                }
+            }
+        }
+        let pk = packet(rays, valid);
+        let mut roots: Vec<(f32, usize, u8, f32x8)> = Vec::with_capacity(self.inst.len());
+        for (k, ii) in self.inst.iter().enumerate() {
+            let (c, r) = self.sphere(ii, 0);
+            let cnt = valid.count_ones() as u64;
+            dc.sphere_tests += cnt;
+            ctr.add(Counter::node_tests, cnt);
+            let (m, e) = pk.test(c, r, best_t(&best));
+            let m = m & valid;
+            if m != 0 {
+                roots.push((hmin(e, m), k, m, e));
+            }
+        }
+        roots.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        for (_, k, m, e) in roots {
+            self.closest_in_x8(k, rays, &pk, m, e, &mut best, &skip, dc, ctr);
+        }
+        for i in lanes(valid) {
+            if let Some(sl) = slot[i] {
+                self.store_cache(sl, best[i].hit);
+            }
+            out[i] = best[i].hit;
+        }
+        out
+    }
+
+    /// Packet form of [`closest_in`](Self::closest_in) from the root of instance `k`.
+    #[allow(clippy::too_many_arguments)]
+    fn closest_in_x8(
+        &self,
+        k: usize,
+        rays: &[Ray],
+        pk: &RayPacketX8,
+        mask: u8,
+        entry: f32x8,
+        best: &mut [Best; 8],
+        skip: &[(u32, u32); 8],
+        dc: &mut DeformCounters,
+        ctr: &mut Counters,
+    ) {
+        let ii = &self.inst[k];
+        let topo = self.topo(ii);
+        let skipn: [u32; 8] = std::array::from_fn(|i| if skip[i].0 == k as u32 { skip[i].1 } else { u32::MAX });
+        let any_skip = skipn.iter().any(|&s| s != u32::MAX);
+        let mut tb = best_t(best);
+        let mut stack: Vec<(u32, u8, f32x8)> = Vec::with_capacity(64);
+        stack.push((0, mask, entry));
+        while let Some((n, m, te)) = stack.pop() {
+            let mut m = m & te.simd_le(tb).to_bitmask() as u8;
+            if any_skip {
+                for i in lanes(m) {
+                    if skipn[i] == n {
+                        m &= !(1 << i);
+                    }
+                }
+            }
+            if m == 0 {
+                continue;
+            }
+            let n = n as usize;
+            if topo.right[n] == LEAF {
+                for i in lanes(m) {
+                    if let Some(h) = self.leaf(k, n, &rays[i], dc, ctr) {
+                        best[i].offer(h);
+                    }
+                }
+                tb = best_t(best);
+                continue;
+            }
+            let (l, r) = (n + 1, topo.right[n] as usize);
+            let s1 = self.sphere(ii, l);
+            let s2 = self.sphere(ii, r);
+            if ii.naive.is_none() && self.params.eq11 {
+                let (c, _) = self.sphere(ii, n);
+                self.tighten(ii, n, c, s1, s2);
+            }
+            let cnt = 2 * m.count_ones() as u64;
+            dc.sphere_tests += cnt;
+            ctr.add(Counter::node_tests, cnt);
+            let (m1, e1) = pk.test(s1.0, s1.1, tb);
+            let (m2, e2) = pk.test(s2.0, s2.1, tb);
+            let (m1, m2) = (m1 & m, m2 & m);
+            match (m1 != 0, m2 != 0) {
+                (true, true) => {
+                    if !self.params.ordered || hmin(e1, m1) <= hmin(e2, m2) {
+                        stack.push((r as u32, m2, e2));
+                        stack.push((l as u32, m1, e1));
+                    } else {
+                        stack.push((l as u32, m1, e1));
+                        stack.push((r as u32, m2, e2));
+                    }
+                }
+                (true, false) => stack.push((l as u32, m1, e1)),
+                (false, true) => stack.push((r as u32, m2, e2)),
+                (false, false) => {}
+            }
+        }
+    }
+
+    /// Any-hit for up to eight rays (lanes of `active`), traversed together as in
+    /// [`intersect_x8`](Self::intersect_x8), with [`occluded_ex`](Self::occluded_ex)'s
+    /// updated-child-first order; a ray leaves the packet at its first accepted hit. Returns
+    /// the mask of occluded rays (equal to `occluded_ex` ray by ray).
+    pub fn occluded_x8(&self, rays: &[Ray], active: u8, ctr: &mut Counters, dc: &mut DeformCounters) -> u8 {
+        assert!(rays.len() <= 8, "a packet holds at most 8 rays");
+        let active = active & if rays.len() == 8 { 0xff } else { (1u8 << rays.len()) - 1 };
+        if self.mode == UpdateMode::Refit || self.frame == 0 {
+            let mut m = 0u8;
+            for i in lanes(active) {
+                if self.occluded_ex(&rays[i], ctr, dc) {
+                    m |= 1 << i;
+                }
+            }
+            return m;
+        }
+        let valid = valid_mask(rays) & active;
+        if valid == 0 {
+            return 0;
+        }
+        let pk = packet(rays, valid);
+        let tfar = f32x8::from(std::array::from_fn::<f32, 8, _>(|i| if valid & (1 << i) != 0 { rays[i].tfar } else { f32::NEG_INFINITY }));
+        let mut roots: Vec<(f32, usize, u8)> = Vec::with_capacity(self.inst.len());
+        for (k, ii) in self.inst.iter().enumerate() {
+            let (c, r) = self.sphere(ii, 0);
+            let cnt = valid.count_ones() as u64;
+            dc.sphere_tests += cnt;
+            ctr.add(Counter::node_tests, cnt);
+            let (m, e) = pk.test(c, r, tfar);
+            let m = m & valid;
+            if m != 0 {
+                roots.push((hmin(e, m), k, m));
+            }
+        }
+        roots.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut done = 0u8;
+        let mut stack: Vec<(u32, u8)> = Vec::with_capacity(64);
+        for (_, k, m) in roots {
+            let m = m & !done;
+            if m == 0 {
+                continue;
+            }
+            let ii = &self.inst[k];
+            let topo = self.topo(ii);
+            if topo.right[0] == LEAF {
+                for i in lanes(m) {
+                    if self.leaf(k, 0, &rays[i], dc, ctr).is_some() {
+                        done |= 1 << i;
+                    }
+                }
+                continue;
+            }
+            let push_children = |stack: &mut Vec<(u32, u8)>, n: usize, m: u8| {
+                let (l, r) = (n + 1, topo.right[n] as usize);
+                let first_l = if self.params.shadow_updated_first && ii.naive.is_none() {
+                    let (cl, cr) = (self.current(ii, l), self.current(ii, r));
+                    cl || !cr
+                } else {
+                    true
+                };
+                if first_l {
+                    stack.push((r as u32, m));
+                    stack.push((l as u32, m));
+                } else {
+                    stack.push((l as u32, m));
+                    stack.push((r as u32, m));
+                }
+            };
+            stack.clear();
+            push_children(&mut stack, 0, m);
+            while let Some((n, m)) = stack.pop() {
+                let m = m & !done;
+                if m == 0 {
+                    continue;
+                }
+                let n = n as usize;
+                let (c, r) = self.sphere(ii, n);
+                let cnt = m.count_ones() as u64;
+                dc.sphere_tests += cnt;
+                ctr.add(Counter::node_tests, cnt);
+                let m = m & pk.test(c, r, tfar).0;
+                if m == 0 {
+                    continue;
+                }
+                if topo.right[n] == LEAF {
+                    for i in lanes(m) {
+                        if self.leaf(k, n, &rays[i], dc, ctr).is_some() {
+                            done |= 1 << i;
+                        }
+                    }
+                    if done == valid {
+                        return done;
+                    }
+                } else {
+                    push_children(&mut stack, n, m);
+                }
+            }
+        }
+        done
     }
 
     /// Front-to-back traversal of the refitted BVH2s (closest hit into `best`, or with `any`
@@ -992,6 +1244,55 @@ impl DeformTracer {
             None => Ok(()),
         }
     }
+}
+
+/// Lanes (bit indices) set in `m`, lowest first.
+#[inline]
+fn lanes(m: u8) -> impl Iterator<Item = usize> {
+    let mut m = m;
+    std::iter::from_fn(move || {
+        if m == 0 {
+            None
+        } else {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            Some(i)
+        }
+    })
+}
+
+/// Bit i set when `rays[i]` is valid.
+#[inline]
+fn valid_mask(rays: &[Ray]) -> u8 {
+    rays.iter().enumerate().fold(0u8, |m, (i, r)| if r.is_valid() { m | 1 << i } else { m })
+}
+
+/// The rays of `valid` as a packet; other lanes get a harmless dummy ray (they are masked).
+#[inline]
+fn packet(rays: &[Ray], valid: u8) -> RayPacketX8 {
+    let (mut o, mut d, mut tn) = ([[0f32; 8]; 3], [[0f32; 8]; 3], [0f32; 8]);
+    for i in 0..8 {
+        let (org, dir, tnear) = if valid & (1 << i) != 0 { (rays[i].org, rays[i].dir, rays[i].tnear) } else { (Vec3::ZERO, Vec3::X, 0.0) };
+        for a in 0..3 {
+            o[a][i] = org[a];
+            d[a][i] = dir[a];
+        }
+        tn[i] = tnear;
+    }
+    RayPacketX8::new(&o, &d, &tn)
+}
+
+/// Each lane's current closest distance.
+#[inline]
+fn best_t(best: &[Best; 8]) -> f32x8 {
+    f32x8::from(std::array::from_fn::<f32, 8, _>(|i| best[i].t))
+}
+
+/// Smallest entry over the lanes of `m` (m ≠ 0).
+#[inline]
+fn hmin(e: f32x8, m: u8) -> f32 {
+    let e = e.to_array();
+    lanes(m).map(|i| e[i]).fold(f32::INFINITY, f32::min)
 }
 
 #[inline]

@@ -480,10 +480,57 @@ pub fn sphere_test_x8_rays(o: &[[f32; 8]; 3], d: &[[f32; 8]; 3], c: Vec3, r: f32
     )
 }
 
+/// Eight rays in struct-of-arrays form with the per-ray terms of the sphere test (|d|² and
+/// its reciprocal) computed once: the kernel of the packet traversal
+/// ([`DeformTracer::intersect_x8`](super::trace::DeformTracer::intersect_x8)), which tests
+/// one node's sphere against all eight rays per step. Same operations in the same order as
+/// [`sphere_test_1`], so every lane is bit-identical to the scalar reference (tested).
+#[derive(Clone, Copy, Debug)]
+pub struct RayPacketX8 {
+    o: [f32x8; 3],
+    d: [f32x8; 3],
+    a: f32x8,
+    inv: f32x8,
+    tnear: f32x8,
+}
+
+impl RayPacketX8 {
+    #[inline]
+    pub fn new(o: &[[f32; 8]; 3], d: &[[f32; 8]; 3], tnear: &[f32; 8]) -> Self {
+        let o = [f32x8::from(o[0]), f32x8::from(o[1]), f32x8::from(o[2])];
+        let d = [f32x8::from(d[0]), f32x8::from(d[1]), f32x8::from(d[2])];
+        let a = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        Self { o, d, a, inv: f32x8::splat(1.0) / a, tnear: f32x8::from(*tnear) }
+    }
+
+    /// The sphere (c, r) against all eight rays, each with its own `tfar`: hit mask and entry
+    /// distances (max(t0, tnear), as [`sphere_test_1`] for the hit lanes).
+    #[inline(always)]
+    pub fn test(&self, c: Vec3, r: f32, tfar: f32x8) -> (u8, f32x8) {
+        kernel_pre(
+            self.o,
+            self.d,
+            self.a,
+            self.inv,
+            [f32x8::splat(c.x), f32x8::splat(c.y), f32x8::splat(c.z)],
+            f32x8::splat(r),
+            self.tnear,
+            tfar,
+        )
+    }
+}
+
 #[inline(always)]
 fn kernel_x8(o: [f32x8; 3], d: [f32x8; 3], c: [f32x8; 3], r: f32x8, tnear: f32x8, tfar: f32x8) -> (u8, [f32; 8]) {
-    let (ocx, ocy, ocz) = (c[0] - o[0], c[1] - o[1], c[2] - o[2]);
     let a = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    let (m, e) = kernel_pre(o, d, a, f32x8::splat(1.0) / a, c, r, tnear, tfar);
+    (m, e.to_array())
+}
+
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn kernel_pre(o: [f32x8; 3], d: [f32x8; 3], a: f32x8, inv: f32x8, c: [f32x8; 3], r: f32x8, tnear: f32x8, tfar: f32x8) -> (u8, f32x8) {
+    let (ocx, ocy, ocz) = (c[0] - o[0], c[1] - o[1], c[2] - o[2]);
     let b = ocx * d[0] + ocy * d[1] + ocz * d[2];
     let cx = ocy * d[2] - ocz * d[1];
     let cy = ocz * d[0] - ocx * d[2];
@@ -493,12 +540,11 @@ fn kernel_x8(o: [f32x8; 3], d: [f32x8; 3], c: [f32x8; 3], r: f32x8, tnear: f32x8
     let disc = a * (r * r) - (cx * cx + cy * cy + cz * cz) + tol * (a * oo);
     let zero = f32x8::splat(0.0);
     let sq = disc.max(zero).sqrt();
-    let inv = f32x8::splat(1.0) / a;
     let slack = tol * (b.abs() + sq);
     let t0 = (b - sq - slack) * inv;
     let t1 = (b + sq + slack) * inv;
     let hit = disc.simd_ge(zero) & t1.simd_ge(tnear) & t0.simd_le(tfar);
-    (hit.to_bitmask() as u8, t0.max(tnear).to_array())
+    (hit.to_bitmask() as u8, t0.max(tnear))
 }
 
 /// Chooses the scalar reference when the `scalar` feature is on.
@@ -581,6 +627,13 @@ mod tests {
             let tf8: [f32; 8] = std::array::from_fn(|_| u().abs() * 3.0);
             let c = Vec3::new(u(), u(), u());
             let (m, e) = sphere_test_x8_rays(&ro, &rd, c, r[0], &tn8, &tf8);
+            let (mp, ep) = RayPacketX8::new(&ro, &rd, &tn8).test(c, r[0], f32x8::from(tf8));
+            assert_eq!(m, mp);
+            for i in 0..8 {
+                if m & (1 << i) != 0 {
+                    assert_eq!(e[i].to_bits(), ep.to_array()[i].to_bits());
+                }
+            }
             for i in 0..8 {
                 let o = Vec3::new(ro[0][i], ro[1][i], ro[2][i]);
                 let d = Vec3::new(rd[0][i], rd[1][i], rd[2][i]);

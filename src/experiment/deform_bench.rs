@@ -97,6 +97,7 @@ pub fn run(
                 detail: s.detail,
                 no_shadows: !s.shadows,
                 threads: spec.threads.unwrap_or(threads),
+                packet: spec.packet,
                 quiet,
             };
             let mut best: Option<crate::cli::animate::AnimateStats> = None;
