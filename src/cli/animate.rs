@@ -53,6 +53,10 @@ pub struct AnimateArgs {
     /// ray by ray. Same images.
     #[arg(long, default_value_t = 8)]
     pub packet: u32,
+    /// Inner nodes over at most this many surfels are bounded exactly from their deformed
+    /// surfels instead of by Eq. 9 (lazy modes; 0 = Eq. 9 everywhere, the paper; at most 64).
+    #[arg(long, default_value_t = 16)]
+    pub exact_below: u32,
     #[arg(long)]
     pub quiet: bool,
 }
@@ -143,6 +147,9 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
     if !(a.detail.is_finite() && a.detail > 0.0 && a.detail <= 10.0) {
         return Err(Error::Usage(format!("--detail {} out of range (0, 10]", a.detail)));
     }
+    if a.exact_below > crate::deform::trace::MAX_EXACT_BELOW {
+        return Err(Error::Usage(format!("--exact-below {}: at most {}", a.exact_below, crate::deform::trace::MAX_EXACT_BELOW)));
+    }
     if a.packet != 1 && a.packet != 8 {
         return Err(Error::Usage(format!("--packet {}: 1 or 8", a.packet)));
     }
@@ -175,7 +182,8 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     let rec = seq.record(frames).map_err(derr)?;
     let simulate_seconds = t0.elapsed().as_secs_f64();
     let t0 = Instant::now();
-    let mut tracer = DeformTracer::new(&seq.scene, mode, TraceParams::default()).map_err(derr)?;
+    let mut tracer =
+        DeformTracer::new(&seq.scene, mode, TraceParams { exact_below: a.exact_below, ..TraceParams::default() }).map_err(derr)?;
     tracer.set_cache_slots((a.width * a.height) as usize);
     let build_seconds = t0.elapsed().as_secs_f64();
     let surfels: u64 = tracer.frame_stats().surfels_total;

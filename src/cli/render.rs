@@ -140,6 +140,7 @@ fn render_surfel(a: &RenderArgs, out: &Path) -> Result<()> {
         no_shadows: false,
         threads: a.threads,
         packet: a.packet,
+        exact_below: 16,
         quiet: a.quiet,
     };
     let st = super::animate::animate(&args)?;

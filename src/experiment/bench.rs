@@ -170,13 +170,14 @@ impl MethodSpec {
                     "frames" => spec.surfel.frames = Some(num(v)? as u32),
                     "detail" => spec.surfel.detail = num(v)? as f32,
                     "shadows" => spec.surfel.shadows = num(v)? != 0.0,
+                    "exact" => spec.surfel.exact_below = num(v)? as u32,
                     "eigen" => {
                         spec.multires.eigen = crate::multires::trace::EigenMode::from_str(v, true)
                             .map_err(|_| bad(format!("eigen={v}: per-box or exact")))?
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen, tri, term, pw, spread; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen, tri, term, pw, spread; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact)"
                         )))
                     }
                 }

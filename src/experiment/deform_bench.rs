@@ -19,18 +19,21 @@ use crate::error::{Error, Result};
 use serde::Serialize;
 use std::path::Path;
 
-/// `surfel` spec options (keys `update=`, `frames=`, `detail=`, `shadows=`).
+/// `surfel` spec options (keys `update=`, `frames=`, `detail=`, `shadows=`, `exact=`; the
+/// spec's `packet=` chooses packets of 8 or single rays).
 #[derive(Clone, Debug, Serialize)]
 pub struct SurfelSpec {
     pub update: String,
     pub frames: Option<u32>,
     pub detail: f32,
     pub shadows: bool,
+    /// `--exact-below` of `animate`.
+    pub exact_below: u32,
 }
 
 impl Default for SurfelSpec {
     fn default() -> Self {
-        SurfelSpec { update: "lazy-cache".into(), frames: None, detail: 1.0, shadows: true }
+        SurfelSpec { update: "lazy-cache".into(), frames: None, detail: 1.0, shadows: true, exact_below: 16 }
     }
 }
 
@@ -98,6 +101,7 @@ pub fn run(
                 no_shadows: !s.shadows,
                 threads: spec.threads.unwrap_or(threads),
                 packet: spec.packet,
+                exact_below: s.exact_below,
                 quiet,
             };
             let mut best: Option<crate::cli::animate::AnimateStats> = None;
@@ -251,6 +255,14 @@ pub fn validate(spec: &MethodSpec) -> Result<()> {
     crate::cli::animate::parse_mode(&s.update)?;
     if !(s.detail.is_finite() && s.detail > 0.0 && s.detail <= 10.0) {
         return Err(Error::Usage(format!("method spec '{}': detail={} out of range (0, 10]", spec.text, s.detail)));
+    }
+    if s.exact_below > crate::deform::trace::MAX_EXACT_BELOW {
+        return Err(Error::Usage(format!(
+            "method spec '{}': exact={} above {}",
+            spec.text,
+            s.exact_below,
+            crate::deform::trace::MAX_EXACT_BELOW
+        )));
     }
     if s.frames == Some(0) || s.frames.is_some_and(|f| f > 100_000) {
         return Err(Error::Usage(format!("method spec '{}': frames out of range", spec.text)));
