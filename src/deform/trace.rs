@@ -41,7 +41,7 @@
 
 use super::displace::{deform_point, DeformField, DeformedSurfel};
 use super::miniball::miniball;
-use super::mls::{clipped_by, ellipse_hit, mls_intersect, MlsOutcome, MlsParams};
+use super::mls::{clipped_by, ellipse_hit, mls_intersect_x8, MlsNbr, MlsOutcome, MlsParams, MAX_NBR};
 use super::object::SurfelObject;
 use super::tree::{child_bound, leaf_sphere, sphere_test_1, sphere_test_spheres, RayPacketX8, Topology, LEAF, RADIUS_PAD};
 use super::DeformError;
@@ -563,14 +563,15 @@ impl DeformTracer {
         // culls the final hit (in `Best::offer`).
         let (t0, x0) = ellipse_hit(ray.org, ray.dir, ds.p, ds.u, ds.v, ray.tnear, ray.tfar)?;
         let (sc, sr) = leaf_sphere(&ds);
-        let mut nb = [(Vec3::ZERO, Vec3::ZERO); 32];
-        let nk = obj.nk.min(32);
-        for (q, slot) in obj.nbr[s * obj.nk..s * obj.nk + nk].iter().zip(nb.iter_mut()) {
-            *slot = self.surfel_pn(ii, *q as usize);
+        let mut nb = MlsNbr::default();
+        let nk = obj.nk.min(MAX_NBR);
+        for q in &obj.nbr[s * obj.nk..s * obj.nk + nk] {
+            let (p, n) = self.surfel_pn(ii, *q as usize);
+            nb.push(p, n);
         }
         let h = obj.h[s] * ds.stretch.clamp(1.0, self.params.max_support_stretch);
         dc.mls_runs += 1;
-        match mls_intersect(ray.org, ray.dir, t0, x0, &nb[..nk], h, sc, sr, ray.tnear, ray.tfar, &self.params.mls) {
+        match mls_intersect_x8(ray.org, ray.dir, t0, x0, &nb, h, sc, sr, ray.tnear, ray.tfar, &self.params.mls) {
             MlsOutcome::Rejected { iters } => {
                 dc.mls_iterations += iters as u64;
                 dc.mls_rejected += 1;
