@@ -26,7 +26,7 @@
 
 use super::knn::KdTree;
 use super::DeformError;
-use glam::{Mat3, Vec3};
+use glam::{Mat3, Mat3A, Vec3, Vec3A, Vec4};
 
 /// The radial spline of Eq. 2: `1 − 6r² + 8r³ − 3r⁴` for `r ≤ 1`, else 0.
 #[inline(always)]
@@ -106,13 +106,39 @@ pub struct DeformField {
     pub k: Vec<Mat3>,
     /// ‖K_j‖_F.
     pub kf: Vec<f32>,
+    /// K_j and a_j = û_j − K_j x_j packed per node for Eq. 1 ([`deform_point`]).
+    pub lin: Vec<NodeLin>,
+}
+
+/// One simulation node's linear field packed in one 64-byte line: `k` = K_j and `a_kf` =
+/// (a_j, ‖K_j‖_F) with a_j = û_j − K_j x_j, so that Eq. 1's sum
+/// Σ_j ω_j (û_j + K_j (x − x_j)) = Σ_j ω_j a_j + (Σ_j ω_j K_j) x: four 4-wide multiply-adds
+/// per node instead of a matrix–vector product and two matrix sums.
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(64))]
+pub struct NodeLin {
+    pub k: Mat3A,
+    pub a_kf: Vec4,
+}
+
+const _: () = assert!(std::mem::size_of::<NodeLin>() == 64);
+
+fn pack_lin(rest: &[Vec3], u: &[Vec3], k: &[Mat3], kf: &[f32]) -> Vec<NodeLin> {
+    (0..rest.len()).map(|j| NodeLin { k: Mat3A::from(k[j]), a_kf: (u[j] - k[j] * rest[j]).extend(kf[j]) }).collect()
 }
 
 impl DeformField {
     /// The undeformed state.
     pub fn identity(nodes: &SimNodes) -> Self {
         let n = nodes.len();
-        DeformField { rot: Mat3::IDENTITY, trans: Vec3::ZERO, u: vec![Vec3::ZERO; n], k: vec![Mat3::ZERO; n], kf: vec![0.0; n] }
+        DeformField {
+            rot: Mat3::IDENTITY,
+            trans: Vec3::ZERO,
+            u: vec![Vec3::ZERO; n],
+            k: vec![Mat3::ZERO; n],
+            kf: vec![0.0; n],
+            lin: vec![NodeLin::default(); n],
+        }
     }
 
     pub fn compute(nodes: &SimNodes, deformed: &[Vec3], factor_rigid: bool) -> Result<Self, DeformError> {
@@ -141,7 +167,8 @@ impl DeformField {
             k.push(kj);
             kf.push(f);
         }
-        Ok(DeformField { rot, trans, u, k, kf })
+        let lin = pack_lin(&nodes.rest, &u, &k, &kf);
+        Ok(DeformField { rot, trans, u, k, kf, lin })
     }
 }
 
@@ -263,20 +290,20 @@ impl DeformedSurfel {
     }
 }
 
-/// Eq. 1 for one point with reference position `x`, tangent axes (u, v) and node weights.
+/// Eq. 1 for one point with reference position `x`, tangent axes (u, v) and node weights,
+/// from the packed per-node fields ([`NodeLin`]).
 #[inline]
-pub fn deform_point(f: &DeformField, rest: &[Vec3], x: Vec3, axes: (Vec3, Vec3), idx: &[u32], w: &[f32]) -> DeformedSurfel {
-    let mut p = f.rot * x + f.trans;
-    let mut g = f.rot;
-    let mut stretch = 1.0f32;
+pub fn deform_point(f: &DeformField, x: Vec3, axes: (Vec3, Vec3), idx: &[u32], w: &[f32]) -> DeformedSurfel {
+    let mut kw = Mat3A::ZERO;
+    let mut akf = Vec4::ZERO;
     for (&j, &wj) in idx.iter().zip(w) {
-        let j = j as usize;
-        let d = x - rest[j];
-        p += (f.u[j] + f.k[j] * d) * wj;
-        g += f.k[j] * wj;
-        stretch += wj * f.kf[j];
+        let l = &f.lin[j as usize];
+        kw += l.k * wj;
+        akf += l.a_kf * wj;
     }
-    DeformedSurfel { p, u: g * axes.0, v: g * axes.1, stretch }
+    let p = f.rot * x + f.trans + akf.truncate() + Vec3::from(kw * Vec3A::from(x));
+    let g = f.rot + Mat3::from(kw);
+    DeformedSurfel { p, u: g * axes.0, v: g * axes.1, stretch: 1.0 + akf.w }
 }
 
 #[cfg(test)]
@@ -315,8 +342,38 @@ mod tests {
         }
         let w = NodeWeights::new(&[Vec3::new(1.1, 1.3, 0.4)], &nodes, 8);
         let x = Vec3::new(1.1, 1.3, 0.4);
-        let s = deform_point(&f, &nodes.rest, x, (Vec3::X, Vec3::Y), &w.idx, &w.w);
+        let s = deform_point(&f, x, (Vec3::X, Vec3::Y), &w.idx, &w.w);
         assert!((s.p - a * x).length() < 1e-3, "{} vs {}", s.p, a * x);
         assert!((s.u - a * Vec3::X).length() < 1e-3);
+    }
+
+    /// The packed form of Eq. 1 ([`NodeLin`]) equals the direct sum
+    /// x̂ + Σ_j ω_j (û_j + K_j (x − x_j)), ∇ = R + Σ_j ω_j K_j, on a random non-rigid motion.
+    #[test]
+    fn packed_eq1_matches_direct_sum() {
+        use crate::core::rng::Sampler;
+        let mut s = Sampler::new(8, 1, 2);
+        let rest: Vec<Vec3> = (0..60).map(|_| Vec3::new(s.next(), s.next(), s.next()) * 2.0).collect();
+        let nodes = SimNodes::new(rest.clone(), vec![1.0; 60], 8).unwrap();
+        let q = glam::Quat::from_axis_angle(Vec3::new(0.3, 1.0, 0.2).normalize(), 0.7);
+        let def: Vec<Vec3> = rest.iter().map(|x| q * *x + Vec3::new(0.1 * (3.0 * x.y).sin(), 0.2 * x.x * x.z, 0.05 * x.y * x.y)).collect();
+        let f = DeformField::compute(&nodes, &def, true).unwrap();
+        let pts: Vec<Vec3> = (0..50).map(|_| Vec3::new(s.next(), s.next(), s.next()) * 2.0).collect();
+        let w = NodeWeights::new(&pts, &nodes, 16);
+        for (i, &x) in pts.iter().enumerate() {
+            let (idx, ws) = (&w.idx[i * 16..i * 16 + 16], &w.w[i * 16..i * 16 + 16]);
+            let (u, v) = (Vec3::new(0.01, 0.0, 0.002), Vec3::new(0.0, 0.012, -0.001));
+            let got = deform_point(&f, x, (u, v), idx, ws);
+            let (mut p, mut g, mut st) = (f.rot * x + f.trans, f.rot, 1.0f32);
+            for (&j, &wj) in idx.iter().zip(ws) {
+                let j = j as usize;
+                p += (f.u[j] + f.k[j] * (x - rest[j])) * wj;
+                g += f.k[j] * wj;
+                st += wj * f.kf[j];
+            }
+            assert!((got.p - p).length() < 1e-5, "{i}: {} vs {p}", got.p);
+            assert!((got.u - g * u).length() < 1e-6 && (got.v - g * v).length() < 1e-6);
+            assert!((got.stretch - st).abs() < 1e-5);
+        }
     }
 }

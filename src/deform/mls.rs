@@ -327,7 +327,10 @@ mod tests {
             let eps = prm.eps_rel * h;
             match (a, b) {
                 (MlsOutcome::Hit { p: pa, n: na, iters: ia, .. }, MlsOutcome::Hit { p: pb, n: nb2, iters: ib, .. }) => {
-                    assert!((pa - pb).length() <= 4.0 * eps && (na - nb2).length() < 1e-3 && ia.abs_diff(ib) <= 1, "case {case}: {a:?} vs {b:?}");
+                    assert!(
+                        (pa - pb).length() <= 4.0 * eps && (na - nb2).length() < 1e-3 && ia.abs_diff(ib) <= 1,
+                        "case {case}: {a:?} vs {b:?}"
+                    );
                     hits += 1;
                     steps_differ += (ia != ib) as u32;
                 }

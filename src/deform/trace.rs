@@ -1355,14 +1355,7 @@ fn hmin(e: f32x8, m: u8) -> f32 {
 #[inline]
 fn deform_surfel(obj: &SurfelObject, f: &DeformField, s: usize) -> DeformedSurfel {
     let k = obj.weights.k;
-    deform_point(
-        f,
-        &obj.nodes.rest,
-        obj.pos[s],
-        obj.model.surfels.axes(s),
-        &obj.weights.idx[s * k..s * k + k],
-        &obj.weights.w[s * k..s * k + k],
-    )
+    deform_point(f, obj.pos[s], obj.model.surfels.axes(s), &obj.weights.idx[s * k..s * k + k], &obj.weights.w[s * k..s * k + k])
 }
 
 #[inline]
