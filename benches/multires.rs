@@ -17,6 +17,11 @@
 //!   hoisted on both sides, as in the traversal), throughput in ray–sphere tests.
 //! - `cone_sigma`: the squared footprint Σ(t) = a + b·t + c·t² — [`Cone::sigma`] vs
 //!   [`Cone::sigma_x8`]; 4 096 depths, throughput in depths.
+//! - `tri_mass`: the Gaussian's mass over a 2-D triangle (`--tri-weight mass`) —
+//!   [`gauss_tri_mass`] (six right triangles one by one) vs [`gauss_tri_mass_x8`] (the six
+//!   in the lanes of one pass); 1 024 small triangles and slivers near the footprint's centre,
+//!   which all take the full path (the x8 kernel's one-edge fast path is not measured here),
+//!   throughput in triangles.
 //!
 //! The 2×2 eigen-decomposition, used inside the node test and the exact point test, has its own
 //! bench (`benches/eigen.rs`). The `x8` kernels use `wide::f32x8` (two SSE halves without
@@ -30,7 +35,8 @@ use lodtrace::multires::cone::{Cone, Fp};
 use lodtrace::multires::octree_accel::{sphere_1, spheres_x8, RayX8};
 use lodtrace::multires::quant::{encode_cover, oct_encode};
 use lodtrace::multires::trace::{
-    node_test_1, node_test_x8, point_w_ref, point_w_x8, tri_bound_1, tri_bound_x8, PointBlock, PointHits, R_CUT,
+    gauss_tri_mass, gauss_tri_mass_x8, node_test_1, node_test_x8, point_w_ref, point_w_x8, tri_bound_1, tri_bound_x8, PointBlock,
+    PointHits, R_CUT,
 };
 use std::hint::black_box;
 use wide::f32x8;
@@ -384,5 +390,41 @@ fn cone_sigma(cr: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, node_test, tri_bound, point_w, octree_spheres, cone_sigma);
+fn tri_mass(cr: &mut Criterion) {
+    const N: usize = 1024;
+    let mut s = Sampler::new(25, 0, 0);
+    let tris: Vec<[Vec2; 3]> = (0..N)
+        .map(|i| {
+            let c = Vec2::new(s.next() - 0.5, s.next() - 0.5) * 1.5;
+            if i % 2 == 0 {
+                std::array::from_fn(|_| c + Vec2::new(s.next() - 0.5, s.next() - 0.5) * 2.0)
+            } else {
+                let dir = Vec2::from_angle(s.next() * 6.283);
+                [c - dir * 1.5, c + dir * 1.5, c + dir * 1.2 + dir.perp() * (0.05 + 0.2 * s.next())]
+            }
+        })
+        .collect();
+    let mut out = vec![0.0f32; N];
+    let mut g = cr.benchmark_group("tri_mass");
+    g.throughput(Throughput::Elements(N as u64));
+    g.bench_function("scalar", |bch| {
+        bch.iter(|| {
+            for (o, q) in out.iter_mut().zip(black_box(&tris)) {
+                *o = gauss_tri_mass(*q);
+            }
+            black_box(&mut out);
+        })
+    });
+    g.bench_function("x8", |bch| {
+        bch.iter(|| {
+            for (o, q) in out.iter_mut().zip(black_box(&tris)) {
+                *o = gauss_tri_mass_x8(*q);
+            }
+            black_box(&mut out);
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, node_test, tri_bound, point_w, octree_spheres, cone_sigma, tri_mass);
 criterion_main!(benches);

@@ -56,7 +56,7 @@ pub struct MultiresArgs {
     /// (default: on a black/white checkerboard, 96², RMSE against 256 spp 0.015 vs 0.070 with
     /// the paper's formula at cone scale 0.5; 0.046 vs 0.106 at cone scale 1). `mass`
     /// integrates the Gaussian over the whole triangle, right for leaf blades thinner than
-    /// the footprint too (`complex` 320×240: mean FLIP 0.1325 vs 0.1381, but 2.5× the time,
+    /// the footprint too (`complex` 640×480: mean FLIP 0.1062 vs 0.1229, but 2.5× the time,
     /// since see-through foliage no longer stops cones early).
     #[arg(long, value_enum, default_value = "coverage")]
     pub tri_weight: trace::TriWeight,
