@@ -170,30 +170,37 @@ pub fn run(
         rows.extend(seq_rows);
     }
     if let Some(o) = out {
-        let ratios: Vec<(String, Vec<(f64, f64)>)> = rows
-            .iter()
-            .filter(|r| r.update == "lazy" || r.update == "lazy-cache")
-            .fold(Vec::<&DeformRow>::new(), |mut v, r| {
-                if !v.iter().any(|x| x.scene == r.scene) {
-                    v.push(r);
-                }
-                v
-            })
-            .into_iter()
-            .map(|r| (r.scene.clone(), r.radius_ratios.iter().filter(|l| l.sampled > 0).map(|l| (l.level as f64, l.mean_ratio)).collect()))
-            .filter(|(_, v): &(String, Vec<(f64, f64)>)| !v.is_empty())
-            .collect();
-        if !ratios.is_empty() {
-            plot::line_chart(
-                &o.join("radius-ratio.png"),
-                "Updated / tightest sphere radius per level (lazy, last frame)",
-                "tree level (0 = root)",
-                "radius ratio",
-                &ratios,
-            )?;
-        }
+        radius_plot(o, &rows)?;
     }
     Ok(rows)
+}
+
+/// `radius-ratio.png` (the paper's Fig. 3): the updated / tightest radius per level of the
+/// first lazy row of every sequence in `rows`.
+pub fn radius_plot(out: &Path, rows: &[DeformRow]) -> Result<()> {
+    let ratios: Vec<(String, Vec<(f64, f64)>)> = rows
+        .iter()
+        .filter(|r| r.update == "lazy" || r.update == "lazy-cache")
+        .fold(Vec::<&DeformRow>::new(), |mut v, r| {
+            if !v.iter().any(|x| x.scene == r.scene) {
+                v.push(r);
+            }
+            v
+        })
+        .into_iter()
+        .map(|r| (r.scene.clone(), r.radius_ratios.iter().filter(|l| l.sampled > 0).map(|l| (l.level as f64, l.mean_ratio)).collect()))
+        .filter(|(_, v): &(String, Vec<(f64, f64)>)| !v.is_empty())
+        .collect();
+    if ratios.is_empty() {
+        return Ok(());
+    }
+    plot::line_chart(
+        &out.join("radius-ratio.png"),
+        "Updated / tightest sphere radius per level (lazy, last frame)",
+        "tree level (0 = root)",
+        "radius ratio",
+        &ratios,
+    )
 }
 
 /// Fig. 5 (time per frame) and the bounding-volume tests per frame of one sequence's rows.

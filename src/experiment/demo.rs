@@ -129,6 +129,8 @@ fn deform_section(a: &DemoArgs) -> Result<String> {
             Err(e) => eprintln!("demo: skipping {seq} ({e})"),
         }
     }
+    // Each sequence ran on its own (so that one failing is skipped): the Fig. 3 plot of all.
+    super::deform_bench::radius_plot(&dir, &rows)?;
     let mut h_out = format!(
         "<h2>Adams et al.: deforming point-sampled surfaces</h2><p>Each sequence ({frames} frames, {w}×{h}, detail {detail}) rendered with the hierarchy rebuilt every frame (naive), updated lazily (§4.1), lazily with per-ray caching (§4.2.2), and — not in the paper — an obvhs BVH2 refitted every frame; the same recorded motion, so the images must be identical (last column). Per-frame time curves like the paper's Fig. 5. Same as <code>lodtrace bench SEQ --methods surfel:update=naive,surfel:update=lazy,...</code>.</p><table><tr><th>sequence</th><th>update</th><th>surfels</th><th>ms/frame</th><th>vs naive</th><th>BV tests/frame</th><th>leaf tests/frame</th><th>cache hits</th><th>MLS iterations</th><th>root radius ratio</th><th>mean radius ratio</th><th>same image</th></tr>"
     );
