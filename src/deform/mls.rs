@@ -101,27 +101,49 @@ pub fn mls_intersect(
             sa += p * w;
             sn += n * w;
         }
-        let ln = sn.length();
-        if !(sw > 0.0) || !(ln > 0.0) || !ln.is_finite() {
-            return MlsOutcome::Rejected { iters: it };
-        }
-        let a = sa / sw;
-        let n = sn / ln;
-        let f = n.dot(x - a);
-        if f.abs() < eps {
-            return MlsOutcome::Hit { t, p: x, n, iters: it };
-        }
-        let den = n.dot(d);
-        if den.abs() < 1e-7 * d.length() {
-            return MlsOutcome::Rejected { iters: it };
-        }
-        t = n.dot(a - o) / den;
-        x = o + d * t;
-        if !(t >= tnear && t <= tfar) || !x.is_finite() || (x - sc).length_squared() > sr * sr {
-            return MlsOutcome::Rejected { iters: it };
+        match step(it, sw, sa, sn, (x, t), (o, d), (sc, sr), (tnear, tfar), eps) {
+            Ok(next) => (x, t) = next,
+            Err(done) => return done,
         }
     }
     MlsOutcome::Rejected { iters: prm.max_iter }
+}
+
+/// One MLS update from the weighted sums at the current point (x, t): converged (a hit),
+/// rejected, or the next point — the ray's hit with the plane (n(x), a(x)).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn step(
+    it: u32,
+    sw: f32,
+    sa: Vec3,
+    sn: Vec3,
+    (x, t): (Vec3, f32),
+    (o, d): (Vec3, Vec3),
+    (sc, sr): (Vec3, f32),
+    (tnear, tfar): (f32, f32),
+    eps: f32,
+) -> Result<(Vec3, f32), MlsOutcome> {
+    let ln = sn.length();
+    if !(sw > 0.0) || !(ln > 0.0) || !ln.is_finite() {
+        return Err(MlsOutcome::Rejected { iters: it });
+    }
+    let a = sa / sw;
+    let n = sn / ln;
+    let f = n.dot(x - a);
+    if f.abs() < eps {
+        return Err(MlsOutcome::Hit { t, p: x, n, iters: it });
+    }
+    let den = n.dot(d);
+    if den.abs() < 1e-7 * d.length() {
+        return Err(MlsOutcome::Rejected { iters: it });
+    }
+    let t = n.dot(a - o) / den;
+    let x = o + d * t;
+    if !(t >= tnear && t <= tfar) || !x.is_finite() || (x - sc).length_squared() > sr * sr {
+        return Err(MlsOutcome::Rejected { iters: it });
+    }
+    Ok((x, t))
 }
 
 /// An MLS neighbourhood in struct-of-arrays form for [`mls_intersect_x8`]: positions and
@@ -217,24 +239,9 @@ pub fn mls_intersect_x8(
         let sw = sw.reduce_add();
         let sa = Vec3::new(sax.reduce_add(), say.reduce_add(), saz.reduce_add());
         let sn = Vec3::new(snx.reduce_add(), sny.reduce_add(), snz.reduce_add());
-        let ln = sn.length();
-        if !(sw > 0.0) || !(ln > 0.0) || !ln.is_finite() {
-            return MlsOutcome::Rejected { iters: it };
-        }
-        let a = sa / sw;
-        let n = sn / ln;
-        let f = n.dot(x - a);
-        if f.abs() < eps {
-            return MlsOutcome::Hit { t, p: x, n, iters: it };
-        }
-        let den = n.dot(d);
-        if den.abs() < 1e-7 * d.length() {
-            return MlsOutcome::Rejected { iters: it };
-        }
-        t = n.dot(a - o) / den;
-        x = o + d * t;
-        if !(t >= tnear && t <= tfar) || !x.is_finite() || (x - sc).length_squared() > sr * sr {
-            return MlsOutcome::Rejected { iters: it };
+        match step(it, sw, sa, sn, (x, t), (o, d), (sc, sr), (tnear, tfar), eps) {
+            Ok(next) => (x, t) = next,
+            Err(done) => return done,
         }
     }
     MlsOutcome::Rejected { iters: prm.max_iter }

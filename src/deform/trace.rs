@@ -532,6 +532,30 @@ impl DeformTracer {
         (c, r * (1.0 + RADIUS_PAD) + RADIUS_PAD * c.abs().max_element())
     }
 
+    /// The spheres of inner node n's two children (updating them lazily), and Eq. 11 for n.
+    #[inline(always)]
+    fn child_spheres(&self, ii: &Instance, n: usize) -> ((Vec3, f32), (Vec3, f32)) {
+        let topo = self.topo(ii);
+        let s1 = self.sphere(ii, n + 1);
+        let s2 = self.sphere(ii, topo.right[n] as usize);
+        if ii.naive.is_none() && self.params.eq11 {
+            let (c, _) = self.sphere(ii, n);
+            self.tighten(ii, n, c, s1, s2);
+        }
+        (s1, s2)
+    }
+
+    /// §4.4's shadow-ray order at inner node n: whether the left child goes first (it is
+    /// current, or neither is; the right one first only when it alone is current).
+    #[inline(always)]
+    fn left_first(&self, ii: &Instance, l: usize, r: usize) -> bool {
+        if self.params.shadow_updated_first && ii.naive.is_none() {
+            self.current(ii, l) || !self.current(ii, r)
+        } else {
+            true
+        }
+    }
+
     /// Eq. 11, evaluated at every descent through a node once both children are current
     /// ("if a node is already visited before, update the radius using Equation 11"), so
     /// tightening propagates upwards as the children tighten. The atomic is only written
@@ -746,12 +770,7 @@ impl DeformTracer {
                 continue;
             }
             let (l, r) = (n + 1, topo.right[n] as usize);
-            let s1 = self.sphere(ii, l);
-            let s2 = self.sphere(ii, r);
-            if ii.naive.is_none() && self.params.eq11 {
-                let (c, _) = self.sphere(ii, n);
-                self.tighten(ii, n, c, s1, s2);
-            }
+            let (s1, s2) = self.child_spheres(ii, n);
             dc.sphere_tests += 2;
             ctr.add(Counter::node_tests, 2);
             let e1 = sphere_test_1(o, d, s1.0, s1.1, ray.tnear, best.t);
@@ -803,13 +822,7 @@ impl DeformTracer {
             }
             let push_children = |stack: &mut Vec<u32>, n: usize| {
                 let (l, r) = (n + 1, topo.right[n] as usize);
-                let first_l = if self.params.shadow_updated_first && ii.naive.is_none() {
-                    let (cl, cr) = (self.current(ii, l), self.current(ii, r));
-                    cl || !cr
-                } else {
-                    true
-                };
-                if first_l {
+                if self.left_first(ii, l, r) {
                     stack.push(r as u32);
                     stack.push(l as u32);
                 } else {
@@ -946,12 +959,7 @@ impl DeformTracer {
                 continue;
             }
             let (l, r) = (n + 1, topo.right[n] as usize);
-            let s1 = self.sphere(ii, l);
-            let s2 = self.sphere(ii, r);
-            if ii.naive.is_none() && self.params.eq11 {
-                let (c, _) = self.sphere(ii, n);
-                self.tighten(ii, n, c, s1, s2);
-            }
+            let (s1, s2) = self.child_spheres(ii, n);
             let cnt = 2 * m.count_ones() as u64;
             dc.sphere_tests += cnt;
             ctr.add(Counter::node_tests, cnt);
@@ -1029,13 +1037,7 @@ impl DeformTracer {
             }
             let push_children = |stack: &mut Vec<(u32, u8)>, n: usize, m: u8| {
                 let (l, r) = (n + 1, topo.right[n] as usize);
-                let first_l = if self.params.shadow_updated_first && ii.naive.is_none() {
-                    let (cl, cr) = (self.current(ii, l), self.current(ii, r));
-                    cl || !cr
-                } else {
-                    true
-                };
-                if first_l {
+                if self.left_first(ii, l, r) {
                     stack.push((r as u32, m));
                     stack.push((l as u32, m));
                 } else {
