@@ -103,7 +103,8 @@ proptest! {
 
     /// After every lazy update of every frame (partial updates with Eq. 11 tightening from
     /// traversal, then a full refit), every surfel ellipse of a node lies inside its sphere,
-    /// also for the small nodes bounded from their surfels (`exact_below`).
+    /// also for the small nodes bounded from their surfels (`exact_below`) and with Eq. 11's
+    /// centre moved between the children (`recentre_eq11`).
     #[test]
     fn lazy_spheres_contain_their_surfels(
         frames in prop::collection::vec(arb_deform(), 1..4),
@@ -112,9 +113,18 @@ proptest! {
         eq11 in any::<bool>(),
         node_rotation in any::<bool>(),
         exact_below in prop::sample::select(vec![0u32, 3, 16, 64]),
+        recentre_eq11 in any::<bool>(),
     ) {
         let obj = shared_ball();
-        let params = TraceParams { factor_rigid: rigid, recentred_bound: recentred, eq11, node_rotation, exact_below, ..TraceParams::default() };
+        let params = TraceParams {
+            factor_rigid: rigid,
+            recentred_bound: recentred,
+            eq11,
+            node_rotation,
+            exact_below,
+            recentre_eq11,
+            ..TraceParams::default()
+        };
         let mut tr = DeformTracer::new(&scene1(obj), UpdateMode::LazyCache, params).unwrap();
         tr.set_cache_slots(64);
         let mut ctr = Counters::default();
