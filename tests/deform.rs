@@ -562,7 +562,8 @@ fn csg_head_hits_stay_on_the_solid() {
 /// Per-frame figures for one sequence (ignored by default):
 /// `DEFORM_SEQ=armadillo-ball DEFORM_DETAIL=1 DEFORM_FRAMES=30 DEFORM_W=256 DEFORM_H=192 \
 ///  cargo test --release --test deform measure -- --ignored --nocapture`
-/// Ablations (default 1): DEFORM_EQ11, DEFORM_RIGID, DEFORM_ORDERED, DEFORM_RECENTRED;
+/// Ablations (default 1): DEFORM_EQ11, DEFORM_RIGID, DEFORM_ORDERED, DEFORM_RECENTRED,
+/// DEFORM_NODE_ROTATION, DEFORM_RECENTRE_EQ11; DEFORM_EXACT_BELOW (default 16);
 /// DEFORM_CACHE_UP (levels above the leaf), DEFORM_SHADOWS (one shadow ray per hit).
 /// DEFORM_SEQ may also be a mesh file (.off/.obj): the default drop of `Sequence::from_mesh`.
 #[test]
@@ -611,6 +612,8 @@ fn measure() {
             ordered: flag("DEFORM_ORDERED"),
             recentred_bound: flag("DEFORM_RECENTRED"),
             node_rotation: flag("DEFORM_NODE_ROTATION"),
+            recentre_eq11: flag("DEFORM_RECENTRE_EQ11"),
+            exact_below: env("DEFORM_EXACT_BELOW", "16").parse().unwrap(),
             ..TraceParams::default()
         };
         let mut tr = DeformTracer::new(&seq.scene, mode, params).unwrap();
