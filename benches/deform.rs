@@ -1,16 +1,27 @@
-//! Criterion benchmark of the Adams et al. bounding-sphere test (`deform::tree`): 4096 random
-//! (ray, sphere) pairs, as
+//! Criterion benchmarks of the Adams et al. kernels with a scalar reference beside an f32x8
+//! version. Run: `cargo bench --bench deform`.
 //!
+//! `sphere_test`: the bounding-sphere test (`deform::tree`) on 4096 random (ray, sphere)
+//! pairs, throughput in ray–sphere tests:
 //! - `scalar`: [`sphere_test_1`] per pair (the reference),
 //! - `x8_spheres`: one ray against 8 spheres per [`sphere_test_x8_spheres`] step,
 //! - `x8_rays`: 8 rays (SoA) against one sphere per [`sphere_test_x8_rays`] step.
 //!
-//! Throughput is in ray–sphere tests per second. Run: `cargo bench --bench deform`.
+//! `packet_nodes`: what the packet traversal does per node — 512 packets of 8 rays, each
+//! meeting 16 spheres with its own per-ray `tfar`: [`sphere_test_1`] ray by ray against
+//! [`RayPacketX8::test`] (the packet built once, as in `intersect_x8`); throughput in
+//! ray–sphere tests.
+//!
+//! `mls`: the MLS iteration (§4.2.1) from a surfel-ellipse start on 1024 noisy 16-surfel
+//! neighbourhoods of a sphere — [`mls_intersect`] vs [`mls_intersect_x8`]; throughput in
+//! intersections.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::Vec3;
 use lodtrace::core::rng::Sampler;
-use lodtrace::deform::tree::{sphere_test_1, sphere_test_x8_rays, sphere_test_x8_spheres};
+use lodtrace::deform::mls::{mls_intersect, mls_intersect_x8, MlsNbr, MlsParams};
+use lodtrace::deform::tree::{sphere_test_1, sphere_test_x8_rays, sphere_test_x8_spheres, RayPacketX8};
+use wide::f32x8;
 use std::hint::black_box;
 
 const N: usize = 4096;
@@ -81,5 +92,87 @@ fn bench(cr: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench);
+fn packet_nodes(cr: &mut Criterion) {
+    const P: usize = 512;
+    const S: usize = 16;
+    let inp = inputs();
+    let tfar: Vec<[f32; 8]> = (0..P).map(|k| std::array::from_fn(|l| 4.0 + ((k * 8 + l) % 7) as f32)).collect();
+    let soa = |f: &dyn Fn(usize) -> f32| -> Vec<[f32; 8]> { (0..P).map(|k| std::array::from_fn(|l| f(8 * k + l))).collect() };
+    let (ox, oy, oz) = (soa(&|i| inp.o[i].x), soa(&|i| inp.o[i].y), soa(&|i| inp.o[i].z));
+    let (dx, dy, dz) = (soa(&|i| inp.d[i].x), soa(&|i| inp.d[i].y), soa(&|i| inp.d[i].z));
+    let mut g = cr.benchmark_group("packet_nodes");
+    g.throughput(Throughput::Elements((P * S * 8) as u64));
+    g.bench_function("scalar", |b| {
+        b.iter(|| {
+            let mut hits = 0u32;
+            for k in 0..P {
+                for j in 0..S {
+                    let (c, r) = (inp.c[(k * S + j) % N], inp.r[(k * S + j) % N]);
+                    for l in 0..8 {
+                        let i = 8 * k + l;
+                        hits += sphere_test_1(inp.o[i], inp.d[i], c, r, 0.0, tfar[k][l]).is_some() as u32;
+                    }
+                }
+            }
+            black_box(hits)
+        })
+    });
+    g.bench_function("x8", |b| {
+        b.iter(|| {
+            let mut hits = 0u32;
+            for k in 0..P {
+                let pk = RayPacketX8::new(&[ox[k], oy[k], oz[k]], &[dx[k], dy[k], dz[k]], &[0.0; 8]);
+                let tf = f32x8::from(tfar[k]);
+                for j in 0..S {
+                    let (m, _) = pk.test(inp.c[(k * S + j) % N], inp.r[(k * S + j) % N], tf);
+                    hits += m.count_ones();
+                }
+            }
+            black_box(hits)
+        })
+    });
+    g.finish();
+}
+
+fn mls(cr: &mut Criterion) {
+    const M: usize = 1024;
+    let mut s = Sampler::new(9, 0, 0);
+    let mut cases = Vec::with_capacity(M);
+    for _ in 0..M {
+        let dir0 = Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5).normalize_or(Vec3::Z);
+        let mut nb = Vec::new();
+        let mut nbx = MlsNbr::default();
+        for _ in 0..16 {
+            let q = (dir0 + Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * 0.3).normalize_or(Vec3::Z);
+            let p = q * (1.0 + 0.01 * (s.next() - 0.5));
+            nb.push((p, q));
+            nbx.push(p, q);
+        }
+        let x0 = dir0;
+        let o = x0 * 4.0 + Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * 0.3;
+        let d = (x0 - o).normalize();
+        let t0 = (x0 - o).length();
+        cases.push((o, d, t0, x0, nb, nbx));
+    }
+    let prm = MlsParams::default();
+    let mut g = cr.benchmark_group("mls");
+    g.throughput(Throughput::Elements(M as u64));
+    g.bench_function("scalar", |b| {
+        b.iter(|| {
+            for (o, d, t0, x0, nb, _) in black_box(&cases) {
+                black_box(mls_intersect(*o, *d, *t0, *x0, nb, 0.35, *x0, 0.5, 0.0, 100.0, &prm));
+            }
+        })
+    });
+    g.bench_function("x8", |b| {
+        b.iter(|| {
+            for (o, d, t0, x0, _, nbx) in black_box(&cases) {
+                black_box(mls_intersect_x8(*o, *d, *t0, *x0, nbx, 0.35, *x0, 0.5, 0.0, 100.0, &prm));
+            }
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench, packet_nodes, mls);
 criterion_main!(benches);
