@@ -31,7 +31,10 @@
 //! - Triangle (§4.5): the vertices are mapped into the footprint coordinates (unit Gaussian)
 //!   of their own depth (exact) or the node's (per-box); d = distance from the origin to the
 //!   2-D triangle; weight = exp(−(d − 0.5)²), taken as 1 for d ≤ 0.5, cut at 2%. Attributes
-//!   are those of the closest point of the triangle.
+//!   are those of the closest point of the triangle. Deviations ([`TriWeight`]): the default
+//!   `coverage` is the Gaussian's exact mass beyond the nearest edge, ½·erfc(±d); `mass`
+//!   integrates it over the whole triangle ([`gauss_tri_mass`], and its x8 form
+//!   [`gauss_tri_mass_x8`] in the renderer), right also for blades thinner than the footprint.
 //!
 //! Compositing (§4.4): see [`super::abuffer`]. Shading is Phong with the same radiometry as
 //! the conventional tracers (`baseline::shade`); light visibility is 1 − the alpha of the
