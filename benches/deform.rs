@@ -21,8 +21,8 @@ use glam::Vec3;
 use lodtrace::core::rng::Sampler;
 use lodtrace::deform::mls::{mls_intersect, mls_intersect_x8, MlsNbr, MlsParams};
 use lodtrace::deform::tree::{sphere_test_1, sphere_test_x8_rays, sphere_test_x8_spheres, RayPacketX8};
-use wide::f32x8;
 use std::hint::black_box;
+use wide::f32x8;
 
 const N: usize = 4096;
 
