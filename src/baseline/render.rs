@@ -94,8 +94,12 @@ impl RenderOpts {
         if !(self.variance_threshold >= 0.0) || !self.variance_threshold.is_finite() {
             return Err(Error::Usage("--variance-threshold must be a finite number >= 0".into()));
         }
-        if self.threads > 1024 {
-            return Err(Error::Usage(format!("--threads {} is absurd", self.threads)));
+        if self.threads > crate::core::MAX_THREADS {
+            return Err(Error::Usage(format!(
+                "--threads {} out of range (0 = all cores, at most {})",
+                self.threads,
+                crate::core::MAX_THREADS
+            )));
         }
         Ok(())
     }
@@ -187,7 +191,7 @@ struct PixelOut {
 /// Renders one frame with the conventional tracers.
 pub fn render(ctx: &TraceCtx, cam: &CameraFrame, opts: &RenderOpts) -> Result<RenderOutput> {
     opts.validate()?;
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(opts.threads).build().map_err(|e| Error::Usage(format!("thread pool: {e}")))?;
+    let pool = crate::core::thread_pool(opts.threads)?;
     let threads = pool.current_num_threads();
     let start = Instant::now();
     let cpu0 = process_cpu_seconds();

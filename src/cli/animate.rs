@@ -159,7 +159,7 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
     if let Some(d) = &a.out {
         std::fs::create_dir_all(d).map_err(|e| Error::io(d, e))?;
     }
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(a.threads).build().map_err(|e| Error::Usage(format!("thread pool: {e}")))?;
+    let pool = crate::core::thread_pool(a.threads)?;
     let threads = pool.current_num_threads();
     pool.install(|| animate_in_pool(a, mode, threads))
 }

@@ -19,6 +19,19 @@ pub const SIMD_LEVEL: &str = if cfg!(all(target_feature = "avx2", target_feature
     "scalar"
 };
 
+/// Most worker threads a run may ask for (`--threads`, bench key `threads=`).
+pub const MAX_THREADS: usize = 1024;
+
+/// The worker pool of a run: `n` threads, 0 = one per core; more than [`MAX_THREADS`] is a
+/// usage error (spawning 100 000 threads would hang the machine instead of failing).
+pub fn thread_pool(n: usize) -> crate::error::Result<rayon::ThreadPool> {
+    use crate::error::Error;
+    if n > MAX_THREADS {
+        return Err(Error::Usage(format!("--threads {n} out of range (0 = all cores, at most {MAX_THREADS})")));
+    }
+    rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| Error::Usage(format!("thread pool: {e}")))
+}
+
 /// An orthonormal frame (t, b, n) around a unit normal (Duff et al. 2017, branchless ONB).
 #[inline]
 pub fn onb(n: Vec3) -> (Vec3, Vec3) {

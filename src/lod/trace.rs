@@ -447,7 +447,7 @@ pub fn render(tr: &mut LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> Resul
     tr.p.validate()?;
     tr.pixel_angle = 2.0 * cam.s / opts.height as f32;
     let tr = &*tr;
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(opts.threads).build().map_err(|e| Error::Usage(format!("thread pool: {e}")))?;
+    let pool = crate::core::thread_pool(opts.threads)?;
     let threads = pool.current_num_threads();
     let start = Instant::now();
     let cpu0 = crate::baseline::render::process_cpu_seconds();

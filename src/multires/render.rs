@@ -28,7 +28,7 @@ pub fn render(ms: &MultiresScene, tp: &TraceParams, cam: &CameraFrame, opts: &Re
     if opts.spp != 1 {
         return Err(Error::Usage("the cone tracers shoot one cone per pixel: use --spp 1".into()));
     }
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(opts.threads).build().map_err(|e| Error::Usage(format!("thread pool: {e}")))?;
+    let pool = crate::core::thread_pool(opts.threads)?;
     let threads = pool.current_num_threads();
     let start = Instant::now();
     let cpu0 = crate::baseline::render::process_cpu_seconds();
