@@ -3,10 +3,17 @@
 //! weight sum and a depth interval. A new sample whose tolerance interval overlaps a fragment
 //! is merged into it (attributes and weights added, intervals united); otherwise it becomes a
 //! new fragment. Fragments are alpha-blended front to back with alpha = min(1, weight sum),
-//! and the ray terminates early at alpha 1: by the paper's rule once the alpha of all its
-//! fragments reaches 1 ([`ABuffer::alpha`], checked by the traversal before each node), or
+//! and the ray terminates early at alpha 1: by the paper's rule once the alpha of its
+//! fragments reaches 1 ([`ABuffer::opaque`], checked by the traversal before each node), or
 //! conservatively once the fragments lying wholly before the traversal front reach it
 //! ([`ABuffer::opaque_before`]); `--termination` in [`super::trace::Termination`].
+//!
+//! *Which* fragments count for the paper's rule: those that begin before the traversal front
+//! (the nearest depth a node still to be visited can reach). The traversal does not find
+//! fragments in depth order — a large node (a floor's root, entered at the eye) hands out its
+//! triangles long before the small nodes in front of them are visited — so a fragment that
+//! lies wholly behind the front may still get geometry in front of it; counting it (the
+//! first version did) let a floor behind a cube end the ray before the cube was reached.
 //!
 //! Bounded memory: at most `cap` fragments (default 16); when full, the two adjacent
 //! fragments with the smallest gap are merged (a documented approximation; it is counted in
@@ -85,8 +92,11 @@ pub struct ABuffer {
     /// Fragments [0, n_final) lie wholly in front of the traversal front.
     n_final: usize,
     alpha_final: f32,
-    /// Alpha of all fragments, valid unless `dirty` (an insertion since).
-    alpha_all: f32,
+    /// Fragments [0, n_begun) begin before the last traversal front `front`; `alpha_begun`
+    /// is their alpha. Valid unless `dirty` (an insertion since).
+    n_begun: usize,
+    alpha_begun: f32,
+    front: f32,
     dirty: bool,
     pub merges: u64,
 }
@@ -101,7 +111,9 @@ impl ABuffer {
             cap: cap.max(2),
             n_final: 0,
             alpha_final: 0.0,
-            alpha_all: 0.0,
+            n_begun: 0,
+            alpha_begun: 0.0,
+            front: f32::NEG_INFINITY,
             dirty: false,
             merges: 0,
         }
@@ -110,7 +122,9 @@ impl ABuffer {
         self.frags.clear();
         self.n_final = 0;
         self.alpha_final = 0.0;
-        self.alpha_all = 0.0;
+        self.n_begun = 0;
+        self.alpha_begun = 0.0;
+        self.front = f32::NEG_INFINITY;
         self.dirty = false;
         self.merges = 0;
     }
@@ -176,14 +190,23 @@ impl ABuffer {
         self.alpha_final >= OPAQUE
     }
 
-    /// The paper's early termination test (§4.4): has the alpha of the whole ray reached 1?
-    /// Called before every node; recomposites only after an insertion.
-    pub fn opaque(&mut self) -> bool {
-        if self.dirty {
-            self.alpha_all = self.alpha();
+    /// The paper's early termination test (§4.4): has the alpha of the ray reached 1? Counts
+    /// the fragments that begin before `t_front`, the nearest depth the traversal can still
+    /// reach (module docs); a fragment straddling the front counts with the weight gathered so
+    /// far. Called before every node; incremental while the front advances and nothing is
+    /// inserted.
+    pub fn opaque(&mut self, t_front: f32) -> bool {
+        if self.dirty || t_front < self.front {
+            self.n_begun = 0;
+            self.alpha_begun = 0.0;
             self.dirty = false;
         }
-        self.alpha_all >= OPAQUE
+        self.front = t_front;
+        while self.n_begun < self.frags.len() && self.frags[self.n_begun].z0 < t_front {
+            self.alpha_begun += (1.0 - self.alpha_begun) * self.frags[self.n_begun].alpha();
+            self.n_begun += 1;
+        }
+        self.alpha_begun >= OPAQUE
     }
 
     /// Total alpha of all fragments, front to back.
@@ -231,11 +254,31 @@ mod tests {
         assert!(ab.opaque_before(3.2));
         assert!((ab.alpha() - 1.0).abs() < 1e-6);
         let mut ab = ABuffer::new(16);
-        assert!(!ab.opaque());
+        assert!(!ab.opaque(1.0));
         ab.insert(smp(1.0, 0.1, 0.6, Vec3::ONE));
-        assert!(!ab.opaque());
+        assert!(!ab.opaque(1.0));
         ab.insert(smp(1.05, 0.1, 0.6, Vec3::ONE));
-        assert!(ab.opaque(), "merged weight 1.2: the whole ray is opaque even with the front inside");
+        assert!(ab.opaque(1.0), "merged weight 1.2: the ray is opaque even with the front inside");
+    }
+
+    /// An opaque fragment found before the geometry in front of it (a floor's big triangle
+    /// from a node entered at the eye) must not end the ray while the front is before it.
+    #[test]
+    fn fragments_behind_the_front_do_not_terminate() {
+        let mut ab = ABuffer::new(16);
+        ab.insert(smp(8.0, 0.2, 1.0, Vec3::X));
+        assert!(!ab.opaque(2.0), "the floor at 8 is behind the front at 2");
+        assert!(!ab.opaque(7.7));
+        assert!(ab.opaque(7.9), "the front has reached the floor");
+        // The cube in front, found later, is composited first.
+        ab.insert(smp(5.0, 0.1, 1.0, Vec3::Y));
+        assert!(ab.opaque(5.0));
+        assert_eq!(ab.frags[0].col, Vec3::Y);
+        // A front that moves back (a node entered nearer) recounts.
+        let mut ab = ABuffer::new(16);
+        ab.insert(smp(8.0, 0.2, 1.0, Vec3::X));
+        assert!(ab.opaque(9.0));
+        assert!(!ab.opaque(3.0));
     }
 
     #[test]

@@ -1389,7 +1389,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let mut steps = 0u32;
         while let Some(e) = sc.pop() {
             let done = match self.p.termination {
-                Termination::Paper => ab.opaque(),
+                Termination::Paper => ab.opaque(e.t),
                 Termination::Final => ab.opaque_before(e.t),
             };
             if done {
