@@ -94,14 +94,7 @@ impl RenderOpts {
         if !(self.variance_threshold >= 0.0) || !self.variance_threshold.is_finite() {
             return Err(Error::Usage("--variance-threshold must be a finite number >= 0".into()));
         }
-        if self.threads > crate::core::MAX_THREADS {
-            return Err(Error::Usage(format!(
-                "--threads {} out of range (0 = all cores, at most {})",
-                self.threads,
-                crate::core::MAX_THREADS
-            )));
-        }
-        Ok(())
+        crate::core::check_threads(self.threads)
     }
 }
 

@@ -25,11 +25,16 @@ pub const MAX_THREADS: usize = 1024;
 /// The worker pool of a run: `n` threads, 0 = one per core; more than [`MAX_THREADS`] is a
 /// usage error (spawning 100 000 threads would hang the machine instead of failing).
 pub fn thread_pool(n: usize) -> crate::error::Result<rayon::ThreadPool> {
-    use crate::error::Error;
+    check_threads(n)?;
+    rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| crate::error::Error::Usage(format!("thread pool: {e}")))
+}
+
+/// The `--threads` range check of [`thread_pool`], for validating options before a run.
+pub fn check_threads(n: usize) -> crate::error::Result<()> {
     if n > MAX_THREADS {
-        return Err(Error::Usage(format!("--threads {n} out of range (0 = all cores, at most {MAX_THREADS})")));
+        return Err(crate::error::Error::Usage(format!("--threads {n} out of range (0 = all cores, at most {MAX_THREADS})")));
     }
-    rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| Error::Usage(format!("thread pool: {e}")))
+    Ok(())
 }
 
 /// An orthonormal frame (t, b, n) around a unit normal (Duff et al. 2017, branchless ONB).
