@@ -337,6 +337,49 @@ fn floor_behind_an_object_does_not_hide_it() {
     }
 }
 
+/// Self-exclusion of secondary cones is per instance: a mirror sphere standing on a green
+/// floor under a blue sky. Near its bottom the mirror reflects the floor a short way off; the
+/// first version skipped the whole scene up to the sphere's self-intersection threshold,
+/// so those reflected cones started below the floor and saw the sky (a blue rim where Embree
+/// sees green). Wherever Embree's pixel is clearly floor-coloured inside the sphere, the
+/// multires pixel must be too.
+#[test]
+fn reflections_of_a_touching_floor_are_not_skipped() {
+    let mut scene = Scene::empty("mirror-on-floor");
+    scene.materials[0] = Material::diffuse("green", Vec3::new(0.1, 0.7, 0.1));
+    let mirror = scene.add_material(Material { name: "mirror".into(), color: Vec3::ZERO, kd: 0.0, reflect: 1.0, ..Default::default() });
+    let board = scene.add_mesh(builtin::checkerboard(16, 16.0, 0, 0));
+    scene.instance(Target::Mesh(board), Affine3A::IDENTITY, None);
+    let mut ball = builtin::icosphere(4, mirror);
+    ball.compute_normals();
+    let ball = scene.add_mesh(ball);
+    scene.instance(Target::Mesh(ball), Affine3A::from_translation(Vec3::new(0.0, 1.0, 0.0)), None);
+    scene.camera =
+        Camera { eye: Vec3::new(0.0, 1.6, 6.0), look: Vec3::new(0.0, 0.8, 0.0), up: Vec3::Y, fovy: 30.0, aperture: 0.0, focal_dist: 6.0 };
+    scene.lights.push(Light::Point { pos: Vec3::new(3.0, 8.0, 6.0), intensity: Vec3::splat(60.0) });
+    scene.background = Vec3::new(0.1, 0.2, 0.9);
+    scene.ambient = Vec3::splat(0.3);
+    scene.validate().unwrap();
+    let (w, h) = (48, 48);
+    let reference = conventional(&scene, reference_accel(), &RenderOpts { width: w, height: h, ..Default::default() });
+    let on_ball = |f: &Film, i: i32, j: i32| f.depth[(j as u32 * w + i as u32) as usize] < 6.5;
+    let greenish = |c: Vec3| c.y > 2.0 * c.z;
+    let film = cones(&scene, &TraceParams::default(), w, h);
+    let (mut floor_seen, mut sky_instead) = (0, 0);
+    for j in 1..h as i32 - 1 {
+        for i in 1..w as i32 - 1 {
+            let interior = [(0, 0), (-1, 0), (1, 0), (0, -1), (0, 1)].iter().all(|&(di, dj)| on_ball(&reference, i + di, j + dj));
+            let k = (j as u32 * w + i as u32) as usize;
+            if interior && greenish(reference.color[k]) {
+                floor_seen += 1;
+                sky_instead += !greenish(film.color[k]) as u32;
+            }
+        }
+    }
+    assert!(floor_seen > 30, "the mirror shows the floor in {floor_seen} interior pixels");
+    assert!(sky_instead <= floor_seen / 20, "{sky_instead} of {floor_seen} pixels reflecting the floor show the sky instead");
+}
+
 /// Issue test: a mesh seen through `cone` and `multires` at close range (leaves reached)
 /// matches Embree's silhouette: coverage ≥ 50% exactly where Embree's pixel-centre ray hits,
 /// except in pixels next to the silhouette.

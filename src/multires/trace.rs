@@ -1348,6 +1348,27 @@ impl Default for Scratch {
     }
 }
 
+/// The self-exclusion of a secondary cone ([`Tracer::traverse`]).
+///
+/// *Deviation from the paper*, which starts every outgoing cone at one threshold "based on
+/// the angle and the diameter" (§7): that threshold only has to clear the surface's own
+/// footprint, but applied to the whole scene it also skipped other objects that touch the
+/// surface. At the bottom of a reflective sphere standing on a floor, reflected cones started
+/// below the floor and saw the sky (a bright rim where the floor's shadow belongs), and
+/// shadow cones from the floor started beyond the sphere's contact (the contact shadow went
+/// missing). Now only the instance the surface belongs to is skipped up to the threshold.
+#[derive(Clone, Copy, Debug)]
+pub struct Own {
+    /// TLAS leaf of the spawning surface (`u32::MAX`: none, `cone.tmin` holds for all).
+    pub leaf: u32,
+    /// Where the other instances begin.
+    pub tmin: f32,
+}
+
+impl Own {
+    pub const NONE: Own = Own { leaf: u32::MAX, tmin: 0.0 };
+}
+
 /// What the traversal collects.
 #[derive(Clone, Copy, PartialEq, Eq)]
 pub enum Collect {
@@ -1369,7 +1390,19 @@ pub struct Tracer<'s, 'a> {
 impl<'s, 'a> Tracer<'s, 'a> {
     /// Traverses the scene with `cone` (world space), filling `ab`.
     pub fn traverse(&self, cone: &Cone, ab: &mut ABuffer, mode: Collect, sc: &mut Scratch, c: &mut Counters) {
+        self.traverse_own(cone, Own::NONE, ab, mode, sc, c)
+    }
+
+    /// [`Tracer::traverse`] for a secondary cone: `own` is the self-exclusion of a secondary cone: the instance (TLAS leaf) whose surface
+    /// spawned it, skipped up to `cone.tmin`; every other instance is tested from `own.tmin`.
+    pub fn traverse_own(&self, cone: &Cone, own: Own, ab: &mut ABuffer, mode: Collect, sc: &mut Scratch, c: &mut Counters) {
         let tl = &self.ms.tlas;
+        let own_tmin = cone.tmin;
+        let mut wcone = *cone;
+        if own.leaf != u32::MAX {
+            wcone.tmin = own.tmin.min(cone.tmin);
+        }
+        let cone = &wcone;
         if tl.r.is_empty() {
             return;
         }
@@ -1404,7 +1437,10 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 if ch & LEAF != 0 {
                     let li = ch & !LEAF;
                     let leaf = &self.ms.leaves[li as usize];
-                    let (lc, s) = cone.to_object(&leaf.inv);
+                    let (mut lc, s) = cone.to_object(&leaf.inv);
+                    if li == own.leaf {
+                        lc.tmin = own_tmin * s;
+                    }
                     let tree = &self.ms.trees[leaf.tree as usize];
                     let lf = floor * s;
                     let h =
@@ -1736,10 +1772,14 @@ impl ShadeScratch {
 impl<'s, 'a> Tracer<'s, 'a> {
     /// Radiance along a cone, composited from its A-buffer (§4.4).
     pub fn radiance(&self, cone: &Cone, depth: u32, importance: f32, ss: &mut ShadeScratch, c: &mut Counters) -> ConeResult {
+        self.radiance_own(cone, Own::NONE, depth, importance, ss, c)
+    }
+
+    fn radiance_own(&self, cone: &Cone, own: Own, depth: u32, importance: f32, ss: &mut ShadeScratch, c: &mut Counters) -> ConeResult {
         let mut ab = std::mem::replace(&mut ss.bufs[depth as usize], ABuffer::new(0));
         ab.clear();
         ab.cap = self.p.max_fragments;
-        self.traverse(cone, &mut ab, Collect::Shade, &mut ss.trav, c);
+        self.traverse_own(cone, own, &mut ab, Collect::Shade, &mut ss.trav, c);
         c.add(Counter::fragments_merged, ab.merges);
         let scene = self.ms.scene;
         let mut res = ConeResult { color: Vec3::ZERO, alpha: 0.0, depth: f32::INFINITY, normal: Vec3::ZERO };
@@ -1811,6 +1851,10 @@ impl<'s, 'a> Tracer<'s, 'a> {
             let sin_el = d.dot(n).abs().min(1.0);
             R_CUT * gmax * (1.0 - sin_el * sin_el).sqrt() + thick / sin_el.max(0.2) + eps
         };
+        let own = match f.best {
+            Elem::Point { leaf, .. } | Elem::Tri { leaf, .. } => Own { leaf, tmin: eps },
+            Elem::None => Own::NONE,
+        };
         let v = -cone.dir;
         // Normal spread: |Σ w·s·n| / Σ w with s the points' own mean-normal lengths, 1 on a
         // smooth surface. *Deviation from the paper* (which shades a prefiltered point by its
@@ -1853,7 +1897,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                         let mut ab = std::mem::replace(&mut ss.bufs[depth as usize + 1], ABuffer::new(0));
                         ab.clear();
                         ab.cap = self.p.max_fragments;
-                        self.traverse(&sh, &mut ab, Collect::Alpha, &mut ss.trav, c);
+                        self.traverse_own(&sh, own, &mut ab, Collect::Alpha, &mut ss.trav, c);
                         c.add(Counter::fragments_merged, ab.merges);
                         let a = ab.alpha();
                         ss.bufs[depth as usize + 1] = ab;
@@ -1884,7 +1928,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                     if importance * transmit > self.p.min_importance {
                         rc.tmin = t_self(rc.dir);
                         c.inc(Counter::rays_refract);
-                        let r = self.radiance(&rc, depth + 1, importance * transmit, ss, c);
+                        let r = self.radiance_own(&rc, own, depth + 1, importance * transmit, ss, c);
                         l += r.color * color * transmit;
                     }
                 }
@@ -1895,7 +1939,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             if let Some(mut rc) = cone::secondary(p, cone.dir, n, &w, fs, Outgoing::Reflect, roughness) {
                 rc.tmin = t_self(rc.dir);
                 c.inc(Counter::rays_reflect);
-                let r = self.radiance(&rc, depth + 1, importance * reflect_w, ss, c);
+                let r = self.radiance_own(&rc, own, depth + 1, importance * reflect_w, ss, c);
                 l += r.color * reflect_w;
             }
         }
