@@ -9,7 +9,7 @@
 //! by the closest hit so far. Checked against Embree by `lodtrace verify --accel octree`.
 
 use super::build::{BuildParams, NO_CHILD};
-use super::trace::MultiresScene;
+use super::trace::{tlas_box_test_1, tlas_box_test_x8, BoxReach, MultiresScene};
 use crate::baseline::accel::{Accel, Hit, Ray};
 use crate::baseline::tri::{intersect_watertight, RayShear};
 use crate::core::stats::{Counter, Counters};
@@ -123,13 +123,15 @@ impl OctreeAccel<'_> {
         let tnear = ray.tnear.max(0.0);
         let mut tfar = ray.tfar;
         let mut best: Option<Hit> = None;
-        let inv_dd = 1.0 / ray.dir.length_squared();
         let ray8 = RayX8::new(ray.org, ray.dir);
         // (entry t, TLAS node)
         let mut stack: Vec<(f32, u32)> = Vec::with_capacity(64);
         let mut ostack: Vec<(f32, u32)> = Vec::with_capacity(64);
+        // The instance level by boxes, then spheres, as the cone tracer does
+        // ([`super::trace::Tlas`]).
+        let reach = BoxReach::ray(ray.org, ray.dir, tnear, tfar);
         c.inc(Counter::instance_tests);
-        if let Some(t0) = sphere_1(ray.org, ray.dir, inv_dd, Vec3::new(tl.cx[0], tl.cy[0], tl.cz[0]), tl.r[0]) {
+        if let Some(t0) = tlas_box_test_1(&reach, tl, 0) {
             stack.push((t0, 0));
         }
         while let Some((t0, n)) = stack.pop() {
@@ -140,7 +142,16 @@ impl OctreeAccel<'_> {
             if ch & (1 << 31) == 0 {
                 let f = ch as usize;
                 c.add(Counter::instance_tests, 8);
-                let (mut m, ts) = spheres_x8(&ray8, tnear, tfar, lanes8(&tl.cx, f), lanes8(&tl.cy, f), lanes8(&tl.cz, f), lanes8(&tl.r, f));
+                let reach = BoxReach { tmax: tfar, ..reach };
+                let (mut m, mut ts) = tlas_box_test_x8(&reach, tl, f);
+                if m != 0 {
+                    let (ms, tss) =
+                        spheres_x8(&ray8, tnear, tfar, lanes8(&tl.cx, f), lanes8(&tl.cy, f), lanes8(&tl.cz, f), lanes8(&tl.r, f));
+                    m &= ms;
+                    for (t, t2) in ts.iter_mut().zip(tss) {
+                        *t = t.max(t2);
+                    }
+                }
                 push_near_last(&mut stack, &mut m, &ts, f);
                 continue;
             }
