@@ -17,6 +17,8 @@
 //!   hoisted on both sides, as in the traversal), throughput in ray–sphere tests.
 //! - `cone_sigma`: the squared footprint Σ(t) = a + b·t + c·t² — [`Cone::sigma`] vs
 //!   [`Cone::sigma_x8`]; 4 096 depths, throughput in depths.
+//! - `tlas_box`: the instance-level box test grown by the cone's reach — [`tlas_box_test_1`]
+//!   vs [`tlas_box_test_x8`]; 1 024 random slots, throughput in slots.
 //! - `tri_mass`: the Gaussian's mass over a 2-D triangle (`--tri-weight mass`) —
 //!   [`gauss_tri_mass`] (six right triangles one by one) vs [`gauss_tri_mass_x8`] (the six
 //!   in the lanes of one pass); 1 024 small triangles and slivers near the footprint's centre,
@@ -35,8 +37,8 @@ use lodtrace::multires::cone::{Cone, Fp};
 use lodtrace::multires::octree_accel::{sphere_1, spheres_x8, RayX8};
 use lodtrace::multires::quant::{encode_cover, oct_encode};
 use lodtrace::multires::trace::{
-    gauss_tri_mass, gauss_tri_mass_x8, node_test_1, node_test_x8, point_w_ref, point_w_x8, tri_bound_1, tri_bound_x8, PointBlock,
-    PointHits, R_CUT,
+    gauss_tri_mass, gauss_tri_mass_x8, node_test_1, node_test_x8, point_w_ref, point_w_x8, tlas_box_test_1, tlas_box_test_x8, tri_bound_1,
+    tri_bound_x8, BoxReach, PointBlock, PointHits, Tlas, R_CUT,
 };
 use std::hint::black_box;
 use wide::f32x8;
@@ -426,5 +428,54 @@ fn tri_mass(cr: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, node_test, tri_bound, point_w, octree_spheres, cone_sigma, tri_mass);
+/// 1 024 random instance slots (boxes near the cone, flat ones included, spheres around them)
+/// in groups of 8, one random cone per group.
+fn tlas_box(cr: &mut Criterion) {
+    const N: usize = 1024;
+    let mut s = Sampler::new(26, 0, 0);
+    let mut tl = Tlas::default();
+    let mut reach = Vec::new();
+    for _ in 0..N / 8 {
+        let cone = rnd_cone(&mut s);
+        reach.push(BoxReach::cone(&cone, R_CUT, FLOOR));
+        for _ in 0..8 {
+            let c = cone.org + cone.dir * (s.next() * 12.0 - 2.0) + v3(&mut s) * 2.0;
+            let h = Vec3::new(s.next(), s.next() * s.next(), s.next()) * 0.8;
+            tl.cx.push(c.x);
+            tl.cy.push(c.y);
+            tl.cz.push(c.z);
+            tl.r.push(h.length() * (1.0 + s.next()));
+            for k in 0..3 {
+                tl.lo[k].push(c[k] - h[k]);
+                tl.hi[k].push(c[k] + h[k]);
+            }
+            tl.child.push(0);
+        }
+    }
+    let mut g = cr.benchmark_group("tlas_box");
+    g.throughput(Throughput::Elements(N as u64));
+    g.bench_function("scalar", |bch| {
+        bch.iter(|| {
+            let mut hits = 0u32;
+            for (i, rc) in black_box(&reach).iter().enumerate() {
+                for l in 0..8 {
+                    hits += tlas_box_test_1(rc, &tl, i * 8 + l).is_some() as u32;
+                }
+            }
+            black_box(hits)
+        })
+    });
+    g.bench_function("x8", |bch| {
+        bch.iter(|| {
+            let mut hits = 0u32;
+            for (i, rc) in black_box(&reach).iter().enumerate() {
+                hits += tlas_box_test_x8(rc, &tl, i * 8).0.count_ones();
+            }
+            black_box(hits)
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, node_test, tri_bound, point_w, octree_spheres, cone_sigma, tri_mass, tlas_box);
 criterion_main!(benches);

@@ -732,7 +732,7 @@ pub fn tlas_box_test_1(rc: &BoxReach, tl: &Tlas, l: usize) -> Option<f32> {
     }
     let c = Vec3::new(tl.cx[l], tl.cy[l], tl.cz[l]);
     let t_far = ((c - rc.org).dot(rc.dir) + r * rc.dir.length()).max(0.0);
-    let m = rc.a.mul_add(1.0, rc.b * t_far).max(rc.floor);
+    let m = (rc.a + rc.b * t_far).max(rc.floor);
     let (mut tn, mut tf) = (rc.tmin.max(0.0), rc.tmax);
     for k in 0..3 {
         let t0 = (tl.lo[k][l] - m - rc.org[k]) * rc.inv_dir[k];
