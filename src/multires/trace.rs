@@ -457,6 +457,10 @@ pub struct Tlas {
 const LEAF: u32 = 1 << 31;
 
 impl Tlas {
+    /// The empty box (lo > hi): the start of a union, and the box of an empty slot, which
+    /// fails every slab test.
+    pub const EMPTY_BOX: (Vec3, Vec3) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+
     /// From each leaf instance's world bounding sphere and box.
     fn build(spheres: &[(Vec3, f32)], boxes: &[(Vec3, Vec3)]) -> Tlas {
         let mut t = Tlas::default();
@@ -493,8 +497,7 @@ impl Tlas {
         for l in 0..8 {
             match list.get(l) {
                 Some(&m) => self.push(Vec3::new(bin.cx[m], bin.cy[m], bin.cz[m]), bin.r[m], bin.bounds(m), 0),
-                // An empty box (lo > hi) fails every slab test.
-                None => self.push(Vec3::ZERO, -1.0, (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), 0),
+                None => self.push(Vec3::ZERO, -1.0, Tlas::EMPTY_BOX, 0),
             };
         }
         self.child[slot] = first as u32;
@@ -517,7 +520,7 @@ impl Tlas {
     fn build_rec(&mut self, node: usize, idx: &mut [u32], s: &[(Vec3, f32)], boxes: &[(Vec3, Vec3)]) {
         // Bounding sphere of the spheres: AABB centre, max distance.
         let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-        let (mut blo, mut bhi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        let (mut blo, mut bhi) = Tlas::EMPTY_BOX;
         for &i in idx.iter() {
             let (c, r) = s[i as usize];
             lo = lo.min(c - Vec3::splat(r));
@@ -611,7 +614,7 @@ impl<'a> MultiresScene<'a> {
             };
             spheres.push((c, t.nodes.r[0] * smax));
             let (olo, ohi) = *mesh_box[l.mesh as usize].get_or_insert_with(|| scene.meshes[l.mesh as usize].bounds());
-            let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+            let (mut lo, mut hi) = Tlas::EMPTY_BOX;
             for k in 0..8 {
                 let corner = Vec3::new(
                     if k & 1 == 0 { olo.x } else { ohi.x },
@@ -2287,7 +2290,7 @@ mod tests {
         let mut tl = Tlas::default();
         for l in 0..8 {
             if l == 5 {
-                tl.push(Vec3::ZERO, -1.0, (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), 0);
+                tl.push(Vec3::ZERO, -1.0, Tlas::EMPTY_BOX, 0);
                 continue;
             }
             let c = cone.org + cone.dir * (s.next() * 12.0 - 2.0) + Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * 2.0;
