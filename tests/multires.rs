@@ -88,6 +88,58 @@ fn opaque_plane_head_on_is_opaque_and_exact() {
     }
 }
 
+/// Instance-level points (`multires::group`, a completion of the paper for instanced
+/// scenes): a floor of 24×24 instanced tiles seen head-on by cones several tiles wide is
+/// still opaque and exactly coloured when the cones stop at slots of the instance tree, the
+/// traversal visits far fewer nodes than instance by instance, and the two images agree.
+#[test]
+fn instance_level_points_keep_a_tiled_floor_opaque_and_exact() {
+    let dist = 40.0f32;
+    let mut scene = Scene::empty("tiled floor");
+    scene.materials[0] = Material::diffuse("c", Vec3::new(0.8, 0.4, 0.2));
+    let tile = scene.add_mesh(builtin::checkerboard(8, 1.0, 0, 0));
+    for i in -12..12 {
+        for j in -12..12 {
+            let xf = Affine3A::from_translation(Vec3::new(i as f32 + 0.5, j as f32 + 0.5, 0.0))
+                * Affine3A::from_rotation_x(std::f32::consts::FRAC_PI_2);
+            scene.instance(Target::Mesh(tile), xf, None);
+        }
+    }
+    scene.camera = Camera { eye: Vec3::new(0.0, 0.0, dist), look: Vec3::ZERO, up: Vec3::Y, fovy: 30.0, aperture: 0.0, focal_dist: dist };
+    scene.lights.push(Light::Point { pos: Vec3::new(0.0, 0.0, dist), intensity: Vec3::splat(dist * dist) });
+    scene.ambient = Vec3::ZERO;
+    scene.background = Vec3::ZERO;
+    scene.validate().unwrap();
+    let ms = MultiresScene::build(&scene, &BuildParams::default()).unwrap();
+    assert!(ms.groups.points.len() > 0);
+    let abort = AtomicBool::new(false);
+    let cam = scene.camera.frame(64, 64);
+    let expect = Vec3::new(0.8, 0.4, 0.2) / std::f32::consts::PI;
+    let cone_scale = 12.0;
+    let mut node_tests = vec![];
+    let mut colours = vec![];
+    for group_points in [true, false] {
+        let tp = TraceParams { cone_scale, group_points, ..Default::default() };
+        let tr = Tracer { ms: &ms, p: &tp, floor: 1e-7, abort: &abort, deadline: None };
+        let mut ss = ShadeScratch::new(16, scene.max_depth);
+        let mut c = Counters::default();
+        let mut cols = vec![];
+        for (i, j) in [(32, 32), (26, 35), (38, 29), (30, 24), (35, 40)] {
+            let r = tr.radiance(&Cone::primary(&cam, i, j, cone_scale), 0, 1.0, &mut ss, &mut c);
+            assert!(r.alpha >= 0.999, "alpha {} at ({i},{j}), group points {group_points}", r.alpha);
+            let err = (r.color - expect).abs().max_element() / expect.max_element();
+            assert!(err < 0.05, "colour {} vs {expect} at ({i},{j}), group points {group_points}", r.color);
+            cols.push(r.color);
+        }
+        node_tests.push(c.get(lodtrace::core::stats::Counter::node_tests) + c.get(lodtrace::core::stats::Counter::instance_tests));
+        colours.push(cols);
+    }
+    assert!(node_tests[0] * 3 < node_tests[1], "node + instance tests with / without group points: {node_tests:?}");
+    for (a, b) in colours[0].iter().zip(&colours[1]) {
+        assert!((*a - *b).abs().max_element() < 0.03 * expect.max_element(), "{a} vs {b}");
+    }
+}
+
 /// Issue test: weight sums ≥ 1 inside a surface at the point levels (spheres and tilted
 /// planes, many footprint sizes), up to the Monte-Carlo noise of the prefiltering.
 #[test]

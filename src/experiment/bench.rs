@@ -143,6 +143,7 @@ impl MethodSpec {
                     "primary" => spec.multires.primary_only = num(v)? != 0.0,
                     "budget" => spec.multires.time_budget = Some(num(v)?),
                     "spread" => spec.multires.no_normal_spread = num(v)? == 0.0,
+                    "groups" => spec.multires.no_group_points = num(v)? == 0.0,
                     "pw" => {
                         spec.multires.point_weights = crate::multires::build::PointWeights::from_str(v, true)
                             .map_err(|_| bad(format!("pw={v}: area or voxel")))?

@@ -63,6 +63,11 @@ pub struct HierarchyStats {
     pub seconds: f64,
     /// Trees read back from the on-disk cache instead of built.
     pub trees_from_cache: usize,
+    /// Instance-level points (`multires::group`): slots with points, points, and their
+    /// build time (part of `seconds`; never cached).
+    pub group_slots: usize,
+    pub group_points: usize,
+    pub group_seconds: f64,
 }
 
 /// The `--stats` JSON (DESIGN.md): at least method, accel, width, height, spp,
@@ -136,8 +141,15 @@ fn run_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &MultiresArgs)
         return Err(Error::Usage("the cone tracers shoot one cone per pixel: use --spp 1".into()));
     }
     let ms = MultiresScene::build(scene, &bp)?;
-    let mut h =
-        HierarchyStats { trees: ms.trees.len(), seconds: ms.build_seconds, trees_from_cache: ms.trees_from_cache(), ..Default::default() };
+    let mut h = HierarchyStats {
+        trees: ms.trees.len(),
+        seconds: ms.build_seconds,
+        trees_from_cache: ms.trees_from_cache(),
+        group_slots: ms.groups.count.iter().filter(|&&n| n > 0).count(),
+        group_points: ms.groups.points.len(),
+        group_seconds: ms.group_seconds,
+        ..Default::default()
+    };
     for t in &ms.trees {
         h.nodes += t.stats.nodes;
         h.points += t.stats.points;

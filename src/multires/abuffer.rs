@@ -38,6 +38,11 @@ pub enum Elem {
         b1: f32,
         b2: f32,
     },
+    /// A point of an instance-tree slot ([`super::group`]).
+    Group {
+        slot: u32,
+        idx: u32,
+    },
 }
 
 #[derive(Clone, Copy, Debug, Default)]

@@ -181,13 +181,13 @@ impl PointSoa {
     pub fn is_empty(&self) -> bool {
         self.qx.is_empty()
     }
-    fn bytes(&self) -> usize {
+    pub(crate) fn bytes(&self) -> usize {
         self.len() * (3 + 4 + 1 + 1 + 3 + 7 + 8)
     }
 }
 
 /// Ranges of the 8-bit material codes of one hierarchy.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct MatRanges {
     pub color_hi: f32,
     /// kd, ks, shininess, reflect, transmit, ior, roughness.
@@ -207,7 +207,7 @@ pub fn mat_props(m: &Material) -> [f32; 7] {
 }
 
 impl MatRanges {
-    fn of(mats: &[&Material]) -> Self {
+    pub(crate) fn of(mats: &[&Material]) -> Self {
         let mut lo = [f32::INFINITY; 7];
         let mut hi = [f32::NEG_INFINITY; 7];
         let mut chi = 0.0f32;

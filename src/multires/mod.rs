@@ -6,6 +6,8 @@
 //!   [`cache`]: its on-disk cache (built once per mesh, materials and parameters, then read back);
 //! - [`cone`]: ray cones, footprints and their construction for every ray kind (§4.1–4.2);
 //! - [`abuffer`]: fragments, merging and alpha compositing (§4.4);
+//! - [`group`]: points over groups of instances (the instance tree's slots), the level of
+//!   detail above the objects;
 //! - [`trace`]: the intersection tests (§4.3, 4.5, 4.6), the traversal (§5.1–5.2) and shading;
 //! - [`render`]: the image loop of `--method multires` and `--method cone`;
 //! - [`octree_accel`]: `--accel octree`, the conventional tracer on the same octree (§6).
@@ -15,6 +17,7 @@ pub mod abuffer;
 pub mod build;
 pub mod cache;
 pub mod cone;
+pub mod group;
 pub mod octree_accel;
 pub mod quant;
 pub mod render;
@@ -79,6 +82,11 @@ pub struct MultiresArgs {
     /// spread over the hemisphere, by their normal spread).
     #[arg(long)]
     pub no_normal_spread: bool,
+    /// Visit every instance a cone overlaps, instead of stopping at a slot of the instance
+    /// tree whose spacing the footprint covers and using that slot's points (the default; a
+    /// completion of the paper for instanced scenes, see `multires::group`).
+    #[arg(long)]
+    pub no_group_points: bool,
     /// Stop rendering after this many seconds (the frame is reported as unfinished).
     #[arg(long)]
     pub time_budget: Option<f64>,
@@ -103,6 +111,7 @@ impl Default for MultiresArgs {
             time_budget: t.time_budget,
             termination: t.termination,
             no_normal_spread: !t.normal_spread,
+            no_group_points: !t.group_points,
         }
     }
 }
@@ -122,6 +131,7 @@ impl MultiresArgs {
             time_budget: self.time_budget,
             termination: self.termination,
             normal_spread: !self.no_normal_spread,
+            group_points: !self.no_group_points,
             points,
             ..Default::default()
         };

@@ -15,7 +15,7 @@ use glam::{Vec2, Vec3};
 use half::f16;
 
 /// Linear 8-bit code over `[lo, hi]`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Range8 {
     pub lo: f32,
     pub hi: f32,

@@ -45,6 +45,7 @@
 use super::abuffer::{ABuffer, Elem, Frag};
 use super::build::{mat_props, BuildParams, PointTree, TriSoa, NO_CHILD};
 use super::cone::{self, Cone, Outgoing};
+use super::group::GroupPoints;
 use super::quant;
 use crate::core::eigen2::{eigen_1, eigen_x8, Eigen2, Sym2};
 use crate::core::stats::{Counter, Counters};
@@ -351,6 +352,10 @@ pub struct TraceParams {
     pub termination: Termination,
     /// Shade aggregates by their normal spread (see `shade`); off: the paper's single normal.
     pub normal_spread: bool,
+    /// Level of detail above the instances: a slot of the instance tree whose spacing the
+    /// footprint covers is rendered from its own points ([`super::group`]); off: every
+    /// instance is visited.
+    pub group_points: bool,
 }
 
 impl Default for TraceParams {
@@ -370,6 +375,7 @@ impl Default for TraceParams {
             time_budget: None,
             termination: Termination::Paper,
             normal_spread: true,
+            group_points: true,
         }
     }
 }
@@ -454,7 +460,7 @@ pub struct Tlas {
     pub hi: [Vec<f32>; 3],
     pub child: Vec<u32>,
 }
-const LEAF: u32 = 1 << 31;
+pub(crate) const LEAF: u32 = 1 << 31;
 
 impl Tlas {
     /// The empty box (lo > hi): the start of a union, and the box of an empty slot, which
@@ -568,8 +574,13 @@ pub struct MultiresScene<'a> {
     pub trees: Vec<PointTree>,
     pub leaves: Vec<MLeaf>,
     pub tlas: Tlas,
-    /// Wall time of [`MultiresScene::build`]: building the trees, or reading them from the cache.
+    /// Points over the instance tree's slots ([`super::group`]).
+    pub groups: GroupPoints,
+    /// Wall time of [`MultiresScene::build`]: building the trees, or reading them from the
+    /// cache, and the instance-level points.
     pub build_seconds: f64,
+    /// Of it, the instance-level points (built every run, not cached).
+    pub group_seconds: f64,
 }
 
 impl<'a> MultiresScene<'a> {
@@ -638,11 +649,24 @@ impl<'a> MultiresScene<'a> {
             });
         }
         let tlas = Tlas::build(&spheres, &boxes);
-        Ok(MultiresScene { scene, trees, leaves: mleaves, tlas, build_seconds: t0.elapsed().as_secs_f64() })
+        let t1 = Instant::now();
+        let tree_meshes: Vec<(&crate::scene::Mesh, Vec<u32>)> = keys
+            .iter()
+            .map(|&(m, ov)| {
+                let mesh = &scene.meshes[m as usize];
+                (mesh, (0..mesh.tri_count()).map(|t| ov.unwrap_or(mesh.mat[t])).collect())
+            })
+            .collect();
+        let groups = super::group::build(&scene.materials, &tree_meshes, &mleaves, &tlas, bp);
+        let group_seconds = t1.elapsed().as_secs_f64();
+        Ok(MultiresScene { scene, trees, leaves: mleaves, tlas, groups, build_seconds: t0.elapsed().as_secs_f64(), group_seconds })
     }
 
     pub fn memory_bytes(&self) -> usize {
-        self.trees.iter().map(|t| t.memory_bytes() + t.tris.bytes()).sum::<usize>() + self.leaves.len() * 160 + self.tlas.r.len() * 44
+        self.trees.iter().map(|t| t.memory_bytes() + t.tris.bytes()).sum::<usize>()
+            + self.leaves.len() * 160
+            + self.tlas.r.len() * 44
+            + self.groups.bytes()
     }
 
     /// How many of the hierarchies were read from the on-disk cache (the rest were built).
@@ -1431,6 +1455,9 @@ const K_TLAS: u8 = 0;
 const K_OCT: u8 = 1;
 /// An octree node reached by the mipmap step: points and triangles only, no descent.
 const K_TERMINAL: u8 = 2;
+/// An instance-tree slot reached by the mipmap step from its parent's points: its own points
+/// (or, for an instance, its root's points and triangles) only.
+const K_TLAS_TERMINAL: u8 = 3;
 
 struct Local {
     cone: Cone,
@@ -1571,7 +1598,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             if steps & 1023 == 0 && self.past_deadline() {
                 break;
             }
-            if e.kind == K_TLAS {
+            if e.kind == K_TLAS || e.kind == K_TLAS_TERMINAL {
                 let ch = tl.child[e.node as usize];
                 if ch & LEAF != 0 {
                     let li = ch & !LEAF;
@@ -1590,27 +1617,65 @@ impl<'s, 'a> Tracer<'s, 'a> {
                         let slot = (sc.locals.len() - 1) as u32;
                         sc.eigs.push(h.eig[0]);
                         let eig = (sc.eigs.len() - 1) as u32;
-                        sc.push(Entry { t: h.t_near[0] / s, node: 0, slot, blend: 1.0, kind: K_OCT, eig });
+                        let kind = if e.kind == K_TLAS_TERMINAL { K_TERMINAL } else { K_OCT };
+                        sc.push(Entry { t: h.t_near[0] / s, node: 0, slot, blend: e.blend, kind, eig });
                     }
-                } else {
-                    let f = ch as usize;
-                    let (mut m, mut t_near) = tlas_box_test_x8(&reach, tl, f);
-                    c.add(Counter::instance_tests, 8);
-                    if m != 0 {
-                        // The spheres with the footprint's own axes cull what the boxes'
-                        // round reach lets through (compact instances, wide cones).
-                        let arr = |v: &Vec<f32>| -> [f32; 8] { v[f..f + 8].try_into().expect("8 slots") };
-                        let h = node_test_x8(cone, &arr(&tl.cx), &arr(&tl.cy), &arr(&tl.cz), &arr(&tl.r), clamp, floor, cut);
-                        m &= h.mask as u32;
-                        for (t, ts) in t_near.iter_mut().zip(h.t_near) {
-                            *t = t.max(ts);
+                    continue;
+                }
+                // Level of detail above the instances (§5.1 applied to the slot's points).
+                let g = &self.ms.groups;
+                let gi = e.node as usize;
+                let mut kind = K_TLAS;
+                let mut blend = e.blend;
+                if self.p.group_points && self.p.points && e.eig != u32::MAX && g.h[gi] > 0.0 {
+                    let boxe = clamp_eigen(&sc.eigs[e.eig as usize], clamp);
+                    let gc = Cone { tmin: own_tmin, ..*cone };
+                    if e.kind == K_TLAS_TERMINAL {
+                        self.test_group(&gc, gi, &boxe, e.blend, ab, &mut sc.hits, mode, c);
+                        continue;
+                    }
+                    let hg = g.h[gi];
+                    if self.p.lod_scale * boxe.s2 >= hg {
+                        let x = if self.p.mipmap { (self.p.lod_scale * boxe.s2 / hg).log2().clamp(0.0, 1.0) } else { 1.0 };
+                        if x > 0.0 {
+                            self.test_group(&gc, gi, &boxe, e.blend * x, ab, &mut sc.hits, mode, c);
+                        }
+                        if x >= 1.0 {
+                            continue;
+                        }
+                        (kind, blend) = (K_TLAS_TERMINAL, e.blend * (1.0 - x));
+                    }
+                } else if e.kind == K_TLAS_TERMINAL {
+                    // An inner slot without points (no surface below): nothing to blend in.
+                    continue;
+                }
+                let f = ch as usize;
+                let (mut m, mut t_near) = tlas_box_test_x8(&reach, tl, f);
+                c.add(Counter::instance_tests, 8);
+                let mut eig = [u32::MAX; 8];
+                if m != 0 {
+                    // The spheres with the footprint's own axes cull what the boxes'
+                    // round reach lets through (compact instances, wide cones).
+                    let arr = |v: &Vec<f32>| -> [f32; 8] { v[f..f + 8].try_into().expect("8 slots") };
+                    let h = node_test_x8(cone, &arr(&tl.cx), &arr(&tl.cy), &arr(&tl.cz), &arr(&tl.r), clamp, floor, cut);
+                    m &= h.mask as u32;
+                    for (t, ts) in t_near.iter_mut().zip(h.t_near) {
+                        *t = t.max(ts);
+                    }
+                    let mut mm = m;
+                    while mm != 0 {
+                        let l = mm.trailing_zeros() as usize;
+                        mm &= mm - 1;
+                        if tl.child[f + l] & LEAF == 0 {
+                            sc.eigs.push(h.eig[l]);
+                            eig[l] = (sc.eigs.len() - 1) as u32;
                         }
                     }
-                    while m != 0 {
-                        let l = m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        sc.push(Entry { t: t_near[l], node: (f + l) as u32, slot: 0, blend: 1.0, kind: K_TLAS, eig: u32::MAX });
-                    }
+                }
+                while m != 0 {
+                    let l = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    sc.push(Entry { t: t_near[l], node: (f + l) as u32, slot: 0, blend, kind, eig: eig[l] });
                 }
                 continue;
             }
@@ -1792,6 +1857,55 @@ impl<'s, 'a> Tracer<'s, 'a> {
         }
     }
 
+    /// The points of instance-tree slot `gi` ([`super::group`]), as [`Tracer::test_points`]
+    /// does an octree node's, in world space.
+    #[allow(clippy::too_many_arguments)]
+    fn test_group(
+        &self,
+        cone: &Cone,
+        gi: usize,
+        boxe: &Eigen2,
+        blend: f32,
+        ab: &mut ABuffer,
+        hits: &mut PointHits,
+        mode: Collect,
+        c: &mut Counters,
+    ) {
+        let g = &self.ms.groups;
+        let h = g.h[gi];
+        let start = g.start[gi] as usize;
+        let n = g.count[gi] as usize;
+        c.add(Counter::surfel_tests, n as u64);
+        let exact = self.p.eigen == EigenMode::Exact;
+        if exact {
+            c.add(Counter::eigen_decompositions, n as u64);
+        }
+        let pts = &g.points;
+        let e = (start + n + 7).min(pts.len());
+        let q = (&pts.qx[start..e], &pts.qy[start..e], &pts.qz[start..e]);
+        let blk =
+            PointBlock { n, ..PointBlock::from_grid(q, &pts.normal[start..e], &pts.cover[start..e], g.grid_lo[gi], g.step[gi], cone) };
+        let share = POINT_MARGIN * h * h / (std::f32::consts::PI * MASS_IN_CUT);
+        point_w_x8(cone, &blk, if exact { None } else { Some(boxe) }, self.p.clamp, self.floor, blend * share, hits);
+        let dz = self.p.depth_tol * h;
+        for k in 0..hits.len {
+            let (j, t, w) = (start + hits.idx[k] as usize, hits.t[k], hits.w[k]);
+            if !(w > 0.0) {
+                continue;
+            }
+            let mut f = Frag { z0: t - dz, z1: t + dz, w, wt: w * t, best_w: w, ..Default::default() };
+            if mode == Collect::Shade {
+                let m = g.ranges.decode(pts.rgb[j], pts.mat[j]);
+                f.col = m.color * w;
+                f.props = m.p.map(|v| v * w);
+                let spread = if self.p.normal_spread { quant::decode_unit(pts.nlen[j]) } else { 1.0 };
+                f.n = quant::oct_decode(pts.normal[j]) * (w * spread);
+                f.best = Elem::Group { slot: gi as u32, idx: j as u32 };
+            }
+            ab.insert(f);
+        }
+    }
+
     #[allow(clippy::too_many_arguments)]
     fn test_triangle(
         &self,
@@ -1854,7 +1968,8 @@ impl<'s, 'a> Tracer<'s, 'a> {
     /// element, from the point's ∇n or the triangle's vertex normals.
     pub fn shape_operator(&self, best: Elem) -> Mat3 {
         let (li, w_obj) = match best {
-            Elem::None => return Mat3::ZERO,
+            // Instance-level points are shaded flat (∇n not fitted, see `group`).
+            Elem::None | Elem::Group { .. } => return Mat3::ZERO,
             Elem::Point { leaf, idx, .. } => {
                 let tree = &self.ms.trees[self.ms.leaves[leaf as usize].tree as usize];
                 let n = quant::oct_decode(tree.points.normal[idx as usize]);
@@ -2000,7 +2115,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         };
         let own = match f.best {
             Elem::Point { leaf, .. } | Elem::Tri { leaf, .. } => Own { tree: self.ms.leaves[leaf as usize].tree, tmin: eps },
-            Elem::None => Own::NONE,
+            Elem::None | Elem::Group { .. } => Own::NONE,
         };
         let v = -cone.dir;
         // Normal spread: |Σ w·s·n| / Σ w with s the points' own mean-normal lengths, 1 on a
