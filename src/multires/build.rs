@@ -261,6 +261,67 @@ pub struct PointTree {
     pub stats: BuildStats,
     /// Derived (not cached): the stored triangles' geometry in `tri_index` order.
     pub tris: TriSoa,
+    /// Derived (not cached): each node's axis-aligned box ([`NodeBoxes`]).
+    pub boxes: NodeBoxes,
+}
+
+/// Axis-aligned boxes of the octree nodes, struct-of-arrays like [`NodeSoa`] (children of a
+/// node contiguous): the box of everything below a node, its points and its triangles'
+/// vertices — the same content as the node's bounding sphere, which is this box's
+/// circumsphere. Absent children have the empty box (lo > hi).
+///
+/// *Deviation from the paper* (bounding spheres, §4.6, §5): the traversal tests a node's box,
+/// grown by the cone's reach, before its sphere ([`super::trace::boxes_x8`]), as it does for
+/// the instance tree. A flat node (a floor, one side of a box) has a flat box, but a sphere
+/// that reaches as high above the surface as the node is wide, so every cone leaving the
+/// surface (shadow cones above all) passed through the spheres of the nodes around its
+/// start. Derived from the tree after a build or a cache read, so the cache format is
+/// unchanged.
+#[derive(Clone, Debug, Default)]
+pub struct NodeBoxes {
+    pub lo: [Vec<f32>; 3],
+    pub hi: [Vec<f32>; 3],
+}
+
+impl NodeBoxes {
+    pub fn of(t: &PointTree) -> NodeBoxes {
+        let n = t.nodes.len();
+        let mut lo = vec![Vec3::splat(f32::INFINITY); n];
+        let mut hi = vec![Vec3::splat(f32::NEG_INFINITY); n];
+        // Children come after their parent (breadth-first): unite bottom-up.
+        for i in (0..n).rev() {
+            let (mut l, mut h) = (lo[i], hi[i]);
+            let s = t.nodes.pt_start[i] as usize;
+            for p in s..s + t.nodes.pt_count[i] as usize {
+                let c = t.point_pos(i, p);
+                (l, h) = (l.min(c), h.max(c));
+            }
+            let s = t.nodes.tri_start[i] as usize;
+            for v in &t.tris.verts[s..s + t.nodes.tri_count[i] as usize] {
+                for p in v {
+                    (l, h) = (l.min(*p), h.max(*p));
+                }
+            }
+            if t.nodes.first_child[i] != NO_CHILD {
+                let f = t.nodes.first_child[i] as usize;
+                for c in f..f + 8 {
+                    (l, h) = (l.min(lo[c]), h.max(hi[c]));
+                }
+            }
+            (lo[i], hi[i]) = (l, h);
+        }
+        let mut b = NodeBoxes::default();
+        for i in 0..n {
+            // Rounding slack, as the sphere's: the tests compute positions the same way.
+            let pad = Vec3::splat(1e-5 * (hi[i] - lo[i]).max_element().max(0.0) + 1e-6 * (1.0 + hi[i].abs().max_element()));
+            let (l, h) = if lo[i].x <= hi[i].x { (lo[i] - pad, hi[i] + pad) } else { (lo[i], hi[i]) };
+            for k in 0..3 {
+                b.lo[k].push(l[k]);
+                b.hi[k].push(h[k]);
+            }
+        }
+        b
+    }
 }
 
 /// The triangles of a tree in `tri_index` order, for the traversal: bounding spheres as
@@ -431,6 +492,10 @@ pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<Po
             ranges,
             stats: BuildStats { nodes: 1, triangles_dropped: dropped, ..Default::default() },
             tris: TriSoa::of(mesh, &[]),
+            boxes: NodeBoxes {
+                lo: [vec![f32::INFINITY], vec![f32::INFINITY], vec![f32::INFINITY]],
+                hi: [vec![f32::NEG_INFINITY], vec![f32::NEG_INFINITY], vec![f32::NEG_INFINITY]],
+            },
         });
     }
     let side = (hi - lo).max_element().max(1e-6) * 1.001;
@@ -489,7 +554,8 @@ pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<Po
     stats.nodes = nodes.len();
     stats.points = points.len();
     let tris = TriSoa::of(mesh, &tri_index);
-    let mut tree = PointTree { nodes, points, tri_index, root_side: side, k: params.k, ranges, stats, tris };
+    let mut tree = PointTree { nodes, points, tri_index, root_side: side, k: params.k, ranges, stats, tris, boxes: NodeBoxes::default() };
+    tree.boxes = NodeBoxes::of(&tree);
     tree.stats.bytes = tree.memory_bytes();
     tree.stats.seconds = t0.elapsed().as_secs_f64();
     Ok(tree)
@@ -795,7 +861,7 @@ mod tests {
     }
 
     /// Every triangle ends up stored exactly once; every point and triangle vertex is inside
-    /// its node's sphere and inside every ancestor's sphere.
+    /// its node's sphere and box and inside every ancestor's.
     #[test]
     fn triangles_stored_once_and_spheres_conservative() {
         let mut mesh = builtin::icosphere(3, 0);
@@ -818,6 +884,12 @@ mod tests {
         }
         let inside = |node: usize, p: Vec3| {
             let c = Vec3::new(n.cx[node], n.cy[node], n.cz[node]);
+            let b = &t.boxes;
+            // The node's box too ([`NodeBoxes`]), and the box within the sphere's cube.
+            for k in 0..3 {
+                assert!(b.lo[k][node] <= p[k] && p[k] <= b.hi[k][node], "{p} outside the box of node {node}");
+                assert!(b.lo[k][node] >= c[k] - n.r[node] * 1.001 && b.hi[k][node] <= c[k] + n.r[node] * 1.001, "box of node {node}");
+            }
             (p - c).length() <= n.r[node] * (1.0 + 1e-5)
         };
         for i in 0..n.len() {

@@ -55,6 +55,7 @@ pub fn cached_in(dir: Option<&Path>, mesh: &Mesh, mats: &[&Material], params: &B
     let path = cache_path(dir, key);
     if let Some(mut t) = std::fs::read(&path).ok().and_then(|b| decode(&b, key, mesh.tri_count(), params)) {
         t.tris = super::build::TriSoa::of(mesh, &t.tri_index);
+        t.boxes = super::build::NodeBoxes::of(&t);
         t.stats.seconds = t0.elapsed().as_secs_f64();
         return Ok(t);
     }
@@ -330,7 +331,8 @@ pub fn decode(b: &[u8], key: u64, n_tris: usize, params: &BuildParams) -> Option
         k,
         ranges: MatRanges { color_hi, props },
         stats: BuildStats { triangles_dropped, samples, max_depth, from_cache: true, ..Default::default() },
-        tris: Default::default(), // derived from the mesh by the caller
+        tris: Default::default(),  // derived from the mesh by the caller
+        boxes: Default::default(), // likewise
     };
     t.stats.nodes = t.nodes.len();
     t.stats.points = t.points.len();
@@ -358,6 +360,8 @@ mod tests {
         assert_eq!(a.tri_index, b.tri_index);
         assert_eq!((a.root_side.to_bits(), a.k), (b.root_side.to_bits(), b.k));
         assert_eq!(a.ranges, b.ranges);
+        // Derived after the read: the same node boxes.
+        assert_eq!((&a.boxes.lo, &a.boxes.hi), (&b.boxes.lo, &b.boxes.hi));
         let s = |t: &PointTree| {
             let s = &t.stats;
             (s.nodes, s.points, s.triangles_stored, s.triangles_dropped, s.samples, s.max_depth, s.bytes)

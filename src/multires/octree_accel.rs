@@ -9,7 +9,7 @@
 //! by the closest hit so far. Checked against Embree by `lodtrace verify --accel octree`.
 
 use super::build::{BuildParams, NO_CHILD};
-use super::trace::{tlas_box_test_1, tlas_box_test_x8, BoxReach, MultiresScene};
+use super::trace::{boxes_x8, tlas_box_test_1, tlas_box_test_x8, BoxReach, MultiresScene};
 use crate::baseline::accel::{Accel, Hit, Ray};
 use crate::baseline::tri::{intersect_watertight, RayShear};
 use crate::core::stats::{Counter, Counters};
@@ -194,8 +194,23 @@ impl OctreeAccel<'_> {
                 }
                 let f = f as usize;
                 c.add(Counter::node_tests, 8);
-                let (mut m, ts) =
-                    spheres_x8(&ray8, tnear, tfar, lanes8(&nodes.cx, f), lanes8(&nodes.cy, f), lanes8(&nodes.cz, f), lanes8(&nodes.r, f));
+                // Boxes, then spheres, as the cone tracer ([`super::build::NodeBoxes`]).
+                let (mut m, mut ts) = boxes_x8(&BoxReach::ray(o, d, tnear, tfar), &tree.volumes(), f);
+                if m != 0 {
+                    let (ms, tss) = spheres_x8(
+                        &ray8,
+                        tnear,
+                        tfar,
+                        lanes8(&nodes.cx, f),
+                        lanes8(&nodes.cy, f),
+                        lanes8(&nodes.cz, f),
+                        lanes8(&nodes.r, f),
+                    );
+                    m &= ms;
+                    for (t, t2) in ts.iter_mut().zip(tss) {
+                        *t = t.max(t2);
+                    }
+                }
                 push_near_last(&mut ostack, &mut m, &ts, f);
             }
         }

@@ -477,11 +477,11 @@ impl Tlas {
         t.push(Vec3::ZERO, f32::NEG_INFINITY, (Vec3::ZERO, Vec3::ZERO), 0);
         t.build_rec(0, &mut idx, spheres, boxes);
         let mut w = Tlas::default();
-        w.push(Vec3::new(t.cx[0], t.cy[0], t.cz[0]), t.r[0], t.bounds(0), 0);
+        w.push(Vec3::new(t.cx[0], t.cy[0], t.cz[0]), t.r[0], t.box_of(0), 0);
         w.collapse(&t, 0, 0);
         w
     }
-    fn bounds(&self, n: usize) -> (Vec3, Vec3) {
+    fn box_of(&self, n: usize) -> (Vec3, Vec3) {
         (Vec3::new(self.lo[0][n], self.lo[1][n], self.lo[2][n]), Vec3::new(self.hi[0][n], self.hi[1][n], self.hi[2][n]))
     }
     /// Wide node `slot` of `self` from binary node `n` of `bin`.
@@ -502,7 +502,7 @@ impl Tlas {
         let first = self.r.len();
         for l in 0..8 {
             match list.get(l) {
-                Some(&m) => self.push(Vec3::new(bin.cx[m], bin.cy[m], bin.cz[m]), bin.r[m], bin.bounds(m), 0),
+                Some(&m) => self.push(Vec3::new(bin.cx[m], bin.cy[m], bin.cz[m]), bin.r[m], bin.box_of(m), 0),
                 None => self.push(Vec3::ZERO, -1.0, Tlas::EMPTY_BOX, 0),
             };
         }
@@ -748,46 +748,83 @@ impl BoxReach {
     }
 }
 
-/// Scalar reference of [`tlas_box_test_x8`]: the centre ray against slot `l`'s box grown by
-/// the cone's reach at the far side of the slot's sphere (which holds every octree node
-/// centre below it, where the per-box footprints are taken). Returns the entry depth, a
-/// lower bound of the depth of anything the slot can contribute.
-pub fn tlas_box_test_1(rc: &BoxReach, tl: &Tlas, l: usize) -> Option<f32> {
-    let r = tl.r[l];
+/// Bounding volumes given as spheres and boxes, struct-of-arrays (the instance tree's slots,
+/// an octree's nodes): `c` = centre x, y, z and radius, `lo`/`hi` the box corners per axis.
+#[derive(Clone, Copy)]
+pub struct Bounds<'a> {
+    pub c: [&'a [f32]; 4],
+    pub lo: [&'a [f32]; 3],
+    pub hi: [&'a [f32]; 3],
+}
+
+/// Scalar reference of [`boxes_x8`]: the centre ray against volume `l`'s box grown by the
+/// cone's reach at the far side of its sphere (which holds every node centre below it, where
+/// the per-box footprints are taken). Returns the entry depth, a lower bound of the depth of
+/// anything the volume can contribute.
+pub fn box_test_1(rc: &BoxReach, b: &Bounds, l: usize) -> Option<f32> {
+    let r = b.c[3][l];
     if !(r >= 0.0) {
         return None;
     }
-    let c = Vec3::new(tl.cx[l], tl.cy[l], tl.cz[l]);
+    let c = Vec3::new(b.c[0][l], b.c[1][l], b.c[2][l]);
     let t_far = ((c - rc.org).dot(rc.dir) + r * rc.dir.length()).max(0.0);
     let m = (rc.a + rc.b * t_far).max(rc.floor);
     let (mut tn, mut tf) = (rc.tmin.max(0.0), rc.tmax);
     for k in 0..3 {
-        let t0 = (tl.lo[k][l] - m - rc.org[k]) * rc.inv_dir[k];
-        let t1 = (tl.hi[k][l] + m - rc.org[k]) * rc.inv_dir[k];
+        let t0 = (b.lo[k][l] - m - rc.org[k]) * rc.inv_dir[k];
+        let t1 = (b.hi[k][l] + m - rc.org[k]) * rc.inv_dir[k];
         tn = tn.max(t0.min(t1));
         tf = tf.min(t0.max(t1));
     }
     (tn <= tf).then_some(tn)
 }
 
-/// 8 slots `f .. f + 8` of the instance tree in one f32x8 step: the mask of passing slots
-/// and their entry depths (as [`tlas_box_test_1`]).
-pub fn tlas_box_test_x8(rc: &BoxReach, tl: &Tlas, f: usize) -> (u32, [f32; 8]) {
-    let ld = |v: &Vec<f32>| f32x8::from(<[f32; 8]>::try_from(&v[f..f + 8]).expect("8 slots"));
+/// Volumes `f .. f + 8` in one f32x8 step: the mask of passing ones and their entry depths
+/// (as [`box_test_1`]).
+#[inline]
+pub fn boxes_x8(rc: &BoxReach, b: &Bounds, f: usize) -> (u32, [f32; 8]) {
+    let ld = |v: &[f32]| f32x8::from(<[f32; 8]>::try_from(&v[f..f + 8]).expect("8 volumes"));
     let sp = f32x8::splat;
-    let (cx, cy, cz, r) = (ld(&tl.cx) - sp(rc.org.x), ld(&tl.cy) - sp(rc.org.y), ld(&tl.cz) - sp(rc.org.z), ld(&tl.r));
+    let (cx, cy, cz, r) = (ld(b.c[0]) - sp(rc.org.x), ld(b.c[1]) - sp(rc.org.y), ld(b.c[2]) - sp(rc.org.z), ld(b.c[3]));
     let t_far = (cx.mul_add(sp(rc.dir.x), cy.mul_add(sp(rc.dir.y), cz * sp(rc.dir.z))) + r * sp(rc.dir.length())).max(sp(0.0));
     let m = t_far.mul_add(sp(rc.b), sp(rc.a)).max(sp(rc.floor));
     let (mut tn, mut tf) = (sp(rc.tmin.max(0.0)), sp(rc.tmax));
     for k in 0..3 {
         let (o, inv) = (sp(rc.org[k]), sp(rc.inv_dir[k]));
-        let t0 = (ld(&tl.lo[k]) - m - o) * inv;
-        let t1 = (ld(&tl.hi[k]) + m - o) * inv;
+        let t0 = (ld(b.lo[k]) - m - o) * inv;
+        let t1 = (ld(b.hi[k]) + m - o) * inv;
         tn = tn.max(t0.min(t1));
         tf = tf.min(t0.max(t1));
     }
     let ok = tn.simd_le(tf) & r.simd_ge(sp(0.0));
     (ok.to_bitmask(), tn.to_array())
+}
+
+impl Tlas {
+    pub fn volumes(&self) -> Bounds<'_> {
+        Bounds {
+            c: [&self.cx, &self.cy, &self.cz, &self.r],
+            lo: [&self.lo[0], &self.lo[1], &self.lo[2]],
+            hi: [&self.hi[0], &self.hi[1], &self.hi[2]],
+        }
+    }
+}
+
+impl PointTree {
+    pub fn volumes(&self) -> Bounds<'_> {
+        let (n, b) = (&self.nodes, &self.boxes);
+        Bounds { c: [&n.cx, &n.cy, &n.cz, &n.r], lo: [&b.lo[0], &b.lo[1], &b.lo[2]], hi: [&b.hi[0], &b.hi[1], &b.hi[2]] }
+    }
+}
+
+/// [`box_test_1`] on slot `l` of the instance tree.
+pub fn tlas_box_test_1(rc: &BoxReach, tl: &Tlas, l: usize) -> Option<f32> {
+    box_test_1(rc, &tl.volumes(), l)
+}
+
+/// [`boxes_x8`] on slots `f .. f + 8` of the instance tree.
+pub fn tlas_box_test_x8(rc: &BoxReach, tl: &Tlas, f: usize) -> (u32, [f32; 8]) {
+    boxes_x8(rc, &tl.volumes(), f)
 }
 
 /// Scalar reference of the node test (§4.6).
@@ -1461,6 +1498,8 @@ const K_TLAS_TERMINAL: u8 = 3;
 
 struct Local {
     cone: Cone,
+    /// The cone's reach for the node boxes ([`boxes_x8`]).
+    reach: BoxReach,
     /// object t = scale · world t
     scale: f32,
     leaf: u32,
@@ -1613,7 +1652,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                         node_test_1(&lc, &tree.nodes.cx[..1], &tree.nodes.cy[..1], &tree.nodes.cz[..1], &tree.nodes.r[..1], clamp, lf, cut);
                     c.inc(Counter::node_tests);
                     if h.mask & 1 != 0 {
-                        sc.locals.push(Local { cone: lc, scale: s, leaf: li });
+                        sc.locals.push(Local { cone: lc, scale: s, leaf: li, reach: BoxReach::cone(&lc, cut, lf) });
                         let slot = (sc.locals.len() - 1) as u32;
                         sc.eigs.push(h.eig[0]);
                         let eig = (sc.eigs.len() - 1) as u32;
@@ -1698,9 +1737,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
 
     /// One octree node (§5.1 steps 1–5).
     fn visit(&self, e: Entry, ab: &mut ABuffer, mode: Collect, sc: &mut Scratch, c: &mut Counters) {
-        let (lc, s, li) = {
+        let (lc, s, li, reach) = {
             let l = &sc.locals[e.slot as usize];
-            (l.cone, l.scale, l.leaf)
+            (l.cone, l.scale, l.leaf, l.reach)
         };
         let leaf = &self.ms.leaves[li as usize];
         let tree = &self.ms.trees[leaf.tree as usize];
@@ -1761,12 +1800,12 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 self.test_points(&lc, s, li, tree, n, &boxe, e.blend * x, ab, &mut sc.hits, mode, c);
             }
             if x < 1.0 && has_children {
-                self.push_children(&lc, s, e.slot, tree, n, e.blend * (1.0 - x), K_TERMINAL, sc, c);
+                self.push_children(&lc, &reach, s, e.slot, tree, n, e.blend * (1.0 - x), K_TERMINAL, sc, c);
             }
             return;
         }
         if has_children {
-            self.push_children(&lc, s, e.slot, tree, n, e.blend, K_OCT, sc, c);
+            self.push_children(&lc, &reach, s, e.slot, tree, n, e.blend, K_OCT, sc, c);
         }
     }
 
@@ -1774,6 +1813,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
     fn push_children(
         &self,
         lc: &Cone,
+        reach: &BoxReach,
         s: f32,
         slot: u32,
         tree: &PointTree,
@@ -1784,6 +1824,13 @@ impl<'s, 'a> Tracer<'s, 'a> {
         c: &mut Counters,
     ) {
         let f = tree.nodes.first_child[n] as usize;
+        // The boxes first (grown by the cone's reach): flat nodes have flat boxes but round
+        // spheres ([`super::build::NodeBoxes`]); all 8 missing skips the decompositions.
+        let (bm, bt) = boxes_x8(reach, &tree.volumes(), f);
+        c.add(Counter::node_tests, 8);
+        if bm == 0 {
+            return;
+        }
         let arr = |v: &Vec<f32>| -> [f32; 8] { v[f..f + 8].try_into().expect("8 children") };
         let h = node_test_x8(
             lc,
@@ -1795,15 +1842,14 @@ impl<'s, 'a> Tracer<'s, 'a> {
             self.floor * s,
             self.p.node_cut(),
         );
-        c.add(Counter::node_tests, 8);
         c.add(Counter::eigen_decompositions, 8);
-        let mut m = h.mask as u32;
+        let mut m = h.mask as u32 & bm;
         while m != 0 {
             let l = m.trailing_zeros() as usize;
             m &= m - 1;
             sc.eigs.push(h.eig[l]);
             let eig = (sc.eigs.len() - 1) as u32;
-            sc.push(Entry { t: h.t_near[l] / s, node: (f + l) as u32, slot, blend, kind, eig });
+            sc.push(Entry { t: h.t_near[l].max(bt[l]) / s, node: (f + l) as u32, slot, blend, kind, eig });
         }
     }
 
@@ -2459,7 +2505,7 @@ mod tests {
                 }
                 let c = Vec3::new(tl.cx[l], tl.cy[l], tl.cz[l]);
                 let t_far = ((c - cone.org).dot(cone.dir) + tl.r[l]).max(0.0);
-                let (lo, hi) = tl.bounds(l);
+                let (lo, hi) = tl.box_of(l);
                 for _ in 0..6 {
                     let x = lo + (hi - lo) * Vec3::new(s.next(), s.next(), s.next());
                     let p = cone.coords(x);
