@@ -563,7 +563,7 @@ pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<Po
 
 /// Barycentrics of a uniform point on a triangle for (u, v) in [0,1)².
 #[inline]
-fn sample_triangle(u: f32, v: f32) -> (f32, f32, f32) {
+pub(crate) fn sample_triangle(u: f32, v: f32) -> (f32, f32, f32) {
     let su = u.sqrt();
     (1.0 - su, su * (1.0 - v), su * v)
 }

@@ -35,7 +35,7 @@
 //!   a flat group of tiles lies on a voxel boundary, so centres would lift it by h/2
 //!   (measured: 8% too bright under a point light at 40 units, tiles 2 units per voxel).
 
-use super::build::{mat_props, BuildParams, MatRanges, PointSoa};
+use super::build::{mat_props, sample_triangle, BuildParams, MatRanges, PointSoa};
 use super::quant;
 use super::trace::{MLeaf, Tlas, LEAF};
 use crate::core::rng::{pcg_hash, Sampler};
@@ -110,8 +110,7 @@ fn sample_list(mesh: &Mesh, mat_of: impl Fn(usize) -> u32, seed: u32) -> SampleL
         let [i0, i1, i2] = mesh.tris[t];
         let (a, b, c) = (mesh.pos(i0), mesh.pos(i1), mesh.pos(i2));
         let (u, v) = r.next2();
-        let su = u.sqrt();
-        let (w0, w1, w2) = (1.0 - su, su * (1.0 - v), su * v);
+        let (w0, w1, w2) = sample_triangle(u, v);
         let ng = (b - a).cross(c - a).normalize_or_zero();
         let mut n = (mesh.normal(i0) * w0 + mesh.normal(i1) * w1 + mesh.normal(i2) * w2).normalize_or_zero();
         if n == Vec3::ZERO || !n.is_finite() {

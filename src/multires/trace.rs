@@ -43,7 +43,7 @@
 //! and angle.
 
 use super::abuffer::{ABuffer, Elem, Frag};
-use super::build::{mat_props, BuildParams, PointTree, TriSoa, NO_CHILD};
+use super::build::{mat_props, BuildParams, MatRanges, PointSoa, PointTree, TriSoa, NO_CHILD};
 use super::cone::{self, Cone, Outgoing};
 use super::group::GroupPoints;
 use super::quant;
@@ -1871,36 +1871,10 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let blk = PointBlock::new(tree, n, lc);
         let h = tree.spacing(tree.nodes.depth[n]);
         let start = tree.nodes.pt_start[n] as usize;
-        let npts = tree.nodes.pt_count[n] as usize;
-        c.add(Counter::surfel_tests, npts as u64);
-        let exact = self.p.eigen == EigenMode::Exact;
-        if exact {
-            c.add(Counter::eigen_decompositions, npts as u64);
-        }
-        let leaf = &self.ms.leaves[li as usize];
-        let inv_s = 1.0 / s;
-        let share = POINT_MARGIN * h * h / (std::f32::consts::PI * MASS_IN_CUT);
-        let pts = &tree.points;
-        point_w_x8(lc, &blk, if exact { None } else { Some(boxe) }, self.p.clamp, self.floor * s, blend * share, hits);
-        for k in 0..hits.len {
-            let (j, t, w) = (start + hits.idx[k] as usize, hits.t[k], hits.w[k]);
-            if !(w > 0.0) {
-                continue;
-            }
-            let t = t * inv_s;
-            let dz = self.p.depth_tol * h * inv_s;
-            let mut f = Frag { z0: t - dz, z1: t + dz, w, wt: w * t, best_w: w, ..Default::default() };
-            if mode == Collect::Shade {
-                let m = tree.ranges.decode(pts.rgb[j], pts.mat[j]);
-                f.col = m.color * w;
-                f.props = m.p.map(|v| v * w);
-                // The point's normal spread (|mean normal| < 1) carries into the fragment.
-                let spread = if self.p.normal_spread { quant::decode_unit(pts.nlen[j]) } else { 1.0 };
-                f.n = (leaf.normal_mat * quant::oct_decode(pts.normal[j])).normalize_or_zero() * (w * spread);
-                f.best = Elem::Point { leaf: li, node: n as u32, idx: j as u32 };
-            }
-            ab.insert(f);
-        }
+        let pts = (&tree.points, start, &tree.ranges);
+        let normal_mat = Some(&self.ms.leaves[li as usize].normal_mat);
+        let best = |j: usize| Elem::Point { leaf: li, node: n as u32, idx: j as u32 };
+        self.weigh_points(lc, &blk, s, h, boxe, blend, pts, normal_mat, best, ab, hits, mode, c);
     }
 
     /// The points of instance-tree slot `gi` ([`super::group`]), as [`Tracer::test_points`]
@@ -1918,35 +1892,64 @@ impl<'s, 'a> Tracer<'s, 'a> {
         c: &mut Counters,
     ) {
         let g = &self.ms.groups;
-        let h = g.h[gi];
-        let start = g.start[gi] as usize;
-        let n = g.count[gi] as usize;
-        c.add(Counter::surfel_tests, n as u64);
+        let (start, n) = (g.start[gi] as usize, g.count[gi] as usize);
+        let p = &g.points;
+        let e = (start + n + 7).min(p.len());
+        let q = (&p.qx[start..e], &p.qy[start..e], &p.qz[start..e]);
+        let blk = PointBlock { n, ..PointBlock::from_grid(q, &p.normal[start..e], &p.cover[start..e], g.grid_lo[gi], g.step[gi], cone) };
+        let best = |j: usize| Elem::Group { slot: gi as u32, idx: j as u32 };
+        self.weigh_points(cone, &blk, 1.0, g.h[gi], boxe, blend, (p, start, &g.ranges), None, best, ab, hits, mode, c);
+    }
+
+    /// Weighs a block of points (§4.3; spacing `h`, `pts` = the points, the block's first index
+    /// and their material ranges) with `cone` (object t = `s` · world t) and inserts the
+    /// fragments, their normals turned by `normal_mat` (None: world space already).
+    #[allow(clippy::too_many_arguments)]
+    fn weigh_points(
+        &self,
+        cone: &Cone,
+        blk: &PointBlock,
+        s: f32,
+        h: f32,
+        boxe: &Eigen2,
+        blend: f32,
+        (pts, start, ranges): (&PointSoa, usize, &MatRanges),
+        normal_mat: Option<&Mat3>,
+        best: impl Fn(usize) -> Elem,
+        ab: &mut ABuffer,
+        hits: &mut PointHits,
+        mode: Collect,
+        c: &mut Counters,
+    ) {
+        c.add(Counter::surfel_tests, blk.n as u64);
         let exact = self.p.eigen == EigenMode::Exact;
         if exact {
-            c.add(Counter::eigen_decompositions, n as u64);
+            c.add(Counter::eigen_decompositions, blk.n as u64);
         }
-        let pts = &g.points;
-        let e = (start + n + 7).min(pts.len());
-        let q = (&pts.qx[start..e], &pts.qy[start..e], &pts.qz[start..e]);
-        let blk =
-            PointBlock { n, ..PointBlock::from_grid(q, &pts.normal[start..e], &pts.cover[start..e], g.grid_lo[gi], g.step[gi], cone) };
+        let inv_s = 1.0 / s;
         let share = POINT_MARGIN * h * h / (std::f32::consts::PI * MASS_IN_CUT);
-        point_w_x8(cone, &blk, if exact { None } else { Some(boxe) }, self.p.clamp, self.floor, blend * share, hits);
-        let dz = self.p.depth_tol * h;
+        point_w_x8(cone, blk, if exact { None } else { Some(boxe) }, self.p.clamp, self.floor * s, blend * share, hits);
+        let dz = self.p.depth_tol * h * inv_s;
         for k in 0..hits.len {
             let (j, t, w) = (start + hits.idx[k] as usize, hits.t[k], hits.w[k]);
             if !(w > 0.0) {
                 continue;
             }
+            let t = t * inv_s;
             let mut f = Frag { z0: t - dz, z1: t + dz, w, wt: w * t, best_w: w, ..Default::default() };
             if mode == Collect::Shade {
-                let m = g.ranges.decode(pts.rgb[j], pts.mat[j]);
+                let m = ranges.decode(pts.rgb[j], pts.mat[j]);
                 f.col = m.color * w;
                 f.props = m.p.map(|v| v * w);
+                // The point's normal spread (|mean normal| < 1) carries into the fragment.
                 let spread = if self.p.normal_spread { quant::decode_unit(pts.nlen[j]) } else { 1.0 };
-                f.n = quant::oct_decode(pts.normal[j]) * (w * spread);
-                f.best = Elem::Group { slot: gi as u32, idx: j as u32 };
+                let nrm = quant::oct_decode(pts.normal[j]);
+                let nrm = match normal_mat {
+                    Some(m) => (*m * nrm).normalize_or_zero(),
+                    None => nrm,
+                };
+                f.n = nrm * (w * spread);
+                f.best = best(j);
             }
             ab.insert(f);
         }
