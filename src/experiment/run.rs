@@ -63,10 +63,11 @@ pub struct HierarchyStats {
     pub seconds: f64,
     /// Trees read back from the on-disk cache instead of built.
     pub trees_from_cache: usize,
-    /// Instance-level points (`multires::group`): slots with points, points, and their
-    /// build time (part of `seconds`; never cached).
+    /// Instance-level points (`multires::group`): slots with points, points, the surface
+    /// samples drawn for them, and their build time (part of `seconds`; never cached).
     pub group_slots: usize,
     pub group_points: usize,
+    pub group_samples: u64,
     pub group_seconds: f64,
 }
 
@@ -147,6 +148,7 @@ fn run_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &MultiresArgs)
         trees_from_cache: ms.trees_from_cache(),
         group_slots: ms.groups.count.iter().filter(|&&n| n > 0).count(),
         group_points: ms.groups.points.len(),
+        group_samples: ms.groups.samples,
         group_seconds: ms.group_seconds,
         ..Default::default()
     };
