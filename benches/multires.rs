@@ -21,9 +21,10 @@
 //!   vs [`tlas_box_test_x8`]; 1 024 random slots, throughput in slots.
 //! - `tri_mass`: the Gaussian's mass over a 2-D triangle (`--tri-weight mass`) —
 //!   [`gauss_tri_mass`] (six right triangles one by one) vs [`gauss_tri_mass_x8`] (the six
-//!   in the lanes of one pass); 1 024 small triangles and slivers near the footprint's centre,
-//!   which all take the full path (the x8 kernel's one-edge fast path is not measured here),
-//!   throughput in triangles.
+//!   in the lanes of one pass) vs [`gauss_tri_mass_8`] (`x8_batch`: eight triangles per
+//!   call, one per lane, as the renderer calls it); 1 024 small triangles and slivers near
+//!   the footprint's centre, which all take the full path (the one-edge fast path is not
+//!   measured here), throughput in triangles.
 //!
 //! The 2×2 eigen-decomposition, used inside the node test and the exact point test, has its own
 //! bench (`benches/eigen.rs`). The `x8` kernels use `wide::f32x8` (two SSE halves without
@@ -34,11 +35,12 @@ use glam::{Vec2, Vec3};
 use lodtrace::core::eigen2::{eigen_1, Eigen2};
 use lodtrace::core::rng::Sampler;
 use lodtrace::multires::cone::{Cone, Fp};
+use lodtrace::multires::mass::{gauss_tri_mass, gauss_tri_mass_8, gauss_tri_mass_x8};
 use lodtrace::multires::octree_accel::{sphere_1, spheres_x8, RayX8};
 use lodtrace::multires::quant::{encode_cover, oct_encode};
 use lodtrace::multires::trace::{
-    gauss_tri_mass, gauss_tri_mass_x8, node_test_1, node_test_x8, point_w_ref, point_w_x8, tlas_box_test_1, tlas_box_test_x8, tri_bound_1,
-    tri_bound_x8, BoxReach, PointBlock, PointHits, Tlas, R_CUT,
+    node_test_1, node_test_x8, point_w_ref, point_w_x8, tlas_box_test_1, tlas_box_test_x8, tri_bound_1, tri_bound_x8, BoxReach, PointBlock,
+    PointHits, Tlas, R_CUT,
 };
 use std::hint::black_box;
 use wide::f32x8;
@@ -421,6 +423,14 @@ fn tri_mass(cr: &mut Criterion) {
         bch.iter(|| {
             for (o, q) in out.iter_mut().zip(black_box(&tris)) {
                 *o = gauss_tri_mass_x8(*q);
+            }
+            black_box(&mut out);
+        })
+    });
+    g.bench_function("x8_batch", |bch| {
+        bch.iter(|| {
+            for (o, q) in out.chunks_exact_mut(8).zip(black_box(&tris).chunks_exact(8)) {
+                o.copy_from_slice(&gauss_tri_mass_8(q.try_into().expect("8 triangles")));
             }
             black_box(&mut out);
         })

@@ -18,6 +18,7 @@ pub mod build;
 pub mod cache;
 pub mod cone;
 pub mod group;
+pub mod mass;
 pub mod octree_accel;
 pub mod quant;
 pub mod render;

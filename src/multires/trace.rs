@@ -33,8 +33,8 @@
 //!   2-D triangle; weight = exp(−(d − 0.5)²), taken as 1 for d ≤ 0.5, cut at 2%. Attributes
 //!   are those of the closest point of the triangle. Deviations ([`TriWeight`]): the default
 //!   `coverage` is the Gaussian's exact mass beyond the nearest edge, ½·erfc(±d); `mass`
-//!   integrates it over the whole triangle ([`gauss_tri_mass`], and its x8 form
-//!   [`gauss_tri_mass_x8`] in the renderer), right also for blades thinner than the footprint.
+//!   integrates it over the whole triangle ([`super::mass`]; its eight-triangle form
+//!   [`super::mass::gauss_tri_mass_8`] in the renderer), right also for blades thinner than the footprint.
 //!
 //! Compositing (§4.4): see [`super::abuffer`]. Shading is Phong with the same radiometry as
 //! the conventional tracers (`baseline::shade`); light visibility is 1 − the alpha of the
@@ -46,6 +46,7 @@ use super::abuffer::{ABuffer, Elem, Frag};
 use super::build::{mat_props, BuildParams, MatRanges, PointSoa, PointTree, TriSoa, NO_CHILD};
 use super::cone::{self, Cone, Outgoing};
 use super::group::GroupPoints;
+use super::mass::{gauss_tri_mass_8, gauss_tri_mass_x8};
 use super::quant;
 use crate::core::eigen2::{eigen_1, eigen_x8, Eigen2, Sym2};
 use crate::core::stats::{Counter, Counters};
@@ -116,184 +117,6 @@ const COVERAGE_CUT: f32 = 1.46;
 /// Footprint distance of the point weight's cut-off: e^(−q) < 0.02 past q = Q_CUT, √Q_CUT =
 /// 1.9779 (with a margin).
 const POINT_CUT: f32 = 1.978_5;
-
-/// Standard normal CDF Φ(x).
-#[inline]
-fn phi(x: f32) -> f32 {
-    half_erfc(-x * std::f32::consts::FRAC_1_SQRT_2)
-}
-
-/// Owen's T function T(h, a) = (1/2π)∫₀^a exp(−h²(1+x²)/2)/(1+x²) dx: the standard
-/// bivariate normal mass of {X > h, 0 < Y < aX}. 4-point Gauss–Legendre for |a| ≤ 1 (the
-/// integrand is smooth there: absolute error < 8e-7 for every h, measured against 200 points
-/// over h ∈ [0, 9], a ∈ [0, 1]; 8 points gave 3e-12, below f32's resolution of the result),
-/// Owen's identity T(h, a) = ½Φ(h) + ½Φ(ah) − Φ(h)Φ(ah) − T(ah, 1/a) (h ≥ 0) above.
-pub fn owen_t(h: f32, a: f32) -> f32 {
-    let (h, sign, a) = (h.abs(), a.signum(), a.abs());
-    let core = |h: f32, a: f32| -> f32 {
-        let hh = -0.5 * h * h;
-        let half = 0.5 * a;
-        let mut acc = 0.0;
-        for k in 0..2 {
-            for x in [half * (1.0 - GL_X[k]), half * (1.0 + GL_X[k])] {
-                let q = 1.0 + x * x;
-                acc += GL_W[k] * (hh * q).exp() / q;
-            }
-        }
-        acc * half / std::f32::consts::TAU
-    };
-    let t = if a <= 1.0 {
-        core(h, a)
-    } else {
-        let ah = a * h;
-        let (ph, pah) = (phi(h), phi(ah));
-        0.5 * ph + 0.5 * pah - ph * pah - core(ah, 1.0 / a)
-    };
-    sign * t
-}
-
-/// Mass of the Gaussian exp(−|x|²)/π (the kernel of the point weights, exp(−q); σ² = ½ per
-/// axis) over the 2-D triangle `q` in footprint units. Fan from the Gaussian's centre: each
-/// edge PQ adds the signed mass of triangle (0, P, Q), the difference of two right
-/// triangles between the foot F of the edge line and P, Q; a right triangle with legs H
-/// (to F) and S (along the edge) holds atan(S/H)/2π − T(H, S/H) of a standard normal
-/// (coordinates ×√2). Exact up to the quadrature (tests: against Monte Carlo, additivity).
-pub fn gauss_tri_mass(q: [glam::Vec2; 3]) -> f32 {
-    let q = q.map(|p| p * std::f32::consts::SQRT_2);
-    let right = |hh: f32, s: f32| -> f32 {
-        if hh <= 1e-12 {
-            return 0.0;
-        }
-        let a = s / hh;
-        a.atan() / std::f32::consts::TAU - owen_t(hh, a)
-    };
-    let mut m = 0.0;
-    for i in 0..3 {
-        let (p, r) = (q[i], q[(i + 1) % 3]);
-        let e = r - p;
-        let l2 = e.length_squared();
-        if !(l2 > 0.0) {
-            continue;
-        }
-        let t = e / l2.sqrt();
-        let (sp, sr) = (p.dot(t), r.dot(t));
-        let hh = p.perp_dot(t).abs();
-        let part = (right(hh, sr) - right(hh, sp)).abs();
-        m += part * p.perp_dot(r).signum();
-    }
-    m.abs().min(1.0)
-}
-
-/// ½·erfc(x), 8 lanes (the same A&S 7.1.26 formula as [`half_erfc`]).
-#[inline]
-fn half_erfc_x8(x: f32x8) -> f32x8 {
-    let c = |v: f32| f32x8::splat(v);
-    let z = x.abs();
-    let t = c(1.0) / z.mul_add(c(0.327_591_1), c(1.0));
-    let poly =
-        t * t.mul_add(t.mul_add(t.mul_add(t.mul_add(c(1.061_405_4), c(-1.453_152_1)), c(1.421_413_7)), c(-0.284_496_74)), c(0.254_829_6));
-    let y = c(0.5) * poly * exp_neg_x8(z * z);
-    x.simd_ge(c(0.0)).bitselect(y, c(1.0) - y)
-}
-
-/// [`gauss_tri_mass`] with the six right-triangle terms of the fan (two per edge) in the
-/// lanes of one f32x8 pass: the 4-point Gauss–Legendre sums of Owen's T as four 8-lane
-/// exponentials, Owen's identity for |a| > 1 and the atan by lane selects. Fast path first:
-/// when at most one edge line passes within 2.75 footprint units of the centre, the other
-/// half-planes miss at most 5e-5 of the mass each, so the nearest edge's half-plane mass
-/// (the `coverage` weight) equals the triangle's to 1e-4 — large triangles crossed by one
-/// edge, the common case. Agrees with the scalar reference to 2e-4 (tested).
-pub fn gauss_tri_mass_x8(q: [glam::Vec2; 3]) -> f32 {
-    const FAR: f32 = 2.75;
-    // Signed distances of the centre to the edge lines, positive on the triangle's side.
-    let area2 = (q[1] - q[0]).perp_dot(q[2] - q[0]);
-    if !(area2.abs() > 0.0) {
-        return 0.0;
-    }
-    let orient = area2.signum();
-    // Edge i is near when its signed distance s_i = orient·(e × −p)/|e| ≤ FAR, tested
-    // without the square root: s_i·|e| ≤ FAR·|e|.
-    let (mut near, mut nearest) = (0, 0);
-    let mut best = f32::INFINITY;
-    for i in 0..3 {
-        let (p, r) = (q[i], q[(i + 1) % 3]);
-        let e = r - p;
-        let (num, l2) = (orient * e.perp_dot(-p), e.length_squared());
-        if l2 > 0.0 && (num <= 0.0 || num * num <= FAR * FAR * l2) {
-            near += 1;
-            // Nearest = smallest s_i; compare s_i < s_j without roots via sign and square.
-            let si2 = num * num / l2;
-            let key = if num <= 0.0 { -si2 } else { si2 };
-            if key < best {
-                (best, nearest) = (key, i);
-            }
-        }
-    }
-    if near <= 1 {
-        if near == 0 {
-            // Every edge line is farther than FAR on the inside: the whole Gaussian.
-            return 1.0 - 3.0 * half_erfc(FAR);
-        }
-        let (p, r) = (q[nearest], q[(nearest + 1) % 3]);
-        let e = r - p;
-        let s = orient * e.perp_dot(-p) / e.length();
-        return half_erfc(-s).min(1.0);
-    }
-    // Lane i < 3: edge i = (p, r) = (q_i, q_i+1) measured at its end r; lane i + 3: the same
-    // edge at its start p; lanes 6, 7 are empty (zero edges, masked below).
-    let q = q.map(|p| p * std::f32::consts::SQRT_2);
-    let (mut px, mut py, mut rx, mut ry, mut ax, mut ay) = ([0.0f32; 8], [0.0f32; 8], [0.0f32; 8], [0.0f32; 8], [0.0f32; 8], [0.0f32; 8]);
-    for i in 0..3 {
-        let (p, r) = (q[i], q[(i + 1) % 3]);
-        for (l, at) in [(i, r), (i + 3, p)] {
-            (px[l], py[l], rx[l], ry[l], ax[l], ay[l]) = (p.x, p.y, r.x, r.y, at.x, at.y);
-        }
-    }
-    let (px, py) = (f32x8::from(px), f32x8::from(py));
-    let (ex, ey) = (f32x8::from(rx) - px, f32x8::from(ry) - py);
-    let l2 = ex * ex + ey * ey;
-    let inv = f32x8::splat(1.0) / l2.sqrt();
-    let hh = ((px * ey - py * ex) * inv).abs();
-    let sv = (f32x8::from(ax) * ex + f32x8::from(ay) * ey) * inv;
-    let edge = l2.simd_gt(f32x8::splat(0.0));
-    let c = |v: f32| f32x8::splat(v);
-    let h = edge.bitselect(hh, c(0.0));
-    let live = h.simd_gt(c(1e-12));
-    let hs = live.bitselect(h, c(1.0));
-    let a = live.bitselect(sv, c(0.0)) / hs;
-    let (aa, asg) = (a.abs(), a.simd_lt(c(0.0)).bitselect(c(-1.0), c(1.0)));
-    let small = aa.simd_le(c(1.0));
-    // Owen's T core on (hc, ac), ac ≤ 1.
-    let hc = small.bitselect(hs, aa * hs);
-    let ac = small.bitselect(aa, c(1.0) / aa.max(c(1e-30)));
-    let hh2 = c(0.5) * hc * hc;
-    let half = c(0.5) * ac;
-    let mut acc = c(0.0);
-    for k in 0..2 {
-        for x in [half * c(1.0 - GL_X[k]), half * c(1.0 + GL_X[k])] {
-            let qq = x.mul_add(x, c(1.0));
-            acc += c(GL_W[k]) * exp_neg_x8(hh2 * qq) / qq;
-        }
-    }
-    let core = acc * half * c(1.0 / std::f32::consts::TAU);
-    // Φ(x) = ½·erfc(−x/√2).
-    let phi8 = |x: f32x8| half_erfc_x8(-x * c(std::f32::consts::FRAC_1_SQRT_2));
-    let (ph, pah) = (phi8(hs), phi8(aa * hs));
-    let big = c(0.5) * ph + c(0.5) * pah - ph * pah - core;
-    let t = small.bitselect(core, big) * asg;
-    let right = live.bitselect(a.atan() * c(1.0 / std::f32::consts::TAU) - t, c(0.0)).to_array();
-    let mut m = 0.0f32;
-    for i in 0..3 {
-        let (p, r) = (q[i], q[(i + 1) % 3]);
-        let part = (right[i] - right[i + 3]).abs();
-        m += part * p.perp_dot(r).signum();
-    }
-    m.abs().min(1.0)
-}
-
-/// Gauss–Legendre nodes (positive half) and weights of [`owen_t`]'s 4-point rule.
-const GL_X: [f32; 2] = [0.339_981_04, 0.861_136_3];
-const GL_W: [f32; 2] = [0.652_145_15, 0.347_854_85];
 
 /// When a cone stops (§4.4, "early ray termination").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
@@ -908,16 +731,9 @@ pub fn node_test_x8(cone: &Cone, cx: &[f32; 8], cy: &[f32; 8], cz: &[f32; 8], r:
     out
 }
 
-/// The per-box cone–triangle weight (§4.5 with §5.2): the node's decomposition `boxe`
-/// gives the axes. Returns (weight, b1, b2, t) or None below the 2% cut-off.
-pub fn triangle_weight_per_box(
-    lc: &Cone,
-    pw: [Vec3; 3],
-    boxe: &Eigen2,
-    clamp: f32,
-    lf: f32,
-    mode: TriWeight,
-) -> Option<(f32, f32, f32, f32)> {
+/// A triangle in the per-box footprint coordinates of §5.2 (the 2-D triangle of §4.5, in
+/// which the cone's Gaussian is the unit one), with its vertices' depths along the axis.
+pub fn triangle_per_box_2d(lc: &Cone, pw: [Vec3; 3], boxe: &Eigen2, clamp: f32, lf: f32) -> ([glam::Vec2; 3], [f32; 3]) {
     // Per-box (§5.2): the node's eigen-decomposition gives the principal axes for
     // all its triangles; the extents along those fixed axes are evaluated once per
     // triangle, at the depth where the axis meets its plane (clamped to the
@@ -940,7 +756,20 @@ pub fn triangle_weight_per_box(
     let sg = lc.sigma(t_ref.max(lc.tmin).max(0.0));
     let e1 = (sg.a * co * co + 2.0 * sg.b * co * sn + sg.c * sn * sn).max(0.0).sqrt().max(lf);
     let e2 = (sg.a * sn * sn - 2.0 * sg.b * co * sn + sg.c * co * co).max(0.0).sqrt().max(clamp * e1).max(lf);
-    let q = dv.map(|d| glam::Vec2::new(d.dot(a1) / e1, d.dot(a2) / e2));
+    (dv.map(|d| glam::Vec2::new(d.dot(a1) / e1, d.dot(a2) / e2)), tv)
+}
+
+/// The per-box cone–triangle weight (§4.5 with §5.2): the node's decomposition `boxe`
+/// gives the axes. Returns (weight, b1, b2, t) or None below the 2% cut-off.
+pub fn triangle_weight_per_box(
+    lc: &Cone,
+    pw: [Vec3; 3],
+    boxe: &Eigen2,
+    clamp: f32,
+    lf: f32,
+    mode: TriWeight,
+) -> Option<(f32, f32, f32, f32)> {
+    let (q, tv) = triangle_per_box_2d(lc, pw, boxe, clamp, lf);
     let (w, b1, b2) = weight_2d(q, mode)?;
     Some((w, b1, b2, tv[0] * (1.0 - b1 - b2) + tv[1] * b1 + tv[2] * b2))
 }
@@ -1414,7 +1243,7 @@ fn weight_2d(q: [glam::Vec2; 3], mode: TriWeight) -> Option<(f32, f32, f32)> {
 
 /// The triangle weight for footprint distance `d` (0 inside) of the 2-D triangle `q`.
 #[inline]
-fn tri_w(mode: TriWeight, d: f32, q: [glam::Vec2; 3]) -> f32 {
+pub(crate) fn tri_w(mode: TriWeight, d: f32, q: [glam::Vec2; 3]) -> f32 {
     match mode {
         TriWeight::Paper => {
             if d <= 0.5 {
@@ -1446,7 +1275,7 @@ fn tri_w(mode: TriWeight, d: f32, q: [glam::Vec2; 3]) -> f32 {
 
 /// Distance from the origin to triangle (a, b, c) in 2-D and the barycentrics (of b, c) of
 /// the closest point.
-fn closest_to_origin(a: glam::Vec2, b: glam::Vec2, c: glam::Vec2) -> (f32, f32, f32) {
+pub(crate) fn closest_to_origin(a: glam::Vec2, b: glam::Vec2, c: glam::Vec2) -> (f32, f32, f32) {
     let area = (b - a).perp_dot(c - a);
     if area.abs() > 1e-12 {
         let w0 = b.perp_dot(c) / area;
@@ -1774,6 +1603,33 @@ impl<'s, 'a> Tracer<'s, 'a> {
                     if m != 0 {
                         m &= tri_footprint_x8(&lc, tris, k, &boxe, clamp, lf, cut) as u32;
                     }
+                    if self.p.tri_weight == TriWeight::Mass {
+                        // The exact mass of the block's survivors in one eight-lane call:
+                        // first the nearest edge's half-plane (which bounds the mass) as the
+                        // quick reject, as `weight_2d` does for one triangle.
+                        let mut qs = [[glam::Vec2::ZERO; 3]; 8];
+                        let mut hits = [(0usize, 0.0f32, 0.0f32, 0.0f32); 8];
+                        let mut n = 0;
+                        while m != 0 {
+                            let j = k + m.trailing_zeros() as usize;
+                            m &= m - 1;
+                            c.inc(Counter::triangle_tests);
+                            let (q, tv) = triangle_per_box_2d(&lc, tris.verts[j], &boxe, clamp, lf);
+                            if let Some((_, b1, b2)) = weight_2d(q, TriWeight::Coverage) {
+                                (qs[n], hits[n]) = (q, (j, b1, b2, tv[0] * (1.0 - b1 - b2) + tv[1] * b1 + tv[2] * b2));
+                                n += 1;
+                            }
+                        }
+                        if n > 0 {
+                            let mass = gauss_tri_mass_8(&qs);
+                            for (&w, &(j, b1, b2, t)) in mass.iter().zip(&hits[..n]) {
+                                if w >= 0.02 {
+                                    let hit = (w, b1, b2, t, boxe);
+                                    self.emit_triangle(&lc, s, li, tree.tri_index[j], tris.verts[j], hit, e.blend, ab, mode);
+                                }
+                            }
+                        }
+                    }
                     while m != 0 {
                         let j = k + m.trailing_zeros() as usize;
                         m &= m - 1;
@@ -1969,9 +1825,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         mode: Collect,
         c: &mut Counters,
     ) {
-        let leaf = &self.ms.leaves[li as usize];
-        let mesh = &self.ms.scene.meshes[leaf.mesh as usize];
-        let (w, b1, b2, t, e_hit) = if self.p.eigen == EigenMode::Exact {
+        let hit = if self.p.eigen == EigenMode::Exact {
             let pv = pw.map(|p| lc.coords(p));
             c.add(Counter::eigen_decompositions, 3);
             let lf = self.floor * s;
@@ -1984,9 +1838,29 @@ impl<'s, 'a> Tracer<'s, 'a> {
             };
             (w, b1, b2, t, *boxe)
         };
+        self.emit_triangle(lc, s, li, tri, pw, hit, blend, ab, mode);
+    }
+
+    /// The fragment of a triangle hit (weight, barycentrics b1 b2 of the closest point, depth,
+    /// and the footprint's decomposition there), unless its depth lies outside the cone's.
+    #[allow(clippy::too_many_arguments)]
+    fn emit_triangle(
+        &self,
+        lc: &Cone,
+        s: f32,
+        li: u32,
+        tri: u32,
+        pw: [Vec3; 3],
+        (w, b1, b2, t, e_hit): (f32, f32, f32, f32, Eigen2),
+        blend: f32,
+        ab: &mut ABuffer,
+        mode: Collect,
+    ) {
         if !(t >= lc.tmin && t <= lc.tmax) {
             return;
         }
+        let leaf = &self.ms.leaves[li as usize];
+        let mesh = &self.ms.scene.meshes[leaf.mesh as usize];
         let w = w * blend;
         let inv_s = 1.0 / s;
         // Depth tolerance: how far the triangle's plane spans in depth across the footprint.
@@ -2297,98 +2171,6 @@ mod tests {
         assert_eq!(h.mask, 0xff);
         let e = eigen_1(cone.sigma(h.t_centre[0].max(0.0)), 1.0e-9, 1e-7);
         assert!((h.eig[3].s1 - e.s1).abs() <= 1e-5 * e.s1 && (h.eig[3].s2 - e.s2).abs() <= 1e-5 * e.s1);
-    }
-
-    /// The exact triangle mass against Monte Carlo (kernel exp(−|x|²)/π), on triangles from
-    /// slivers to large ones, around and away from the centre; additivity when a triangle
-    /// is split; and that the nearest-edge half-plane bounds it from above.
-    #[test]
-    fn gauss_tri_mass_matches_monte_carlo() {
-        use glam::Vec2;
-        let mut s = Sampler::new(5, 0, 0);
-        // Gaussian samples (Box–Muller, σ² = ½ per axis).
-        let gs: Vec<Vec2> = (0..200_000)
-            .map(|_| {
-                let (u, v) = s.next2();
-                let r = (-(1.0 - u).ln()).sqrt();
-                Vec2::new(r * (std::f32::consts::TAU * v).cos(), r * (std::f32::consts::TAU * v).sin())
-            })
-            .collect();
-        let inside = |q: [Vec2; 3], p: Vec2| {
-            let e = |a: Vec2, b: Vec2| (b - a).perp_dot(p - a);
-            let (x, y, z) = (e(q[0], q[1]), e(q[1], q[2]), e(q[2], q[0]));
-            (x >= 0.0 && y >= 0.0 && z >= 0.0) || (x <= 0.0 && y <= 0.0 && z <= 0.0)
-        };
-        let mut worst = 0.0f32;
-        for i in 0..60 {
-            let c = Vec2::new(s.next() - 0.5, s.next() - 0.5) * 3.0;
-            let q: [Vec2; 3] = if i % 3 == 0 {
-                // A sliver: long and 0.05–0.3 wide.
-                let dir = Vec2::from_angle(s.next() * 6.283);
-                let w = 0.05 + 0.25 * s.next();
-                [c - dir * 3.0, c + dir * 3.0, c + dir * 2.5 + dir.perp() * w]
-            } else {
-                std::array::from_fn(|_| c + Vec2::new(s.next() - 0.5, s.next() - 0.5) * 4.0 * s.next())
-            };
-            let mc = gs.iter().filter(|&&p| inside(q, p)).count() as f32 / gs.len() as f32;
-            let m = gauss_tri_mass(q);
-            worst = worst.max((m - mc).abs());
-            assert!((m - mc).abs() < 4e-3, "mass {m} vs Monte Carlo {mc} for {q:?}");
-            // Split at the midpoint of edge 0–1: the halves add up.
-            let mid = (q[0] + q[1]) * 0.5;
-            let sum = gauss_tri_mass([q[0], mid, q[2]]) + gauss_tri_mass([mid, q[1], q[2]]);
-            assert!((sum - m).abs() < 1e-4, "halves {sum} vs {m}");
-            // The nearest edge's half-plane (`coverage`) bounds it.
-            let (d, _, _) = closest_to_origin(q[0], q[1], q[2]);
-            assert!(m <= tri_w(TriWeight::Coverage, d, q) + 1e-4);
-        }
-        // A long blade 0.1 wide where it crosses the centre: about the strip's mass erf(0.05)
-        // = 0.0564, where the nearest edge's half-plane gives ½·erfc(−0.05) = 0.53.
-        let blade = [Vec2::new(-0.1, -50.0), Vec2::new(0.1, -50.0), Vec2::new(0.0, 50.0)];
-        let m = gauss_tri_mass(blade);
-        assert!((m - 0.0564).abs() < 0.002, "blade {m}");
-        assert!(worst > 0.0);
-    }
-
-    /// The x8 kernel (with its one-edge fast path) against the scalar reference: random,
-    /// sliver, tiny, huge and degenerate triangles, both orientations.
-    #[test]
-    fn gauss_tri_mass_x8_matches_scalar() {
-        use glam::Vec2;
-        let mut s = Sampler::new(6, 1, 0);
-        let (mut fast, mut full) = (0, 0);
-        for i in 0..20_000 {
-            let c = Vec2::new(s.next() - 0.5, s.next() - 0.5) * 8.0;
-            let scale = [0.05, 0.5, 2.0, 8.0, 100.0][i % 5];
-            let mut q: [Vec2; 3] = match i % 4 {
-                0 => {
-                    let dir = Vec2::from_angle(s.next() * 6.283);
-                    let w = 0.01 + 0.3 * s.next();
-                    [c - dir * scale, c + dir * scale, c + dir * 0.8 * scale + dir.perp() * w]
-                }
-                1 => [c, c + Vec2::X * scale, c + Vec2::X * 2.0 * scale], // colinear
-                _ => std::array::from_fn(|_| c + Vec2::new(s.next() - 0.5, s.next() - 0.5) * scale),
-            };
-            if i % 7 == 0 {
-                q.swap(1, 2);
-            }
-            let (a, b) = (gauss_tri_mass(q), gauss_tri_mass_x8(q));
-            assert!((a - b).abs() <= 2e-4 && b.is_finite(), "{i}: {a} vs {b} for {q:?}");
-            // Which path: the fast one when at most one edge line is near the centre.
-            let near = (0..3)
-                .filter(|&k| {
-                    let (p, r) = (q[k], q[(k + 1) % 3]);
-                    let l = (r - p).length();
-                    l > 0.0 && ((r - p).perp_dot(-p) / l).abs() <= 2.75
-                })
-                .count();
-            if near <= 1 {
-                fast += 1;
-            } else {
-                full += 1;
-            }
-        }
-        assert!(fast > 2000 && full > 2000, "fast {fast}, full {full}");
     }
 
     #[test]
