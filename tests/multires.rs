@@ -13,7 +13,7 @@ use lodtrace::multires::abuffer::ABuffer;
 use lodtrace::multires::build::BuildParams;
 use lodtrace::multires::cone::Cone;
 use lodtrace::multires::render::render as cone_render;
-use lodtrace::multires::trace::{Collect, MultiresScene, Scratch, ShadeScratch, Termination, TraceParams, Tracer};
+use lodtrace::multires::trace::{Collect, MultiresScene, Scratch, ShadeScratch, Termination, TraceParams, Tracer, TriWeight};
 use lodtrace::scene::{builtin, Camera, Light, Material, Mesh, Scene, Target};
 use std::sync::atomic::AtomicBool;
 
@@ -231,33 +231,8 @@ fn area_point_weights_sum_to_one_at_any_orientation() {
 /// (`primary_only`, no shadows), so the answer is known.
 #[test]
 fn normal_spread_shades_aggregates_by_their_mean_cosine() {
-    let mut s = Scene::empty("foliage");
-    s.materials[0] = Material::diffuse("leaf", Vec3::splat(0.8));
-    let mut m = Mesh::new("cloud");
-    let mut h = 0x9e37_79b9u32;
-    let mut rnd = || {
-        h ^= h << 13;
-        h ^= h >> 17;
-        h ^= h << 5;
-        h as f32 / u32::MAX as f32
-    };
-    for _ in 0..6000 {
-        let c = Vec3::new(rnd(), rnd(), rnd()) * 2.0 - Vec3::ONE;
-        let a = Vec3::new(rnd(), rnd(), rnd()) * 2.0 - Vec3::ONE;
-        let b = Vec3::new(rnd(), rnd(), rnd()) * 2.0 - Vec3::ONE;
-        let (i, j, k) = (m.push_vertex(c), m.push_vertex(c + a * 0.08), m.push_vertex(c + b * 0.08));
-        m.push_tri(i, j, k, 0);
-    }
-    m.compute_normals();
-    let id = s.add_mesh(m);
-    s.instance(Target::Mesh(id), Affine3A::IDENTITY, None);
-    let d = 12.0;
-    s.camera = Camera { eye: Vec3::new(0.0, 0.0, d), look: Vec3::ZERO, up: Vec3::Y, fovy: 20.0, aperture: 0.0, focal_dist: d };
     // Light from the side (l ⊥ v), far, irradiance 1 at the cloud.
-    s.lights.push(Light::Point { pos: Vec3::new(1000.0, 0.0, 0.0), intensity: Vec3::splat(1.0e6) });
-    s.ambient = Vec3::ZERO;
-    s.background = Vec3::ZERO;
-    s.validate().unwrap();
+    let s = foliage_scene(Vec3::new(1000.0, 0.0, 0.0));
     let ms = MultiresScene::build(&s, &BuildParams::default()).unwrap();
     let cam = s.camera.frame(32, 32);
     let shade = |normal_spread: bool| {
@@ -284,6 +259,71 @@ fn normal_spread_shades_aggregates_by_their_mean_cosine() {
     let (on, off) = (shade(true), shade(false));
     assert!((on - 0.25).abs() < 0.08, "mean cosine with spread {on}, without {off}, expected 0.25");
     assert!((on - 0.25).abs() < (off - 0.25).abs(), "mean cosine with spread {on}, without {off}, expected 0.25");
+}
+
+/// A cloud of 6,000 small, randomly facing triangles in [−1, 1]³ (the test's foliage),
+/// lit by `light`, seen from z = 12.
+fn foliage_scene(light: Vec3) -> Scene {
+    let mut s = Scene::empty("foliage");
+    s.materials[0] = Material::diffuse("leaf", Vec3::splat(0.8));
+    let mut m = Mesh::new("cloud");
+    let mut h = 0x9e37_79b9u32;
+    let mut rnd = || {
+        h ^= h << 13;
+        h ^= h >> 17;
+        h ^= h << 5;
+        h as f32 / u32::MAX as f32
+    };
+    for _ in 0..6000 {
+        let c = Vec3::new(rnd(), rnd(), rnd()) * 2.0 - Vec3::ONE;
+        let a = Vec3::new(rnd(), rnd(), rnd()) * 2.0 - Vec3::ONE;
+        let b = Vec3::new(rnd(), rnd(), rnd()) * 2.0 - Vec3::ONE;
+        let (i, j, k) = (m.push_vertex(c), m.push_vertex(c + a * 0.08), m.push_vertex(c + b * 0.08));
+        m.push_tri(i, j, k, 0);
+    }
+    m.compute_normals();
+    let id = s.add_mesh(m);
+    s.instance(Target::Mesh(id), Affine3A::IDENTITY, None);
+    let d = 12.0;
+    s.camera = Camera { eye: Vec3::new(0.0, 0.0, d), look: Vec3::ZERO, up: Vec3::Y, fovy: 20.0, aperture: 0.0, focal_dist: d };
+    s.lights.push(Light::Point { pos: light, intensity: Vec3::splat(light.length_squared()) });
+    s.ambient = Vec3::ZERO;
+    s.background = Vec3::ZERO;
+    s.validate().unwrap();
+    s
+}
+
+/// Foliage shadows itself (`aggregate_shadow`, a deviation from the paper): a fragment of a
+/// leaf cloud measures the skip at the start of its shadow cones with the cone's own
+/// footprint, not with its projection on the plane of its mean normal, which near grazing
+/// stretches past the leaves that shadow it. Seen from the side and lit from above, the
+/// cloud comes closer to the reference with either triangle weight. A smooth surface is not
+/// touched.
+#[test]
+fn foliage_shadows_itself() {
+    let scene = foliage_scene(Vec3::new(0.0, 1000.0, 300.0));
+    let (w, h) = (48, 48);
+    let reference = conventional(&scene, reference_accel(), &RenderOpts { width: w, height: h, spp: 64, ..Default::default() });
+    let mean = |f: &Film| f.color.iter().map(|c| c.x as f64).sum::<f64>() / f.color.len() as f64;
+    let want = mean(&reference);
+    for tw in [TriWeight::Coverage, TriWeight::Mass] {
+        let [(m_on, e_on), (m_off, e_off)] = [true, false].map(|aggregate_shadow| {
+            let f = cones(&scene, &TraceParams { aggregate_shadow, tri_weight: tw, ..Default::default() }, w, h);
+            (mean(&f), rmse(&f, &reference))
+        });
+        let msg = format!("{tw:?}: mean {m_on} / RMSE {e_on} with, {m_off} / {e_off} without; reference mean {want}");
+        assert!(m_on < m_off && e_on < e_off, "{msg}");
+        // With the exact triangle mass the cloud's coverage is right, and the brightness
+        // lands on the reference's (measured: 2 % off with, 15 % without).
+        if tw == TriWeight::Mass {
+            assert!((m_on - want).abs() < 0.5 * (m_off - want).abs(), "{msg}");
+        }
+    }
+    // A plane, head-on and at a distance where points are used: the same image either way.
+    let plane = square_scene(Vec3::splat(0.7), 40.0);
+    let a = cones(&plane, &TraceParams::default(), 32, 32);
+    let b = cones(&plane, &TraceParams { aggregate_shadow: false, ..Default::default() }, 32, 32);
+    assert_eq!(a.color, b.color);
 }
 
 /// A black-and-white checkerboard seen at a grazing angle: high-contrast edges everywhere.

@@ -88,6 +88,12 @@ pub struct MultiresArgs {
     /// completion of the paper for instanced scenes, see `multires::group`).
     #[arg(long)]
     pub no_group_points: bool,
+    /// Measure the self-shadowing skip of every fragment's shadow cones as for a surface (the
+    /// footprint projected on the plane of its mean normal); default: aggregates of
+    /// differently facing pieces (foliage) use the cone's own footprint, so the leaves around
+    /// them still shadow them (a deviation from the paper).
+    #[arg(long)]
+    pub no_aggregate_shadow: bool,
     /// Stop rendering after this many seconds (the frame is reported as unfinished).
     #[arg(long)]
     pub time_budget: Option<f64>,
@@ -113,6 +119,7 @@ impl Default for MultiresArgs {
             termination: t.termination,
             no_normal_spread: !t.normal_spread,
             no_group_points: !t.group_points,
+            no_aggregate_shadow: !t.aggregate_shadow,
         }
     }
 }
@@ -133,6 +140,7 @@ impl MultiresArgs {
             termination: self.termination,
             normal_spread: !self.no_normal_spread,
             group_points: !self.no_group_points,
+            aggregate_shadow: !self.no_aggregate_shadow,
             points,
             ..Default::default()
         };
