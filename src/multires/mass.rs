@@ -314,39 +314,51 @@ mod tests {
         assert!(worst > 0.0);
     }
 
+    /// A test triangle around a random point within 4 of the centre, at one of five scales:
+    /// `kind` 0 a sliver 0.01–0.31 wide, 1 three colinear points, else three random points;
+    /// every seventh one turned the other way round.
+    fn sample_triangle(s: &mut Sampler, i: usize, kind: usize) -> [Vec2; 3] {
+        let c = Vec2::new(s.next() - 0.5, s.next() - 0.5) * 8.0;
+        let scale = [0.05, 0.5, 2.0, 8.0, 100.0][i % 5];
+        let mut q: [Vec2; 3] = match kind {
+            0 => {
+                let dir = Vec2::from_angle(s.next() * 6.283);
+                let w = 0.01 + 0.3 * s.next();
+                [c - dir * scale, c + dir * scale, c + dir * 0.8 * scale + dir.perp() * w]
+            }
+            1 => [c, c + Vec2::X * scale, c + Vec2::X * 2.0 * scale],
+            _ => std::array::from_fn(|_| c + Vec2::new(s.next() - 0.5, s.next() - 0.5) * scale),
+        };
+        if i % 7 == 0 {
+            q.swap(1, 2);
+        }
+        q
+    }
+
+    /// Whether the kernels take the one-edge fast path: at most one edge line within 2.75
+    /// footprint units of the centre.
+    fn takes_fast_path(q: &[Vec2; 3]) -> bool {
+        let near = (0..3)
+            .filter(|&k| {
+                let (p, r) = (q[k], q[(k + 1) % 3]);
+                let l = (r - p).length();
+                l > 0.0 && ((r - p).perp_dot(-p) / l).abs() <= 2.75
+            })
+            .count();
+        near <= 1
+    }
+
     /// The x8 kernel (with its one-edge fast path) against the scalar reference: random,
     /// sliver, tiny, huge and degenerate triangles, both orientations.
     #[test]
     fn gauss_tri_mass_x8_matches_scalar() {
-        use glam::Vec2;
         let mut s = Sampler::new(6, 1, 0);
         let (mut fast, mut full) = (0, 0);
         for i in 0..20_000 {
-            let c = Vec2::new(s.next() - 0.5, s.next() - 0.5) * 8.0;
-            let scale = [0.05, 0.5, 2.0, 8.0, 100.0][i % 5];
-            let mut q: [Vec2; 3] = match i % 4 {
-                0 => {
-                    let dir = Vec2::from_angle(s.next() * 6.283);
-                    let w = 0.01 + 0.3 * s.next();
-                    [c - dir * scale, c + dir * scale, c + dir * 0.8 * scale + dir.perp() * w]
-                }
-                1 => [c, c + Vec2::X * scale, c + Vec2::X * 2.0 * scale], // colinear
-                _ => std::array::from_fn(|_| c + Vec2::new(s.next() - 0.5, s.next() - 0.5) * scale),
-            };
-            if i % 7 == 0 {
-                q.swap(1, 2);
-            }
+            let q = sample_triangle(&mut s, i, i % 4);
             let (a, b) = (gauss_tri_mass(q), gauss_tri_mass_x8(q));
             assert!((a - b).abs() <= 2e-4 && b.is_finite(), "{i}: {a} vs {b} for {q:?}");
-            // Which path: the fast one when at most one edge line is near the centre.
-            let near = (0..3)
-                .filter(|&k| {
-                    let (p, r) = (q[k], q[(k + 1) % 3]);
-                    let l = (r - p).length();
-                    l > 0.0 && ((r - p).perp_dot(-p) / l).abs() <= 2.75
-                })
-                .count();
-            if near <= 1 {
+            if takes_fast_path(&q) {
                 fast += 1;
             } else {
                 full += 1;
@@ -366,21 +378,12 @@ mod tests {
             let mut qs = [[Vec2::ZERO; 3]; 8];
             for (l, q) in qs.iter_mut().enumerate() {
                 let i = b * 8 + l;
-                let c = Vec2::new(s.next() - 0.5, s.next() - 0.5) * 8.0;
-                let scale = [0.05, 0.5, 2.0, 8.0, 100.0][i % 5];
-                *q = match (i / 3) % 5 {
-                    0 => {
-                        let dir = Vec2::from_angle(s.next() * 6.283);
-                        let w = 0.01 + 0.3 * s.next();
-                        [c - dir * scale, c + dir * scale, c + dir * 0.8 * scale + dir.perp() * w]
-                    }
-                    1 => [c, c + Vec2::X * scale, c + Vec2::X * 2.0 * scale],
-                    2 if i % 11 == 0 => [c, Vec2::new(f32::NAN, 0.0), c + Vec2::Y],
-                    2 if i % 13 == 0 => [c, c + Vec2::new(f32::INFINITY, 1.0), c + Vec2::Y],
-                    _ => std::array::from_fn(|_| c + Vec2::new(s.next() - 0.5, s.next() - 0.5) * scale),
-                };
-                if i % 7 == 0 {
-                    q.swap(1, 2);
+                let kind = (i / 3) % 5;
+                *q = sample_triangle(&mut s, i, kind);
+                if kind == 2 && i % 11 == 0 {
+                    q[1] = Vec2::new(f32::NAN, 0.0);
+                } else if kind == 2 && i % 13 == 0 {
+                    q[1] = q[0] + Vec2::new(f32::INFINITY, 1.0);
                 }
             }
             if b % 50 == 0 {
@@ -397,14 +400,7 @@ mod tests {
                 let finite = q.iter().all(|v| v.is_finite());
                 let want = if finite { gauss_tri_mass(*q) } else { 0.0 };
                 assert!((got[l] - want).abs() <= 2e-4 && got[l].is_finite(), "batch {b} lane {l}: {} vs {want} for {q:?}", got[l]);
-                let near = (0..3)
-                    .filter(|&k| {
-                        let (p, r) = (q[k], q[(k + 1) % 3]);
-                        let l = (r - p).length();
-                        l > 0.0 && ((r - p).perp_dot(-p) / l).abs() <= 2.75
-                    })
-                    .count();
-                if near <= 1 {
+                if takes_fast_path(q) {
                     fast = true;
                 } else {
                     full = true;
