@@ -288,7 +288,7 @@ mod tests {
             let c = Vec2::new(s.next() - 0.5, s.next() - 0.5) * 3.0;
             let q: [Vec2; 3] = if i % 3 == 0 {
                 // A sliver: long and 0.05–0.3 wide.
-                let dir = Vec2::from_angle(s.next() * 6.283);
+                let dir = Vec2::from_angle(s.next() * std::f32::consts::TAU);
                 let w = 0.05 + 0.25 * s.next();
                 [c - dir * 3.0, c + dir * 3.0, c + dir * 2.5 + dir.perp() * w]
             } else {
@@ -322,7 +322,7 @@ mod tests {
         let scale = [0.05, 0.5, 2.0, 8.0, 100.0][i % 5];
         let mut q: [Vec2; 3] = match kind {
             0 => {
-                let dir = Vec2::from_angle(s.next() * 6.283);
+                let dir = Vec2::from_angle(s.next() * std::f32::consts::TAU);
                 let w = 0.01 + 0.3 * s.next();
                 [c - dir * scale, c + dir * scale, c + dir * 0.8 * scale + dir.perp() * w]
             }
