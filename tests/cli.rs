@@ -177,6 +177,34 @@ fn render_writes_exr_aovs() {
     assert!(n.iter().filter(|v| v.length() > 0.5).all(|v| (v.length() - 1.0).abs() < 1e-3));
 }
 
+/// `--out NAME.exr` writes the beauty image as linear float EXR (the same render as the PNG,
+/// within the PNG's 8-bit sRGB step); any other extension is one error line, exit 2, no file.
+#[test]
+fn render_out_exr_is_linear_float_and_other_names_are_refused() {
+    let d = tmp("out-exr");
+    let (pe, pp, pt) = (d.join("c.exr"), d.join("c.png"), d.join("c.tif"));
+    for p in [&pe, &pp] {
+        let (code, _, err) =
+            lodtrace(&["render", "spheres", "--accel", "bvh", "--width", "40", "--height", "30", "--quiet", "--out", p.to_str().unwrap()]);
+        assert_eq!(code, 0, "{err}");
+    }
+    assert_eq!(&std::fs::read(&pe).unwrap()[..4], &[0x76, 0x2f, 0x31, 0x01], "not an OpenEXR file");
+    let (w, h, e) = lodtrace::film::io::read_image_linear(&pe).unwrap();
+    let (_, _, p) = lodtrace::film::io::read_image_linear(&pp).unwrap();
+    assert_eq!((w, h), (40, 30));
+    // Linear values above 1 survive in the EXR (the PNG clamps them); below 1 they agree
+    // within the 8-bit step.
+    for (a, b) in e.iter().zip(&p) {
+        let a = a.min(glam::Vec3::ONE);
+        assert!((a - *b).abs().max_element() < 0.01, "{a} vs {b}");
+    }
+    let (code, _, err) =
+        lodtrace(&["render", "spheres", "--accel", "bvh", "--width", "40", "--height", "30", "--quiet", "--out", pt.to_str().unwrap()]);
+    assert_eq!(code, 2);
+    one_error_line(&err);
+    assert!(!pt.exists());
+}
+
 #[test]
 fn lod_bench_writes_diff_and_distortion_maps() {
     let (code, out, err, d, json) = small_bench("lodbench", &["cabinet", "--methods", "whitted:bvh,lod:bvh,lod:bvh:force=1"]);

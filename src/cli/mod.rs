@@ -89,6 +89,7 @@ pub struct RenderArgs {
     /// Samples per pixel (whitted: jittered when > 1; distributed: the maximum per pixel).
     #[arg(long, default_value_t = 1)]
     pub spp: u32,
+    /// Output image (default render.png): `.png` is 8-bit sRGB, `.exr` linear float.
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// AOV output, `depth=FILE.exr` or `normal=FILE.exr` (repeatable).

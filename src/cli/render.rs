@@ -58,6 +58,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     opts.validate()?;
     let out = a.out.clone().unwrap_or_else(|| "render.png".into());
     check_out_path(&out)?;
+    io::check_beauty_ext(&out)?;
     for (k, p) in &a.aov {
         check_out_path(p)?;
         let png = k.starts_with("disparity") || k.starts_with("lod");
@@ -84,7 +85,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         scene.max_depth = d;
     }
     let r = run::run(&scene, a.method, a.accel, &opts, &a.multires, &a.lod)?;
-    io::write_png(&out, &r.out.film)?;
+    io::write_beauty(&out, &r.out.film)?;
     for (kind, p) in &a.aov {
         match kind.as_str() {
             "depth" => io::write_exr_depth(p, &r.out.film)?,
@@ -144,7 +145,7 @@ fn render_surfel(a: &RenderArgs, out: &Path) -> Result<()> {
         quiet: a.quiet,
     };
     let st = super::animate::animate(&args)?;
-    io::write_png(out, &st.last_frame)?;
+    io::write_beauty(out, &st.last_frame)?;
     eprintln!(
         "{}: surfel {}x{}: {} surfels, build {:.3} s, render {:.3} s -> {}",
         st.scene,

@@ -1,6 +1,7 @@
 //! Image files: PNG beauty (8-bit sRGB), EXR AOVs, all written atomically.
 //!
-//! - PNG: 8-bit sRGB (the beauty image for viewing).
+//! - PNG: 8-bit sRGB (the beauty image for viewing); `--out NAME.exr` writes the beauty image
+//!   as linear float EXR instead (`write_beauty`).
 //! - EXR (`write_film_exr`, `write_exr_depth`, `write_exr_normal`): 32-bit float, linear,
 //!   three channels R, G, B. The `image` crate's EXR encoder writes RGB or RGBA only, so the
 //!   depth AOV stores the same value in all three channels (any channel reads it back).
@@ -48,6 +49,30 @@ pub fn to_rgb8(film: &Film) -> image::RgbImage {
 pub fn write_png(path: &Path, film: &Film) -> Result<()> {
     let img = to_rgb8(film);
     write_rgb8_png(path, &img)
+}
+
+/// The beauty image in the format its extension names: `.exr` linear float (as
+/// `write_film_exr`), anything else 8-bit sRGB PNG. `check_beauty_ext` vets the name first.
+pub fn write_beauty(path: &Path, film: &Film) -> Result<()> {
+    if has_ext(path, "exr") {
+        write_film_exr(path, film)
+    } else {
+        write_png(path, film)
+    }
+}
+
+fn has_ext(path: &Path, ext: &str) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case(ext))
+}
+
+/// A beauty image's file name must end in `.png` or `.exr`; anything else would be written
+/// as PNG under a misleading name.
+pub fn check_beauty_ext(path: &Path) -> Result<()> {
+    if has_ext(path, "png") || has_ext(path, "exr") {
+        Ok(())
+    } else {
+        Err(Error::Usage(format!("{}: the image is written as .png (8-bit sRGB) or .exr (linear float); name it so", path.display())))
+    }
 }
 
 pub fn write_rgb8_png(path: &Path, img: &image::RgbImage) -> Result<()> {
