@@ -88,10 +88,10 @@ pub struct MultiresArgs {
     /// completion of the paper for instanced scenes, see `multires::group`).
     #[arg(long)]
     pub no_group_points: bool,
-    /// Measure the self-shadowing skip of every fragment's shadow cones as for a surface (the
-    /// footprint projected on the plane of its mean normal); default: aggregates of
-    /// differently facing pieces (foliage) use the cone's own footprint, so the leaves around
-    /// them still shadow them (a deviation from the paper).
+    /// Start every fragment's shadow cones past its own footprint (projected on the plane of
+    /// its mean normal), as for a surface; default: aggregates of differently facing pieces
+    /// (foliage) skip their own thickness only, so the leaves within the footprint still
+    /// shadow each other (a deviation from the paper).
     #[arg(long)]
     pub no_aggregate_shadow: bool,
     /// Stop rendering after this many seconds (the frame is reported as unfinished).
