@@ -177,6 +177,33 @@ fn render_writes_exr_aovs() {
     assert!(n.iter().filter(|v| v.length() > 0.5).all(|v| (v.length() - 1.0).abs() < 1e-3));
 }
 
+/// `--no-shadows` (a diagnostic): every light counts as visible. With it the image is
+/// nowhere darker and somewhere brighter (the spheres' shadows on the floor), for the
+/// conventional and the cone tracer; `--method surfel` refuses it.
+#[test]
+fn render_no_shadows_lights_everything() {
+    let d = tmp("no-shadows");
+    for method in ["whitted", "multires"] {
+        let img = |extra: &[&str], name: &str| {
+            let p = d.join(format!("{method}-{name}.exr"));
+            let mut args = vec!["render", "spheres", "--method", method, "--accel", "bvh", "--width", "48", "--height", "48", "--quiet"];
+            args.extend_from_slice(extra);
+            args.extend_from_slice(&["--out", p.to_str().unwrap()]);
+            let (code, _, err) = lodtrace(&args);
+            assert_eq!(code, 0, "{err}");
+            lodtrace::film::io::read_image_linear(&p).unwrap().2
+        };
+        let (on, off) = (img(&[], "on"), img(&["--no-shadows"], "off"));
+        let darker = on.iter().zip(&off).filter(|(a, b)| b.max_element() < a.max_element() - 1e-3).count();
+        let brighter = on.iter().zip(&off).filter(|(a, b)| b.max_element() > a.max_element() + 0.02).count();
+        assert!(darker == 0 && brighter > 20, "{method}: {darker} pixels darker, {brighter} brighter without shadows");
+    }
+    let (code, _, err) =
+        lodtrace(&["render", "spheres", "--method", "surfel", "--no-shadows", "--quiet", "--out", d.join("s.png").to_str().unwrap()]);
+    assert_eq!(code, 2);
+    one_error_line(&err);
+}
+
 /// `--out NAME.exr` writes the beauty image as linear float EXR (the same render as the PNG,
 /// within the PNG's 8-bit sRGB step); any other extension is one error line, exit 2, no file.
 #[test]

@@ -137,8 +137,10 @@ impl<'a> TraceCtx<'a> {
             if cos <= 0.0 || s.ng.dot(ldir) <= 0.0 {
                 continue;
             }
-            c.inc(Counter::rays_shadow);
-            if occluded(&Ray::segment(p_out, ldir, 0.0, d * (1.0 - 1e-4)), c) {
+            if self.scene.shadows {
+                c.inc(Counter::rays_shadow);
+            }
+            if self.scene.shadows && occluded(&Ray::segment(p_out, ldir, 0.0, d * (1.0 - 1e-4)), c) {
                 continue;
             }
             let e = light.intensity() * (cos / d2);

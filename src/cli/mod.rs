@@ -116,6 +116,10 @@ pub struct RenderArgs {
     /// Recursion depth limit for reflection/refraction (default: the scene's).
     #[arg(long)]
     pub max_depth: Option<u32>,
+    /// Every light counts as visible: no shadow rays or cones (a diagnostic, to split shading
+    /// from visibility; whitted, distributed, lod, multires and cone).
+    #[arg(long)]
+    pub no_shadows: bool,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,

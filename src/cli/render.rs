@@ -74,6 +74,9 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         check_out_path(p)?;
     }
     if a.method == crate::cli::Method::Surfel {
+        if a.no_shadows {
+            return Err(Error::Usage("--no-shadows is not available for --method surfel".into()));
+        }
         return render_surfel(a, &out);
     }
     let mut scene = crate::scene::load::load_scene(&a.scene)?;
@@ -84,6 +87,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         }
         scene.max_depth = d;
     }
+    scene.shadows = !a.no_shadows;
     let r = run::run(&scene, a.method, a.accel, &opts, &a.multires, &a.lod)?;
     io::write_beauty(&out, &r.out.film)?;
     for (kind, p) in &a.aov {

@@ -2093,7 +2093,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 if !(cos_s > 0.0) {
                     continue;
                 }
-                let vis = if self.p.primary_only {
+                let vis = if self.p.primary_only || !scene.shadows {
                     1.0
                 } else {
                     let (mut sh, dist) = cone::shadow(p, n, f0, f1, lp, ax_a, ax_b);

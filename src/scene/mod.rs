@@ -163,6 +163,9 @@ pub struct Scene {
     pub ambient: Vec3,
     /// Maximum recursion depth for reflection and refraction.
     pub max_depth: u32,
+    /// Lights are tested for visibility (shadow rays and cones); off (`render --no-shadows`,
+    /// a diagnostic) every light counts as visible.
+    pub shadows: bool,
 }
 
 impl Scene {
@@ -178,6 +181,7 @@ impl Scene {
             background: Vec3::new(0.05, 0.05, 0.08),
             ambient: Vec3::splat(0.03),
             max_depth: 5,
+            shadows: true,
         }
     }
     pub fn add_material(&mut self, m: Material) -> u32 {
@@ -311,6 +315,7 @@ impl Scene {
             background: self.background,
             ambient: self.ambient,
             max_depth: self.max_depth,
+            shadows: self.shadows,
         }
     }
 
