@@ -1593,7 +1593,10 @@ impl<'s, 'a> Tracer<'s, 'a> {
             if self.p.eigen == EigenMode::Exact {
                 c.add(Counter::triangle_tests, tcount as u64);
                 for (j, &tri) in tree.tri_index[ts..ts + tcount].iter().enumerate() {
-                    self.test_triangle(&lc, s, li, tri, tris.verts[ts + j], &boxe, e.blend, ab, mode, c);
+                    let pw = tris.verts[ts + j];
+                    if let Some(hit) = self.triangle_hit(&lc, s, pw, &boxe, c) {
+                        self.emit_triangle(&lc, s, li, tri, pw, hit, e.blend, ab, mode);
+                    }
                 }
             } else {
                 let lf = self.floor * s;
@@ -1639,7 +1642,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
                         let j = k + m.trailing_zeros() as usize;
                         m &= m - 1;
                         c.inc(Counter::triangle_tests);
-                        self.test_triangle(&lc, s, li, tree.tri_index[j], tris.verts[j], &boxe, e.blend, ab, mode, c);
+                        if let Some(hit) = self.triangle_hit(&lc, s, tris.verts[j], &boxe, c) {
+                            self.emit_triangle(&lc, s, li, tree.tri_index[j], tris.verts[j], hit, e.blend, ab, mode);
+                        }
                     }
                 }
             }
@@ -1816,34 +1821,20 @@ impl<'s, 'a> Tracer<'s, 'a> {
         }
     }
 
-    #[allow(clippy::too_many_arguments)]
-    fn test_triangle(
-        &self,
-        lc: &Cone,
-        s: f32,
-        li: u32,
-        tri: u32,
-        pw: [Vec3; 3],
-        boxe: &Eigen2,
-        blend: f32,
-        ab: &mut ABuffer,
-        mode: Collect,
-        c: &mut Counters,
-    ) {
-        let hit = if self.p.eigen == EigenMode::Exact {
+    /// The anti-aliased ray–triangle test (§4.3): weight, barycentrics b1 b2 of the closest
+    /// point, depth and the footprint's decomposition there, or `None` below the cut-off.
+    fn triangle_hit(&self, lc: &Cone, s: f32, pw: [Vec3; 3], boxe: &Eigen2, c: &mut Counters) -> Option<(f32, f32, f32, f32, Eigen2)> {
+        if self.p.eigen == EigenMode::Exact {
             let pv = pw.map(|p| lc.coords(p));
             c.add(Counter::eigen_decompositions, 3);
             let lf = self.floor * s;
             let ev = pv.map(|p| eigen_1(lc.sigma(p.z.max(lc.tmin).max(0.0)), self.p.clamp, lf));
-            let Some((w, b1, b2, t)) = triangle_weight(pv, ev) else { return };
-            (w, b1, b2, t, ev[0])
+            let (w, b1, b2, t) = triangle_weight(pv, ev)?;
+            Some((w, b1, b2, t, ev[0]))
         } else {
-            let Some((w, b1, b2, t)) = triangle_weight_per_box(lc, pw, boxe, self.p.clamp, self.floor * s, self.p.tri_weight) else {
-                return;
-            };
-            (w, b1, b2, t, *boxe)
-        };
-        self.emit_triangle(lc, s, li, tri, pw, hit, blend, ab, mode);
+            let (w, b1, b2, t) = triangle_weight_per_box(lc, pw, boxe, self.p.clamp, self.floor * s, self.p.tri_weight)?;
+            Some((w, b1, b2, t, *boxe))
+        }
     }
 
     /// The fragment of a triangle hit (weight, barycentrics b1 b2 of the closest point, depth,
