@@ -94,6 +94,14 @@ pub struct MultiresArgs {
     /// shadow each other (a deviation from the paper).
     #[arg(long)]
     pub no_aggregate_shadow: bool,
+    /// Give a triangle's fragment no more depth than the triangle's own vertices span, instead
+    /// of its plane's span across the footprint (the paper's surface rule, the default):
+    /// pieces smaller than the footprint at different depths (leaves, the two sides of a
+    /// glass shell) then composite front to back instead of summing into one fragment. A
+    /// deviation from the paper; `complex` 320×240: mean FLIP 0.1207 → 0.1189 for 27 % more
+    /// time, with `--tri-weight mass` 0.0896 → 0.0854 for 32 % more.
+    #[arg(long)]
+    pub tight_depth: bool,
     /// Stop rendering after this many seconds (the frame is reported as unfinished).
     #[arg(long)]
     pub time_budget: Option<f64>,
@@ -120,6 +128,7 @@ impl Default for MultiresArgs {
             no_normal_spread: !t.normal_spread,
             no_group_points: !t.group_points,
             no_aggregate_shadow: !t.aggregate_shadow,
+            tight_depth: t.tight_depth,
         }
     }
 }
@@ -141,6 +150,7 @@ impl MultiresArgs {
             normal_spread: !self.no_normal_spread,
             group_points: !self.no_group_points,
             aggregate_shadow: !self.no_aggregate_shadow,
+            tight_depth: self.tight_depth,
             points,
             ..Default::default()
         };

@@ -34,7 +34,8 @@
 //!   are those of the closest point of the triangle. Deviations ([`TriWeight`]): the default
 //!   `coverage` is the Gaussian's exact mass beyond the nearest edge, ½·erfc(±d); `mass`
 //!   integrates it over the whole triangle ([`super::mass`]; its eight-triangle form
-//!   [`super::mass::gauss_tri_mass_8`] in the renderer), right also for blades thinner than the footprint.
+//!   [`super::mass::gauss_tri_mass_8`] in the renderer), right also for blades thinner than the
+//!   footprint, and is cut and normalised as the point weights are (see [`TriWeight::Mass`]).
 //!
 //! Compositing (§4.4): see [`super::abuffer`]. Shading is Phong with the same radiometry as
 //! the conventional tracers (`baseline::shade`); light visibility is 1 − the alpha of the
@@ -93,20 +94,26 @@ pub enum TriWeight {
     /// The Gaussian's exact mass over the whole triangle ([`gauss_tri_mass`]): also right for
     /// triangles thinner than the footprint (leaf blades, stems) and at corners, where the
     /// nearest edge's half-plane (`coverage`) overestimates: a blade 0.2 footprint units wide
-    /// gets 0.56 there instead of 0.11.
+    /// gets 0.56 there instead of 0.11. Cut and normalised as the point weights are: a
+    /// triangle counts when the Gaussian at its nearest point is ≥ 2% (d ≤ √ln 50, however
+    /// small its mass), and its mass is divided by the mass inside that radius (0.98), so a
+    /// tessellated surface covering the footprint sums to ≥ 1 — the paper's invariant, and
+    /// what lets early termination end a cone on it.
     Mass,
 }
 
 impl TriWeight {
     /// The footprint distance d beyond which the weight is below the 2% cut-off (§4.4):
     /// exp(−(d − ½)²) < 0.02 past ½ + √ln 50 = 2.478 (R_CUT); ½·erfc(d) < 0.02 past
-    /// 1.4522 (`mass` is bounded by `coverage`, see [`weight_2d`]). The triangle prefilter and
-    /// the 2-D quick reject cull at this distance (tested at the boundary).
+    /// 1.4522; `mass` cuts where the points do, e^(−d²) < 0.02 past √ln 50 = 1.978. The
+    /// triangle prefilter and the 2-D quick reject cull at this distance (tested at the
+    /// boundary).
     #[inline]
     pub fn cut(self) -> f32 {
         match self {
             TriWeight::Paper => R_CUT,
-            TriWeight::Coverage | TriWeight::Mass => COVERAGE_CUT,
+            TriWeight::Coverage => COVERAGE_CUT,
+            TriWeight::Mass => POINT_CUT,
         }
     }
 }
@@ -183,6 +190,9 @@ pub struct TraceParams {
     /// their own thickness only, not past their footprint (see `shade`); off: every fragment
     /// as a surface.
     pub aggregate_shadow: bool,
+    /// A triangle's fragment spans in depth no more than the triangle's vertices do (see
+    /// `emit_triangle`); off (default, the paper): its plane's span across the footprint.
+    pub tight_depth: bool,
 }
 
 impl Default for TraceParams {
@@ -204,6 +214,7 @@ impl Default for TraceParams {
             normal_spread: true,
             group_points: true,
             aggregate_shadow: true,
+            tight_depth: false,
         }
     }
 }
@@ -1211,13 +1222,13 @@ pub fn point_w_x8(cone: &Cone, blk: &PointBlock, boxe: Option<&Eigen2>, clamp: f
 /// Anti-aliased ray–triangle test (§4.5) in footprint coordinates. `pv` are the vertices'
 /// ray coordinates, `ev` their footprints. Returns (weight, barycentrics of the closest
 /// point (b1, b2), depth) or None below the cut-off.
-pub fn triangle_weight(pv: [Vec3; 3], ev: [Eigen2; 3]) -> Option<(f32, f32, f32, f32)> {
+pub fn triangle_weight(pv: [Vec3; 3], ev: [Eigen2; 3], mode: TriWeight) -> Option<(f32, f32, f32, f32)> {
     let q: [glam::Vec2; 3] = std::array::from_fn(|i| {
         let e = &ev[i];
         let (x, y) = (pv[i].x, pv[i].y);
         glam::Vec2::new((e.cos * x + e.sin * y) / e.s1, (e.cos * y - e.sin * x) / e.s2)
     });
-    let (w, b1, b2) = weight_2d(q, TriWeight::Paper)?;
+    let (w, b1, b2) = weight_2d(q, mode)?;
     let t = pv[0].z * (1.0 - b1 - b2) + pv[1].z * b1 + pv[2].z * b2;
     Some((w, b1, b2, t))
 }
@@ -1237,13 +1248,29 @@ fn weight_2d(q: [glam::Vec2; 3], mode: TriWeight) -> Option<(f32, f32, f32)> {
     if !d.is_finite() {
         return None;
     }
-    let mut w = tri_w(if mode == TriWeight::Mass { TriWeight::Coverage } else { mode }, d, q);
-    // The nearest edge's half-plane holds the triangle: its mass bounds the exact one, so
-    // the 2% cut-off and the prefilters built on `coverage` stay conservative.
-    if mode == TriWeight::Mass && w >= 0.02 {
-        w = gauss_tri_mass_x8(q);
+    if mode == TriWeight::Mass {
+        if d > cut {
+            return None;
+        }
+        let w = gauss_tri_mass_x8(q) * (1.0 / MASS_IN_CUT);
+        return (w > 0.0).then_some((w, b1, b2));
     }
+    let w = tri_w(mode, d, q);
     (w >= 0.02).then_some((w, b1, b2))
+}
+
+/// The `mass` weight's candidates ([`TriWeight::Mass`]): the quick reject and the nearest
+/// point within the cut-off, with its barycentrics; the mass itself comes eight triangles
+/// at a time ([`gauss_tri_mass_8`]).
+#[inline]
+fn mass_candidate(q: [glam::Vec2; 3]) -> Option<(f32, f32)> {
+    let lo = q[0].min(q[1]).min(q[2]);
+    let hi = q[0].max(q[1]).max(q[2]);
+    if lo.x > POINT_CUT || lo.y > POINT_CUT || hi.x < -POINT_CUT || hi.y < -POINT_CUT || !(lo.x <= hi.x) {
+        return None;
+    }
+    let (d, b1, b2) = closest_to_origin(q[0], q[1], q[2]);
+    (d <= POINT_CUT).then_some((b1, b2))
 }
 
 /// The triangle weight for footprint distance `d` (0 inside) of the 2-D triangle `q`.
@@ -1612,9 +1639,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
                         m &= tri_footprint_x8(&lc, tris, k, &boxe, clamp, lf, cut) as u32;
                     }
                     if self.p.tri_weight == TriWeight::Mass {
-                        // The exact mass of the block's survivors in one eight-lane call:
-                        // first the nearest edge's half-plane (which bounds the mass) as the
-                        // quick reject, as `weight_2d` does for one triangle.
+                        // The exact mass of the block's survivors in one eight-lane call,
+                        // after the quick reject and the cut-off on the nearest point, as
+                        // `weight_2d` does for one triangle.
                         let mut qs = [[glam::Vec2::ZERO; 3]; 8];
                         let mut hits = [(0usize, 0.0f32, 0.0f32, 0.0f32); 8];
                         let mut n = 0;
@@ -1623,7 +1650,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                             m &= m - 1;
                             c.inc(Counter::triangle_tests);
                             let (q, tv) = triangle_per_box_2d(&lc, tris.verts[j], &boxe, clamp, lf);
-                            if let Some((_, b1, b2)) = weight_2d(q, TriWeight::Coverage) {
+                            if let Some((b1, b2)) = mass_candidate(q) {
                                 (qs[n], hits[n]) = (q, (j, b1, b2, tv[0] * (1.0 - b1 - b2) + tv[1] * b1 + tv[2] * b2));
                                 n += 1;
                             }
@@ -1631,7 +1658,8 @@ impl<'s, 'a> Tracer<'s, 'a> {
                         if n > 0 {
                             let mass = gauss_tri_mass_8(&qs);
                             for (&w, &(j, b1, b2, t)) in mass.iter().zip(&hits[..n]) {
-                                if w >= 0.02 {
+                                let w = w * (1.0 / MASS_IN_CUT);
+                                if w > 0.0 {
                                     let hit = (w, b1, b2, t, boxe);
                                     self.emit_triangle(&lc, s, li, tree.tri_index[j], tris.verts[j], hit, e.blend, ab, mode);
                                 }
@@ -1829,7 +1857,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             c.add(Counter::eigen_decompositions, 3);
             let lf = self.floor * s;
             let ev = pv.map(|p| eigen_1(lc.sigma(p.z.max(lc.tmin).max(0.0)), self.p.clamp, lf));
-            let (w, b1, b2, t) = triangle_weight(pv, ev)?;
+            let (w, b1, b2, t) = triangle_weight(pv, ev, self.p.tri_weight)?;
             Some((w, b1, b2, t, ev[0]))
         } else {
             let (w, b1, b2, t) = triangle_weight_per_box(lc, pw, boxe, self.p.clamp, self.floor * s, self.p.tri_weight)?;
@@ -1860,13 +1888,26 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let w = w * blend;
         let inv_s = 1.0 / s;
         // Depth tolerance: how far the triangle's plane spans in depth across the footprint.
+        // With `tight_depth` (*deviation*, off by default) no more than the triangle's own
+        // vertices span: a leaf smaller than the footprint, seen at an angle, otherwise
+        // reaches up to 20 footprints deep and merges the leaves behind it into its
+        // fragment, whose alpha is then the sum of their coverages instead of their
+        // front-to-back composite. Triangles sharing an edge still overlap (both intervals
+        // hold the edge's depths).
         let [a, b, cc] = pw;
         let ng = (b - a).cross(cc - a).normalize_or_zero();
         let cos = ng.dot(lc.dir).abs().max(0.05);
         let tan = (1.0 - cos * cos).max(0.0).sqrt() / cos;
-        let dz = (R_CUT * e_hit.s1 * tan.min(8.0)).max(1e-5 * (1.0 + t.abs())) * inv_s;
+        let plane = R_CUT * e_hit.s1 * tan.min(8.0);
+        let eps = 1e-5 * (1.0 + t.abs());
+        let (mut z0, mut z1) = (t - plane.max(eps), t + plane.max(eps));
+        if self.p.tight_depth {
+            let tv = pw.map(|p| (p - lc.org).dot(lc.dir));
+            z0 = z0.max(tv[0].min(tv[1]).min(tv[2]) - eps);
+            z1 = z1.min(tv[0].max(tv[1]).max(tv[2]) + eps);
+        }
         let tw = t * inv_s;
-        let mut f = Frag { z0: tw - dz, z1: tw + dz, w, wt: w * tw, best_w: w, ..Default::default() };
+        let mut f = Frag { z0: z0 * inv_s, z1: z1 * inv_s, w, wt: w * tw, best_w: w, ..Default::default() };
         if mode == Collect::Shade {
             let [i0, i1, i2] = mesh.tris[tri as usize];
             let mat = &self.ms.scene.materials[leaf.material.unwrap_or(mesh.mat[tri as usize]) as usize];
@@ -2502,15 +2543,36 @@ mod tests {
     fn triangle_weight_inside_edge_and_far() {
         let e = Eigen2 { cos: 1.0, sin: 0.0, s1: 1.0, s2: 1.0 };
         let tri = |o: Vec3| [Vec3::new(-1.0, -1.0, 5.0) + o, Vec3::new(1.0, -1.0, 5.0) + o, Vec3::new(0.0, 1.0, 5.0) + o];
-        let (w, _, _, t) = triangle_weight(tri(Vec3::ZERO), [e; 3]).unwrap();
+        let (w, _, _, t) = triangle_weight(tri(Vec3::ZERO), [e; 3], TriWeight::Paper).unwrap();
         assert_eq!(w, 1.0);
         assert!((t - 5.0).abs() < 1e-6);
         // Edge at distance 1.5 from the axis: exp(-(1.5-0.5)²) = e^-1.
-        let (w, _, _, _) = triangle_weight(tri(Vec3::new(0.0, 2.5, 0.0)), [e; 3]).unwrap();
+        let (w, _, _, _) = triangle_weight(tri(Vec3::new(0.0, 2.5, 0.0)), [e; 3], TriWeight::Paper).unwrap();
         assert!((w - (-1.0f32).exp()).abs() < 1e-5, "{w}");
-        assert!(triangle_weight(tri(Vec3::new(0.0, 5.0, 0.0)), [e; 3]).is_none());
+        assert!(triangle_weight(tri(Vec3::new(0.0, 5.0, 0.0)), [e; 3], TriWeight::Paper).is_none());
         // Degenerate (colinear) triangles and NaN do not panic.
-        let _ = triangle_weight([Vec3::ZERO, Vec3::X, Vec3::X * 2.0], [e; 3]);
-        assert!(triangle_weight([Vec3::NAN; 3], [e; 3]).is_none());
+        let _ = triangle_weight([Vec3::ZERO, Vec3::X, Vec3::X * 2.0], [e; 3], TriWeight::Paper);
+        assert!(triangle_weight([Vec3::NAN; 3], [e; 3], TriWeight::Paper).is_none());
+    }
+
+    /// The exact-eigen test honours `--tri-weight` (it used to apply the paper's weight
+    /// whatever was asked): a large triangle whose edge passes through the axis gets ½ with
+    /// `coverage`, ½/0.98 with `mass` (normalised as the points are), 1 with `paper`; a tiny
+    /// triangle on the axis gets its Gaussian mass with `mass`, however small.
+    #[test]
+    fn exact_triangle_weight_follows_the_mode() {
+        let e = Eigen2 { cos: 1.0, sin: 0.0, s1: 1.0, s2: 1.0 };
+        let half = [Vec3::new(-50.0, 0.0, 5.0), Vec3::new(50.0, 0.0, 5.0), Vec3::new(0.0, 50.0, 5.0)];
+        let w = |m: TriWeight, t: [Vec3; 3]| triangle_weight(t, [e; 3], m).map(|x| x.0);
+        assert_eq!(w(TriWeight::Paper, half), Some(1.0));
+        assert!((w(TriWeight::Coverage, half).unwrap() - 0.5).abs() < 1e-3);
+        assert!((w(TriWeight::Mass, half).unwrap() - 0.5 / MASS_IN_CUT).abs() < 1e-3);
+        // Area 0.005 at the centre: mass ≈ 0.005/π = 0.0016, below the old 2% cut.
+        let tiny = [Vec3::new(-0.05, -0.05, 5.0), Vec3::new(0.05, -0.05, 5.0), Vec3::new(0.0, 0.05, 5.0)];
+        let m = w(TriWeight::Mass, tiny).expect("a tiny triangle on the axis counts");
+        assert!((m - 0.005 / std::f32::consts::PI / MASS_IN_CUT).abs() < 5e-5, "{m}");
+        // Past the cut (nearest point 2.0 > √ln 50 away): nothing.
+        let far = tiny.map(|p| p + Vec3::new(0.0, 2.05, 0.0));
+        assert!(w(TriWeight::Mass, far).is_none());
     }
 }
