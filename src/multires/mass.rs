@@ -9,8 +9,8 @@
 //! - [`gauss_tri_mass`]: the scalar reference;
 //! - [`gauss_tri_mass_x8`]: one triangle, its six right-triangle terms in the lanes of one
 //!   f32x8 pass (6 of 8 lanes busy), with a one-edge fast path;
-//! - [`gauss_tri_mass_8`]: eight triangles, one per lane, the six terms as six full passes —
-//!   the form the renderer uses (a leaf's triangles come eight at a time out of the
+//! - [`gauss_tri_mass_8`]: eight triangles, one per lane, the six terms as six full passes
+//!   (the edge-midpoint rule for small triangles, [`SMALL_TRI`]) — the form the renderer uses (a leaf's triangles come eight at a time out of the
 //!   prefilter, [`super::trace`]).
 
 use super::trace::{exp_neg_x8, half_erfc};

@@ -1238,6 +1238,11 @@ pub fn triangle_weight(pv: [Vec3; 3], ev: [Eigen2; 3], mode: TriWeight) -> Optio
 /// barycentrics, and the weight; None below the 2% cut-off.
 #[inline]
 fn weight_2d(q: [glam::Vec2; 3], mode: TriWeight) -> Option<(f32, f32, f32)> {
+    if mode == TriWeight::Mass {
+        let (b1, b2) = mass_candidate(q)?;
+        let w = gauss_tri_mass_x8(q) * (1.0 / MASS_IN_CUT);
+        return (w > 0.0).then_some((w, b1, b2));
+    }
     let lo = q[0].min(q[1]).min(q[2]);
     let hi = q[0].max(q[1]).max(q[2]);
     let cut = mode.cut();
@@ -1247,13 +1252,6 @@ fn weight_2d(q: [glam::Vec2; 3], mode: TriWeight) -> Option<(f32, f32, f32)> {
     let (d, b1, b2) = closest_to_origin(q[0], q[1], q[2]);
     if !d.is_finite() {
         return None;
-    }
-    if mode == TriWeight::Mass {
-        if d > cut {
-            return None;
-        }
-        let w = gauss_tri_mass_x8(q) * (1.0 / MASS_IN_CUT);
-        return (w > 0.0).then_some((w, b1, b2));
     }
     let w = tri_w(mode, d, q);
     (w >= 0.02).then_some((w, b1, b2))
