@@ -392,8 +392,7 @@ mod tests {
 
     /// The eight-triangle kernel against the scalar reference, on the same kinds of
     /// triangles, mixed so that most batches hold fast-path, small-triangle and full-path
-    /// lanes together;
-    /// empty, colinear and non-finite lanes give 0.
+    /// lanes together; empty, colinear and non-finite lanes give 0.
     #[test]
     fn gauss_tri_mass_8_matches_scalar() {
         let mut s = Sampler::new(8, 2, 0);

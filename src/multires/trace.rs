@@ -2368,7 +2368,8 @@ mod tests {
 
     /// The triangle prefilter culls exactly: every triangle that the full per-box test gives
     /// a weight (inside the cone's depth range) passes its bounding-sphere test, for random
-    /// cones, triangles near and across the footprint, both weight modes, random box axes
+    /// cones, triangles near and across the footprint, all three weight modes (`mass` with
+    /// its own cut, the points'), random box axes
     /// and clamps; and a good share is culled (it is not vacuous).
     #[test]
     fn triangle_prefilter_is_conservative() {
@@ -2385,7 +2386,7 @@ mod tests {
             let lf = if i % 5 == 0 { 1e-3 } else { 1e-7 };
             // The box's axes come from some other depth (the node centre's).
             let boxe = eigen_1(cone.sigma((t + (s.next() - 0.5) * 2.0).max(0.0)), clamp, lf);
-            let mode = if i % 2 == 0 { TriWeight::Paper } else { TriWeight::Coverage };
+            let mode = [TriWeight::Paper, TriWeight::Coverage, TriWeight::Mass][i % 3];
             let full = triangle_weight_per_box(&cone, pw, &boxe, clamp, lf, mode).filter(|x| x.3 >= cone.tmin && x.3 <= cone.tmax);
             let soa = super::super::build::TriSoa::of(
                 &{
