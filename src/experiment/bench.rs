@@ -6,7 +6,7 @@
 //! A method spec is `METHOD[:ACCEL][:key=value...]`, keys: `spp`, `threads`, `packet`,
 //! `fps` (distributed first-pass spp), `vt` (distributed variance threshold), `depth`; for
 //! the cone tracers (`multires`, `cone`): `k`, `c` (oversampling), `clamp`, `lod`, `dtol`,
-//! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage|mass`, `term=paper|final`, `pw=area|voxel`, `spread=0`, `groups=0`, `agg=0` (surface shadow skip for aggregates too), `tight=1` (a triangle fragment's depth interval from its vertices, not its plane);
+//! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage|mass`, `term=paper|final`, `pw=area|voxel`, `spread=0`, `groups=0`, `agg=0` (surface shadow skip for aggregates too), `tight=1` (a triangle fragment's depth interval from its vertices, not its plane), `mask=1` (`--coverage-masks`);
 //! for `lod`: `f`, `a` (a_LOD), `thres`, `sel=0` (no selective tracing), `levels`, `dist`
 //! (distance criterion), `force` (fixed LOD), `net=1` (net disparity), `select=cone` (the
 //! ray-cone selector).
@@ -146,6 +146,7 @@ impl MethodSpec {
                     "groups" => spec.multires.no_group_points = num(v)? == 0.0,
                     "agg" => spec.multires.no_aggregate_shadow = num(v)? == 0.0,
                     "tight" => spec.multires.tight_depth = num(v)? != 0.0,
+                    "mask" => spec.multires.coverage_masks = num(v)? != 0.0,
                     "pw" => {
                         spec.multires.point_weights = crate::multires::build::PointWeights::from_str(v, true)
                             .map_err(|_| bad(format!("pw={v}: area or voxel")))?

@@ -67,7 +67,7 @@ pub const Q_CUT: f32 = 3.912_023;
 /// (0.5 + √ln50 ≈ 2.48) reaches 2%: the node test's cut-off.
 pub const R_CUT: f32 = 2.48;
 /// Mass of the unit Gaussian inside the cut-off, 1 − e^{−ln 50} = 0.98.
-const MASS_IN_CUT: f32 = 0.98;
+pub(crate) const MASS_IN_CUT: f32 = 0.98;
 /// Safety margin on the point weights so that a surface's interior sums to ≥ 1 (the paper's
 /// guarantee) despite the Monte-Carlo noise of the voxel occupancy: an axis-aligned plane
 /// sums to 1.0 ± 2% without it (measured, `tests/multires.rs`).
@@ -123,7 +123,7 @@ const COVERAGE_CUT: f32 = 1.46;
 
 /// Footprint distance of the point weight's cut-off: e^(−q) < 0.02 past q = Q_CUT, √Q_CUT =
 /// 1.9779 (with a margin).
-const POINT_CUT: f32 = 1.978_5;
+pub(crate) const POINT_CUT: f32 = 1.978_5;
 
 /// When a cone stops (§4.4, "early ray termination").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
@@ -193,6 +193,9 @@ pub struct TraceParams {
     /// A triangle's fragment spans in depth no more than the triangle's vertices do (see
     /// `emit_triangle`); off (default, the paper): its plane's span across the footprint.
     pub tight_depth: bool,
+    /// Triangle fragments carry coverage masks that correct the compositing of correlated
+    /// pieces ([`super::mask`]); off (default): the paper's alpha compositing.
+    pub coverage_masks: bool,
 }
 
 impl Default for TraceParams {
@@ -215,6 +218,7 @@ impl Default for TraceParams {
             group_points: true,
             aggregate_shadow: true,
             tight_depth: false,
+            coverage_masks: false,
         }
     }
 }
@@ -1827,8 +1831,8 @@ impl<'s, 'a> Tracer<'s, 'a> {
             if !(w > 0.0) {
                 continue;
             }
-            let t = t * inv_s;
-            let mut f = Frag { z0: t - dz, z1: t + dz, w, wt: w * t, best_w: w, ..Default::default() };
+            let tw = t * inv_s;
+            let mut f = Frag { z0: tw - dz, z1: tw + dz, w, wt: w * tw, best_w: w, ..Default::default() };
             if mode == Collect::Shade {
                 let m = ranges.decode(pts.rgb[j], pts.mat[j]);
                 f.col = m.color * w;
@@ -1906,6 +1910,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
         }
         let tw = t * inv_s;
         let mut f = Frag { z0: z0 * inv_s, z1: z1 * inv_s, w, wt: w * tw, best_w: w, ..Default::default() };
+        if self.p.coverage_masks {
+            f.mask = super::mask::tri_mask(super::mask::whiten(lc, pw, t, self.p.clamp, self.floor * s));
+        }
         if mode == Collect::Shade {
             let [i0, i1, i2] = mesh.tris[tri as usize];
             let mat = &self.ms.scene.materials[leaf.material.unwrap_or(mesh.mat[tri as usize]) as usize];
@@ -2003,9 +2010,10 @@ impl<'s, 'a> Tracer<'s, 'a> {
         c.add(Counter::fragments_merged, ab.merges);
         let scene = self.ms.scene;
         let mut res = ConeResult { color: Vec3::ZERO, alpha: 0.0, depth: f32::INFINITY, normal: Vec3::ZERO };
-        let mut acc = 0.0f32;
+        let mut over = super::abuffer::Over::default();
         for f in &ab.frags {
-            let k = (1.0 - acc) * f.alpha();
+            let k = over.add(f);
+            let acc = over.acc;
             if res.depth.is_infinite() && f.w >= 0.5 {
                 res.depth = f.t();
                 res.normal = f.n.normalize_or_zero();
@@ -2013,11 +2021,11 @@ impl<'s, 'a> Tracer<'s, 'a> {
             if k > 1e-4 {
                 res.color += self.shade(cone, f, depth, importance * k, ss, c) * k;
             }
-            acc += k;
             if acc >= super::abuffer::OPAQUE {
                 break;
             }
         }
+        let acc = over.acc;
         res.alpha = acc;
         res.color += scene.background * (1.0 - acc);
         ss.bufs[depth as usize] = ab;
