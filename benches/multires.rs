@@ -25,6 +25,9 @@
 //!   call, one per lane, as the renderer calls it); 1 024 small triangles and slivers near
 //!   the footprint's centre, which all take the full path (the one-edge fast path is not
 //!   measured here), throughput in triangles.
+//! - `tri_mask`: a triangle's coverage mask over the 64 sub-rays (`--coverage-masks`) —
+//!   [`tri_mask_1`] vs [`tri_mask`] (eight sub-rays per step); the same 1 024 triangles,
+//!   throughput in triangles.
 //!
 //! The 2×2 eigen-decomposition, used inside the node test and the exact point test, has its own
 //! bench (`benches/eigen.rs`). The `x8` kernels use `wide::f32x8` (two SSE halves without
@@ -35,6 +38,7 @@ use glam::{Vec2, Vec3};
 use lodtrace::core::eigen2::{eigen_1, Eigen2};
 use lodtrace::core::rng::Sampler;
 use lodtrace::multires::cone::{Cone, Fp};
+use lodtrace::multires::mask::{tri_mask, tri_mask_1};
 use lodtrace::multires::mass::{gauss_tri_mass, gauss_tri_mass_8, gauss_tri_mass_x8};
 use lodtrace::multires::octree_accel::{sphere_1, spheres_x8, RayX8};
 use lodtrace::multires::quant::{encode_cover, oct_encode};
@@ -394,10 +398,11 @@ fn cone_sigma(cr: &mut Criterion) {
     g.finish();
 }
 
-fn tri_mass(cr: &mut Criterion) {
+/// 1 024 small triangles and slivers near the footprint's centre.
+fn centre_triangles() -> Vec<[Vec2; 3]> {
     const N: usize = 1024;
     let mut s = Sampler::new(25, 0, 0);
-    let tris: Vec<[Vec2; 3]> = (0..N)
+    (0..N)
         .map(|i| {
             let c = Vec2::new(s.next() - 0.5, s.next() - 0.5) * 1.5;
             if i % 2 == 0 {
@@ -407,7 +412,12 @@ fn tri_mass(cr: &mut Criterion) {
                 [c - dir * 1.5, c + dir * 1.5, c + dir * 1.2 + dir.perp() * (0.05 + 0.2 * s.next())]
             }
         })
-        .collect();
+        .collect()
+}
+
+fn tri_mass(cr: &mut Criterion) {
+    const N: usize = 1024;
+    let tris = centre_triangles();
     let mut out = vec![0.0f32; N];
     let mut g = cr.benchmark_group("tri_mass");
     g.throughput(Throughput::Elements(N as u64));
@@ -431,6 +441,30 @@ fn tri_mass(cr: &mut Criterion) {
         bch.iter(|| {
             for (o, q) in out.chunks_exact_mut(8).zip(black_box(&tris).chunks_exact(8)) {
                 o.copy_from_slice(&gauss_tri_mass_8(q.try_into().expect("8 triangles")));
+            }
+            black_box(&mut out);
+        })
+    });
+    g.finish();
+}
+
+fn tri_mask_bench(cr: &mut Criterion) {
+    let tris = centre_triangles();
+    let mut out = vec![0u64; tris.len()];
+    let mut g = cr.benchmark_group("tri_mask");
+    g.throughput(Throughput::Elements(tris.len() as u64));
+    g.bench_function("scalar", |bch| {
+        bch.iter(|| {
+            for (o, q) in out.iter_mut().zip(black_box(&tris)) {
+                *o = tri_mask_1(*q);
+            }
+            black_box(&mut out);
+        })
+    });
+    g.bench_function("x8", |bch| {
+        bch.iter(|| {
+            for (o, q) in out.iter_mut().zip(black_box(&tris)) {
+                *o = tri_mask(*q);
             }
             black_box(&mut out);
         })
@@ -487,5 +521,5 @@ fn tlas_box(cr: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, node_test, tri_bound, point_w, octree_spheres, cone_sigma, tri_mass, tlas_box);
+criterion_group!(benches, node_test, tri_bound, point_w, octree_spheres, cone_sigma, tri_mass, tri_mask_bench, tlas_box);
 criterion_main!(benches);

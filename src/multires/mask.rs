@@ -110,32 +110,38 @@ pub fn whiten<const N: usize>(lc: &Cone, p: [Vec3; N], t: f32, clamp: f32, floor
 /// (whitened footprint coordinates; either orientation). Degenerate or non-finite
 /// triangles set none.
 pub fn tri_mask_1(q: [Vec2; 3]) -> u64 {
-    let area = (q[1] - q[0]).perp_dot(q[2] - q[0]);
-    if !(area.abs() > 0.0) {
+    let Some(edges) = edge_functions(q) else {
         return 0;
-    }
-    let sg = area.signum();
+    };
     let mut m = 0u64;
     for k in 0..BITS {
         let s = offset(k);
-        let inside = (0..3).all(|i| {
-            let (a, b) = (q[i], q[(i + 1) % 3]);
-            sg * (b - a).perp_dot(s - a) >= 0.0
-        });
-        if inside {
+        if edges.iter().all(|&(a, b, c)| a * s.x + b * s.y + c >= 0.0) {
             m |= 1 << k;
         }
     }
     m
 }
 
+/// The triangle's three edge functions a·x + b·y + c, oriented so that the inside is ≥ 0;
+/// None for a degenerate or non-finite triangle.
+#[inline]
+fn edge_functions(q: [Vec2; 3]) -> Option<[(f32, f32, f32); 3]> {
+    let area = (q[1] - q[0]).perp_dot(q[2] - q[0]);
+    if !(area.abs() > 0.0) {
+        return None;
+    }
+    let sg = area.signum();
+    Some(std::array::from_fn(|i| {
+        let (p, e) = (q[i], q[(i + 1) % 3] - q[i]);
+        // perp_dot(e, s − p) = e.x (s.y − p.y) − e.y (s.x − p.x)
+        (-sg * e.y, sg * e.x, sg * (e.y * p.x - e.x * p.y))
+    }))
+}
+
 /// [`tri_mask_1`], eight sub-rays per `f32x8` step (bit-identical: the same operations in
 /// the same order).
 pub fn tri_mask(q: [Vec2; 3]) -> u64 {
-    let area = (q[1] - q[0]).perp_dot(q[2] - q[0]);
-    if !(area.abs() > 0.0) {
-        return 0;
-    }
     // Outside the offsets' disc: nothing to test.
     let lo = q[0].min(q[1]).min(q[2]);
     let hi = q[0].max(q[1]).max(q[2]);
@@ -143,24 +149,20 @@ pub fn tri_mask(q: [Vec2; 3]) -> u64 {
     if lo.x > R || lo.y > R || hi.x < -R || hi.y < -R {
         return 0;
     }
-    let sg = f32x8::splat(area.signum());
+    let Some(edges) = edge_functions(q) else {
+        return 0;
+    };
     let o = offsets();
     let z = f32x8::splat(0.0);
-    let edges: [(f32x8, f32x8, f32x8, f32x8); 3] = std::array::from_fn(|i| {
-        let (a, b) = (q[i], q[(i + 1) % 3]);
-        let e = b - a;
-        (f32x8::splat(a.x), f32x8::splat(a.y), f32x8::splat(e.x), f32x8::splat(e.y))
-    });
+    let e = edges.map(|(a, b, c)| (f32x8::splat(a), f32x8::splat(b), f32x8::splat(c)));
     let mut m = 0u64;
-    for c in 0..BITS / 8 {
-        let (sx, sy) = (o.x[c], o.y[c]);
-        let mut inside = f32x8::splat(f32::from_bits(u32::MAX));
-        for &(ax, ay, ex, ey) in &edges {
-            // perp_dot(e, s − a) = e.x (s.y − a.y) − e.y (s.x − a.x)
-            let d = ex * (sy - ay) - ey * (sx - ax);
-            inside &= (sg * d).simd_ge(z);
-        }
-        m |= (inside.to_bitmask() as u64 & 0xff) << (8 * c);
+    for k in 0..BITS / 8 {
+        let (sx, sy) = (o.x[k], o.y[k]);
+        let d0 = e[0].0 * sx + e[0].1 * sy + e[0].2;
+        let d1 = e[1].0 * sx + e[1].1 * sy + e[1].2;
+        let d2 = e[2].0 * sx + e[2].1 * sy + e[2].2;
+        let inside = d0.simd_ge(z) & d1.simd_ge(z) & d2.simd_ge(z);
+        m |= (inside.to_bitmask() as u64 & 0xff) << (8 * k);
     }
     m
 }
