@@ -22,12 +22,16 @@
 //! far foliage turned transparent: `complex` mean FLIP 0.0865 → 0.0964 (`tri=mass`,
 //! 320×240), with 60 % more time.
 //!
-//! The masks only *correct* the paper's compositing ([`super::abuffer::Over`]): the weights
-//! still give each fragment's alpha; the share a fragment gets of what is left in front of
-//! it is scaled by how much of its mask is still uncovered, relative to the uncovered share
-//! of all bits. A surface behind that covers the whole footprint therefore fills exactly
-//! what is left (no seams or halos from the 64-sample discretisation), a leaf hidden behind
-//! the same spot of a leaf in front gets nothing.
+//! The masks only *correct* the paper's weights and compositing; the weights still give the
+//! coverage. Within a fragment, the share of a piece's sub-rays that earlier pieces already
+//! cover is not counted as coverage ([`super::abuffer::Frag::hidden`]; leaves of one plant
+//! mostly meet in one fragment). Across fragments ([`super::abuffer::Over`]), the share a
+//! fragment gets of what is left in front of it is scaled by how much of its mask is still
+//! uncovered, relative to the uncovered share of all bits: a surface behind that covers the
+//! whole footprint fills exactly what is left (no seams or halos from the 64-sample
+//! discretisation), a leaf behind the same spot of a leaf in front gets nothing. Early ray
+//! termination ([`super::abuffer::ABuffer::opaque`]) sees the corrected fragment alphas but
+//! composites them as the paper does.
 
 use super::cone::Cone;
 use super::trace::MASS_IN_CUT;
