@@ -415,28 +415,32 @@ fn centre_triangles() -> Vec<[Vec2; 3]> {
         .collect()
 }
 
+/// Benchmarks `f` applied to each triangle in turn, results into `out`.
+fn per_triangle<T>(
+    g: &mut criterion::BenchmarkGroup<criterion::measurement::WallTime>,
+    name: &str,
+    tris: &[[Vec2; 3]],
+    out: &mut [T],
+    f: impl Fn([Vec2; 3]) -> T,
+) {
+    g.bench_function(name, |bch| {
+        bch.iter(|| {
+            for (o, q) in out.iter_mut().zip(black_box(tris)) {
+                *o = f(*q);
+            }
+            black_box(&mut *out);
+        })
+    });
+}
+
 fn tri_mass(cr: &mut Criterion) {
     const N: usize = 1024;
     let tris = centre_triangles();
     let mut out = vec![0.0f32; N];
     let mut g = cr.benchmark_group("tri_mass");
     g.throughput(Throughput::Elements(N as u64));
-    g.bench_function("scalar", |bch| {
-        bch.iter(|| {
-            for (o, q) in out.iter_mut().zip(black_box(&tris)) {
-                *o = gauss_tri_mass(*q);
-            }
-            black_box(&mut out);
-        })
-    });
-    g.bench_function("x8", |bch| {
-        bch.iter(|| {
-            for (o, q) in out.iter_mut().zip(black_box(&tris)) {
-                *o = gauss_tri_mass_x8(*q);
-            }
-            black_box(&mut out);
-        })
-    });
+    per_triangle(&mut g, "scalar", &tris, &mut out, gauss_tri_mass);
+    per_triangle(&mut g, "x8", &tris, &mut out, gauss_tri_mass_x8);
     g.bench_function("x8_batch", |bch| {
         bch.iter(|| {
             for (o, q) in out.chunks_exact_mut(8).zip(black_box(&tris).chunks_exact(8)) {
@@ -453,22 +457,8 @@ fn tri_mask_bench(cr: &mut Criterion) {
     let mut out = vec![0u64; tris.len()];
     let mut g = cr.benchmark_group("tri_mask");
     g.throughput(Throughput::Elements(tris.len() as u64));
-    g.bench_function("scalar", |bch| {
-        bch.iter(|| {
-            for (o, q) in out.iter_mut().zip(black_box(&tris)) {
-                *o = tri_mask_1(*q);
-            }
-            black_box(&mut out);
-        })
-    });
-    g.bench_function("x8", |bch| {
-        bch.iter(|| {
-            for (o, q) in out.iter_mut().zip(black_box(&tris)) {
-                *o = tri_mask(*q);
-            }
-            black_box(&mut out);
-        })
-    });
+    per_triangle(&mut g, "scalar", &tris, &mut out, tri_mask_1);
+    per_triangle(&mut g, "x8", &tris, &mut out, tri_mask);
     g.finish();
 }
 
