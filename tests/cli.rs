@@ -356,11 +356,96 @@ fn animate_writes_frames_and_per_frame_stats() {
     assert!(v["per_frame"][0]["sphere_tests"].as_u64().unwrap() > 0);
 }
 
+/// A PLY point file of `rows` (x y z nx ny nz).
+fn ply_text(rows: &[[f32; 6]]) -> String {
+    let mut t = format!("ply\nformat ascii 1.0\nelement vertex {}\n", rows.len());
+    for p in ["x", "y", "z", "nx", "ny", "nz"] {
+        t += &format!("property float {p}\n");
+    }
+    t += "end_header\n";
+    for r in rows {
+        t += &format!("{} {} {} {} {} {}\n", r[0], r[1], r[2], r[3], r[4], r[5]);
+    }
+    t
+}
+
+/// Surfels read from a point file (Adams et al. §3) are dropped onto the floor like a mesh:
+/// every point becomes a surfel (radii from the 8th neighbour), and the object moves.
+#[test]
+fn animate_reads_ply_point_files() {
+    let d = tmp("animateply");
+    // 3,000 points of a unit sphere (Fibonacci spiral) with outward normals.
+    let n = 3000;
+    let rows: Vec<[f32; 6]> = (0..n)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+            let r = (1.0 - z * z).sqrt();
+            let a = i as f32 * std::f32::consts::PI * (3.0 - 5f32.sqrt());
+            let p = [r * a.cos(), z, r * a.sin()];
+            [p[0], p[1], p[2], p[0], p[1], p[2]]
+        })
+        .collect();
+    let ply = d.join("ball.ply");
+    std::fs::write(&ply, ply_text(&rows)).unwrap();
+    let j = d.join("a.json");
+    let (code, _, err) = lodtrace(&[
+        "animate",
+        ply.to_str().unwrap(),
+        "--frames",
+        "12",
+        "--width",
+        "48",
+        "--height",
+        "36",
+        "--quiet",
+        "--out",
+        d.to_str().unwrap(),
+        "--stats",
+        j.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&j).unwrap()).unwrap();
+    assert_eq!(v["surfels"], n);
+    assert_eq!(v["scene"], "ball");
+    let first = image::open(d.join("frame_0000.png")).unwrap().to_rgb8();
+    let last = image::open(d.join("frame_0011.png")).unwrap().to_rgb8();
+    assert_ne!(first.as_raw(), last.as_raw(), "the dropped object does not move");
+}
+
 #[test]
 fn bad_animate_input_is_one_line_exit_2() {
     let d = tmp("animatebad");
     let bad_ply = d.join("bad.off");
     std::fs::write(&bad_ply, "OFF\n3 1 0\n0 0 0\nnan 0 0\n0 1 0\n3 0 1 2\n").unwrap();
+    let good = [
+        [0.0, 0.0, 0.0, 0.0, 0.0, 1.0],
+        [1.0, 0.0, 0.0, 0.0, 0.0, 1.0],
+        [0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        [1.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        [2.0, 0.0, 0.0, 0.0, 0.0, 1.0],
+    ];
+    let ply = |name: &str, text: String| {
+        let p = d.join(name);
+        std::fs::write(&p, text).unwrap();
+        p.to_str().unwrap().to_string()
+    };
+    let mut zero_n = good;
+    zero_n[2][5] = 0.0;
+    let mut dup = good;
+    dup[3] = dup[1];
+    let plys = [
+        ply("nan.ply", ply_text(&good).replacen("1 1 0", "nan 1 0", 1)),
+        ply("trunc.ply", ply_text(&good).replacen("2 0 0 0 0 1\n", "", 1)),
+        ply("zero_normal.ply", ply_text(&zero_n)),
+        ply("dup.ply", ply_text(&dup)),
+        ply("few.ply", ply_text(&good[..2])),
+        d.join("missing.ply").to_str().unwrap().to_string(),
+    ];
+    for p in &plys {
+        let (code, _, err) = lodtrace(&["animate", p, "--frames", "1"]);
+        assert_eq!(code, 2, "{p}: {err}");
+        one_error_line(&err);
+    }
     for args in [
         &["animate", "heads", "--frames", "0"][..],
         &["animate", "heads", "--update", "sometimes"],

@@ -1,8 +1,9 @@
 //! `lodtrace animate SCENE --frames N [--update naive|lazy|lazy-cache|refit]`: ray tracing a
 //! deforming point-sampled scene (Adams et al. 2005) frame by frame.
 //!
-//! SCENE is a built-in sequence (`armadillo-ball`, `bend`, `heads`, `elastic-balls`) or a
-//! mesh file, which is sampled into surfels and dropped onto a floor. The motion is simulated
+//! SCENE is a built-in sequence (`armadillo-ball`, `bend`, `heads`, `elastic-balls`), a
+//! mesh file, which is sampled into surfels, or a PLY point file (surfels as read); either
+//! is dropped onto a floor. The motion is simulated
 //! and recorded first, so every update mode replays the same frames; a frame's time is the
 //! hierarchy update (`begin_frame`: the naive rebuild, or the lazy bookkeeping) plus the rays.
 //! Shading: Phong-diffuse surfels in their collection colour, one point light with shadow
@@ -24,7 +25,7 @@ use std::time::Instant;
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct AnimateArgs {
-    /// Built-in sequence (armadillo-ball, bend, heads, elastic-balls) or a mesh file (.off/.obj).
+    /// Built-in sequence (armadillo-ball, bend, heads, elastic-balls), a mesh file (.off/.obj) or a point file (.ply: x y z nx ny nz, optional radius).
     pub scene: String,
     #[arg(long)]
     pub frames: Option<u32>,
@@ -174,8 +175,13 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         if !p.is_file() {
             return Err(Error::UnknownScene(format!("{} (sequences: {})", a.scene, Sequence::BUILTIN.join(", "))));
         }
-        let mesh = crate::scene::load::load_mesh(p, 0)?;
-        Sequence::from_mesh(&mesh, &opts).map_err(derr)?
+        let ply = p.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"));
+        if ply {
+            Sequence::from_points(crate::deform::ply::load_ply(p).map_err(derr)?, &opts).map_err(derr)?
+        } else {
+            let mesh = crate::scene::load::load_mesh(p, 0)?;
+            Sequence::from_mesh(&mesh, &opts).map_err(derr)?
+        }
     };
     let frames = a.frames.unwrap_or(seq.frames);
     let t0 = Instant::now();

@@ -26,6 +26,13 @@ fn scalar(p: &Property) -> Option<f32> {
     })
 }
 
+/// `ply-rs`'s multi-line parse message (line, offending text, nested `Custom { .. }`
+/// error) as one line: whitespace collapsed, the nested debug dump dropped.
+fn one_line(msg: &str) -> String {
+    let head = msg.split("Error: Custom").next().unwrap_or(msg);
+    head.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
 /// Reads a PLY point file (ASCII or binary) into a single-collection surfel model.
 pub fn load_ply(path: &Path) -> Result<SurfelModel, DeformError> {
     let err = |msg: String| DeformError::Ply { path: path.to_path_buf(), msg };
@@ -38,7 +45,7 @@ pub fn load_ply(path: &Path) -> Result<SurfelModel, DeformError> {
 pub fn read_ply<R: std::io::BufRead>(r: &mut R, path: &Path) -> Result<SurfelModel, DeformError> {
     let err = |msg: String| DeformError::Ply { path: path.to_path_buf(), msg };
     let parser = Parser::<DefaultElement>::new();
-    let ply = parser.read_ply(r).map_err(|e| err(format!("parse error: {e}")))?;
+    let ply = parser.read_ply(r).map_err(|e| err(format!("parse error: {}", one_line(&e.to_string()))))?;
     let verts = ply.payload.get("vertex").ok_or_else(|| err("no 'vertex' element".into()))?;
     let get = |e: &DefaultElement, k: &str, i: usize| -> Result<Option<f32>, DeformError> {
         match e.get(k) {

@@ -101,7 +101,18 @@ impl Sequence {
     /// The default motion for any mesh: normalised to height 1 (flat meshes: longest side
     /// 2), dropped from 0.5 above a floor, soft, deforming on impact.
     pub fn from_mesh(mesh: &Mesh, opts: &SequenceOptions) -> Result<Sequence, DeformError> {
-        let obj_nodes = mesh_object(mesh, opts, 1.0, Vec3::new(0.0, 0.5, 0.0))?;
+        let name = if mesh.name.is_empty() { "mesh" } else { &mesh.name };
+        Self::dropped(name, mesh_object(mesh, opts, 1.0, Vec3::new(0.0, 0.5, 0.0))?)
+    }
+
+    /// A point file's surfels (§3: surfel models read from point files) dropped onto a
+    /// floor like [`Sequence::from_mesh`]; the file's radii are kept (scaled with the model).
+    pub fn from_points(model: SurfelModel, opts: &SequenceOptions) -> Result<Sequence, DeformError> {
+        let name = model.collections.first().map(|c| c.name.clone()).unwrap_or_else(|| "points".into());
+        Self::dropped(&name, surfel_object(&name, model.surfels, opts, 1.0, Vec3::new(0.0, 0.5, 0.0))?)
+    }
+
+    fn dropped(name: &str, obj_nodes: (Arc<SurfelObject>, Vec<Vec3>, f32)) -> Result<Sequence, DeformError> {
         let (obj, nodes, radius) = obj_nodes;
         let mut world = World::new(1.0 / 30.0, 4);
         world.colliders.push(Collider::Plane { n: Vec3::Y, d: 0.0 });
@@ -115,7 +126,7 @@ impl Sequence {
             BodyParams { stiffness: 0.8, beta: 0.05, cluster_size: 64, ..Default::default() },
         ));
         Ok(Sequence {
-            name: if mesh.name.is_empty() { "mesh".into() } else { mesh.name.clone() },
+            name: name.into(),
             scene: DeformScene { objects: vec![obj], instances: vec![0] },
             world,
             frame: 0,
@@ -222,7 +233,7 @@ fn cluster_nodes(pts: &[Vec3], target: usize) -> (Vec<Vec3>, f32) {
 /// its node positions (world = reference here) and the node collision radius.
 fn mesh_object(mesh: &Mesh, opts: &SequenceOptions, height: f32, base: Vec3) -> Result<(Arc<SurfelObject>, Vec<Vec3>, f32), DeformError> {
     let target = ((170_000.0 * opts.detail) as usize).max(200);
-    let mut s = match opts.mesh_surfels {
+    let s = match opts.mesh_surfels {
         Some(n) => sample_mesh(mesh, n, opts.seed)?,
         None => {
             let v = surfels_from_mesh_vertices(mesh)?;
@@ -233,6 +244,18 @@ fn mesh_object(mesh: &Mesh, opts: &SequenceOptions, height: f32, base: Vec3) -> 
             }
         }
     };
+    surfel_object(&mesh.name, s, opts, height, base)
+}
+
+/// A surfel set (sampled from a mesh or read from a point file) scaled to `height`, standing
+/// on `base`, with simulation nodes clustered from its surfels.
+fn surfel_object(
+    name: &str,
+    mut s: SurfelSoa,
+    opts: &SequenceOptions,
+    height: f32,
+    base: Vec3,
+) -> Result<(Arc<SurfelObject>, Vec<Vec3>, f32), DeformError> {
     let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
     for i in 0..s.len() {
         lo = lo.min(s.pos(i));
@@ -252,7 +275,7 @@ fn mesh_object(mesh: &Mesh, opts: &SequenceOptions, height: f32, base: Vec3) -> 
     }
     let n_nodes = ((opts.mesh_nodes as f32 * opts.detail.sqrt()) as usize).max(24);
     let (nodes, cell) = cluster_nodes(&s.positions(), n_nodes);
-    let model = SurfelModel::single(&mesh.name, s, [0.75, 0.72, 0.68]);
+    let model = SurfelModel::single(name, s, [0.75, 0.72, 0.68]);
     let m = vec![1.0; nodes.len()];
     let obj = SurfelObject::build(model, nodes.clone(), m, &opts.object)?;
     Ok((obj, nodes, 0.5 * cell))
