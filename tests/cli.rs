@@ -321,34 +321,25 @@ fn bad_lod_options_are_one_line_exit_2() {
     assert_eq!(code, 2, "{err}");
 }
 
+/// `lodtrace animate SCENE ARGS --width 48 --height 36 --quiet --out D --stats D/a.json`,
+/// asserting exit 0; returns the stats JSON (the frames are in `d`).
+fn small_animate(d: &std::path::Path, scene: &str, args: &[&str]) -> serde_json::Value {
+    let j = d.join("a.json");
+    let mut all = vec!["animate", scene];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--width", "48", "--height", "36", "--quiet", "--out", d.to_str().unwrap(), "--stats", j.to_str().unwrap()]);
+    let (code, _, err) = lodtrace(&all);
+    assert_eq!(code, 0, "{err}");
+    serde_json::from_str(&std::fs::read_to_string(&j).unwrap()).unwrap()
+}
+
 #[test]
 fn animate_writes_frames_and_per_frame_stats() {
     let d = tmp("animate");
-    let j = d.join("a.json");
-    let (code, _, err) = lodtrace(&[
-        "animate",
-        "heads",
-        "--frames",
-        "3",
-        "--detail",
-        "0.05",
-        "--width",
-        "48",
-        "--height",
-        "36",
-        "--update",
-        "lazy-cache",
-        "--quiet",
-        "--out",
-        d.to_str().unwrap(),
-        "--stats",
-        j.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
+    let v = small_animate(&d, "heads", &["--frames", "3", "--detail", "0.05", "--update", "lazy-cache"]);
     for f in 0..3 {
         assert!(d.join(format!("frame_{f:04}.png")).is_file());
     }
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&j).unwrap()).unwrap();
     assert_eq!(v["frames"], 3);
     assert_eq!(v["per_frame"].as_array().unwrap().len(), 3);
     let total: f64 = v["per_frame"].as_array().unwrap().iter().map(|r| r["seconds"].as_f64().unwrap()).sum();
@@ -387,24 +378,7 @@ fn animate_reads_ply_point_files() {
         .collect();
     let ply = d.join("ball.ply");
     std::fs::write(&ply, ply_text(&rows)).unwrap();
-    let j = d.join("a.json");
-    let (code, _, err) = lodtrace(&[
-        "animate",
-        ply.to_str().unwrap(),
-        "--frames",
-        "12",
-        "--width",
-        "48",
-        "--height",
-        "36",
-        "--quiet",
-        "--out",
-        d.to_str().unwrap(),
-        "--stats",
-        j.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{err}");
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&j).unwrap()).unwrap();
+    let v = small_animate(&d, ply.to_str().unwrap(), &["--frames", "12"]);
     assert_eq!(v["surfels"], n);
     assert_eq!(v["scene"], "ball");
     let first = image::open(d.join("frame_0000.png")).unwrap().to_rgb8();
