@@ -3,9 +3,9 @@
 //!
 //! SCENE is a built-in sequence (`armadillo-ball`, `bend`, `heads`, `elastic-balls`), a
 //! mesh file, which is sampled into surfels, or a PLY point file (surfels as read); either
-//! is dropped onto a floor. The motion is simulated
-//! and recorded first, so every update mode replays the same frames; a frame's time is the
-//! hierarchy update (`begin_frame`: the naive rebuild, or the lazy bookkeeping) plus the rays.
+//! is dropped onto a floor. The motion is simulated and recorded first, so every update
+//! mode replays the same frames; a frame's time is the hierarchy update (`begin_frame`: the
+//! naive rebuild, or the lazy bookkeeping) plus the rays.
 //! Shading: Phong-diffuse surfels in their collection colour, one point light with shadow
 //! rays (the §4.4 shadow-ray path), the simulation's static planes and boxes rendered
 //! analytically (planes only from their free side, so a hollow box shows as a cut-away).
@@ -175,8 +175,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         if !p.is_file() {
             return Err(Error::UnknownScene(format!("{} (sequences: {})", a.scene, Sequence::BUILTIN.join(", "))));
         }
-        let ply = p.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"));
-        if ply {
+        if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply")) {
             Sequence::from_points(crate::deform::ply::load_ply(p).map_err(derr)?, &opts).map_err(derr)?
         } else {
             let mesh = crate::scene::load::load_mesh(p, 0)?;

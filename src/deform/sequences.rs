@@ -102,18 +102,17 @@ impl Sequence {
     /// 2), dropped from 0.5 above a floor, soft, deforming on impact.
     pub fn from_mesh(mesh: &Mesh, opts: &SequenceOptions) -> Result<Sequence, DeformError> {
         let name = if mesh.name.is_empty() { "mesh" } else { &mesh.name };
-        Self::dropped(name, mesh_object(mesh, opts, 1.0, Vec3::new(0.0, 0.5, 0.0))?)
+        Ok(Self::dropped(name, mesh_object(mesh, opts, 1.0, Vec3::new(0.0, 0.5, 0.0))?))
     }
 
     /// A point file's surfels (§3: surfel models read from point files) dropped onto a
     /// floor like [`Sequence::from_mesh`]; the file's radii are kept (scaled with the model).
     pub fn from_points(model: SurfelModel, opts: &SequenceOptions) -> Result<Sequence, DeformError> {
         let name = model.collections.first().map(|c| c.name.clone()).unwrap_or_else(|| "points".into());
-        Self::dropped(&name, surfel_object(&name, model.surfels, opts, 1.0, Vec3::new(0.0, 0.5, 0.0))?)
+        Ok(Self::dropped(&name, surfel_object(&name, model.surfels, opts, 1.0, Vec3::new(0.0, 0.5, 0.0))?))
     }
 
-    fn dropped(name: &str, obj_nodes: (Arc<SurfelObject>, Vec<Vec3>, f32)) -> Result<Sequence, DeformError> {
-        let (obj, nodes, radius) = obj_nodes;
+    fn dropped(name: &str, (obj, nodes, radius): (Arc<SurfelObject>, Vec<Vec3>, f32)) -> Sequence {
         let mut world = World::new(1.0 / 30.0, 4);
         world.colliders.push(Collider::Plane { n: Vec3::Y, d: 0.0 });
         let n = nodes.len();
@@ -125,14 +124,14 @@ impl Sequence {
             radius,
             BodyParams { stiffness: 0.8, beta: 0.05, cluster_size: 64, ..Default::default() },
         ));
-        Ok(Sequence {
+        Sequence {
             name: name.into(),
             scene: DeformScene { objects: vec![obj], instances: vec![0] },
             world,
             frame: 0,
             frames: 60,
             camera: cam(Vec3::new(0.0, 0.9, 3.2), Vec3::new(0.0, 0.5, 0.0), 40.0),
-        })
+        }
     }
 
     /// Node positions now.
