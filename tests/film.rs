@@ -251,6 +251,50 @@ fn compare_cli() {
     assert_eq!(err.trim_end().lines().count(), 1, "{err}");
 }
 
+/// `compare --region`: the error of an image noisy only on its right half is all in a
+/// right-half region; a left-half region, away from the seam, has none of it; the region
+/// shares add up to the whole image's error; bad rectangles are exit-2 errors.
+#[test]
+fn compare_regions_split_the_error() {
+    let d = tmp("regions");
+    let a = gradient(W, H);
+    let noisy_all = noisy(&a, 0.05);
+    let b: Vec<Vec3> = (0..(W * H) as usize).map(|i| if (i as u32 % W) >= W / 2 { noisy_all[i] } else { a[i] }).collect();
+    let (pa, pb) = (d.join("a.png"), d.join("b.png"));
+    io::write_png(&pa, &film_from(W, H, a)).unwrap();
+    io::write_png(&pb, &film_from(W, H, b)).unwrap();
+    let (h2, w2, w4) = (W / 2, W / 2, W / 4);
+    let regions = [format!("left={},0,{},{H}", 0, w4), format!("right={w2},0,{W},{H}"), format!("lefthalf=0,0,{h2},{H}")];
+    let mut args: Vec<std::ffi::OsString> = vec!["compare".into(), pa.clone().into(), pb.clone().into(), "--json".into()];
+    for r in &regions {
+        args.push("--region".into());
+        args.push(r.into());
+    }
+    let args_ref: Vec<&std::ffi::OsStr> = args.iter().map(|s| s.as_os_str()).collect();
+    let o = lodtrace(&args_ref);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let r = v["regions"].as_array().unwrap();
+    assert_eq!(r.len(), 3);
+    let f = |i: usize, k: &str| r[i][k].as_f64().unwrap();
+    let total = v["flip_mean"].as_f64().unwrap();
+    assert!(total > 0.01, "the noise must show: {total}");
+    assert_eq!(f(0, "flip_mean"), 0.0, "untouched quarter away from the seam");
+    assert_eq!(f(0, "rmse"), 0.0);
+    assert!(f(1, "flip_share") > 0.95, "the noisy half holds the error: {}", f(1, "flip_share"));
+    assert!((f(1, "flip_share") + f(2, "flip_share") - 1.0).abs() < 1e-9, "two halves make the whole");
+    assert!((f(1, "flip_mean") * 0.5 + f(2, "flip_mean") * 0.5 - total).abs() < 1e-9);
+    assert!(f(1, "rmse") > 0.01);
+
+    for bad in ["x=0,0,0,4", "x=0,0,4", "x=0,0,4,99999", "=0,0,4,4", "x=a,0,4,4"] {
+        let o = lodtrace(&["compare".as_ref(), pa.as_os_str(), pb.as_os_str(), "--region".as_ref(), bad.as_ref()]);
+        assert_eq!(o.status.code(), Some(2), "{bad}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.starts_with("lodtrace: error:") && err.contains("--region"), "{err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    }
+}
+
 #[test]
 fn plots_write_pngs() {
     let d = tmp("plot");

@@ -86,6 +86,14 @@ fn srgb8(a: &[Vec3]) -> Vec<u8> {
 
 /// Mean LDR FLIP error of `b` against reference `a`, and the magma-coloured error map.
 pub fn flip_mean(a: &[Vec3], b: &[Vec3], w: u32, h: u32) -> Result<(f64, image::RgbImage)> {
+    let (values, map) = flip_map(a, b, w, h)?;
+    Ok((mean_finite(&values), map))
+}
+
+/// Per-pixel LDR FLIP error of `b` against reference `a` (row-major, `w·h` values in [0, 1]),
+/// and the magma-coloured map of it. Region means are taken from this full-image map, so a
+/// region's figure sees the same filtered neighbourhood as the whole image's mean.
+pub fn flip_map(a: &[Vec3], b: &[Vec3], w: u32, h: u32) -> Result<(Vec<f32>, image::RgbImage)> {
     let n = check(a, b, w, h)?;
     if n == 0 {
         return Err(Error::Usage("FLIP: images are empty".into()));
@@ -93,12 +101,16 @@ pub fn flip_mean(a: &[Vec3], b: &[Vec3], w: u32, h: u32) -> Result<(f64, image::
     let ref_img = nv_flip::FlipImageRgb8::with_data(w, h, &srgb8(a));
     let test_img = nv_flip::FlipImageRgb8::with_data(w, h, &srgb8(b));
     let err = nv_flip::flip(ref_img, test_img, nv_flip::DEFAULT_PIXELS_PER_DEGREE);
-    // The exact mean of the map (FlipPool's mean is histogram-based, i.e. binned).
+    // The exact values (FlipPool's mean is histogram-based, i.e. binned).
     let values = err.to_vec();
-    let mean = values.iter().map(|&v| finite_or_zero(v)).sum::<f64>() / values.len().max(1) as f64;
     let vis = err.apply_color_lut(&nv_flip::magma_lut());
     let map = image::RgbImage::from_raw(w, h, vis.to_vec()).ok_or_else(|| Error::Image("FLIP: error map has the wrong size".into()))?;
-    Ok((mean, map))
+    Ok((values, map))
+}
+
+/// Mean of the finite values (non-finite count as 0); 0 for none.
+pub fn mean_finite(v: &[f32]) -> f64 {
+    v.iter().map(|&x| finite_or_zero(x)).sum::<f64>() / v.len().max(1) as f64
 }
 
 /// Luma of the sRGB-encoded values, in [0,1].
