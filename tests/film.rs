@@ -285,6 +285,8 @@ fn compare_regions_split_the_error() {
     assert!((f(1, "flip_share") + f(2, "flip_share") - 1.0).abs() < 1e-9, "two halves make the whole");
     assert!((f(1, "flip_mean") * 0.5 + f(2, "flip_mean") * 0.5 - total).abs() < 1e-9);
     assert!(f(1, "rmse") > 0.01);
+    let whole_rmse = v["rmse"].as_f64().unwrap();
+    assert!((f(1, "rmse").powi(2) * 0.5 + f(2, "rmse").powi(2) * 0.5 - whole_rmse.powi(2)).abs() < 1e-9, "halves' MSE make the whole's");
 
     for bad in ["x=0,0,0,4", "x=0,0,4", "x=0,0,4,99999", "=0,0,4,4", "x=a,0,4,4"] {
         let o = lodtrace(&["compare".as_ref(), pa.as_os_str(), pb.as_os_str(), "--region".as_ref(), bad.as_ref()]);

@@ -82,9 +82,11 @@ fn region_figures(r: &Region, flip: &[f32], a: &[glam::Vec3], b: &[glam::Vec3], 
             let i = (y * w + x) as usize;
             let f = flip[i];
             fsum += if f.is_finite() { f as f64 } else { 0.0 };
+            // As `metrics::rmse`: a non-finite channel counts as 0.
+            let fz = |v: f32| if v.is_finite() { v as f64 } else { 0.0 };
             for c in 0..3 {
-                let d = a[i][c] - b[i][c];
-                sq += if d.is_finite() { (d * d) as f64 } else { 0.0 };
+                let d = fz(a[i][c]) - fz(b[i][c]);
+                sq += d * d;
             }
             n += 1;
         }
