@@ -74,8 +74,8 @@ pub fn parse_region(s: &str, w: u32, h: u32) -> Result<Region> {
     Ok(Region { name, x0, y0, x1, y1 })
 }
 
-/// Per-region figures: (mean FLIP, share of the total FLIP sum, RMSE).
-fn region_figures(r: &Region, flip: &[f32], a: &[glam::Vec3], b: &[glam::Vec3], w: u32) -> (f64, f64, f64) {
+/// Per-region figures: (mean FLIP, share of `total`, the image's FLIP sum, RMSE).
+fn region_figures(r: &Region, flip: &[f32], total: f64, a: &[glam::Vec3], b: &[glam::Vec3], w: u32) -> (f64, f64, f64) {
     let (mut fsum, mut sq, mut n) = (0.0f64, 0.0f64, 0usize);
     for y in r.y0..r.y1 {
         for x in r.x0..r.x1 {
@@ -91,7 +91,6 @@ fn region_figures(r: &Region, flip: &[f32], a: &[glam::Vec3], b: &[glam::Vec3], 
             n += 1;
         }
     }
-    let total = metrics::mean_finite(flip) * flip.len() as f64;
     (fsum / n as f64, if total > 0.0 { fsum / total } else { 0.0 }, (sq / (3 * n) as f64).sqrt())
 }
 
@@ -122,7 +121,8 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
     if let Some(p) = &a.diff {
         io::write_rgb8_png(p, &flip_map)?;
     }
-    let per_region: Vec<(f64, f64, f64)> = regions.iter().map(|r| region_figures(r, &flip_values, &ia, &ib, w)).collect();
+    let per_region: Vec<(f64, f64, f64)> =
+        regions.iter().map(|r| region_figures(r, &flip_values, flip * flip_values.len() as f64, &ia, &ib, w)).collect();
 
     let mut failed = Vec::new();
     if let Some(m) = a.max_flip {
