@@ -92,6 +92,58 @@ fn bench_writes_table_json_images_and_plots() {
     image::open(d.join("bench-time.png")).unwrap();
 }
 
+/// `--region`: each row's error split by pixel rectangle. Two halves tiling the image: their
+/// FLIP shares add up to 1, their mean FLIPs average to the whole image's, their mean squared
+/// errors to the whole image's; the split is in the table and bench.json. A region needs the
+/// reference and must lie inside the image (exit 2 before anything renders).
+#[test]
+fn bench_regions_split_each_rows_error() {
+    let (code, out, err, _d, json) = small_bench(
+        "regions",
+        &[
+            "spheres",
+            "--methods",
+            "whitted:bvh,distributed:bvh:spp=4:vt=0",
+            "--reference",
+            "distributed:bvh:spp=16:vt=0",
+            "--region",
+            "top=0,0,48,18",
+            "--region",
+            "bottom=0,18,48,36",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("Error by region"), "{out}");
+    assert!(out.contains("top 0,0,48,18"), "{out}");
+    let v = json.unwrap();
+    for r in v["rows"].as_array().unwrap() {
+        let g = r["regions"].as_array().unwrap();
+        assert_eq!(g.len(), 2, "{r}");
+        assert_eq!(g[0]["name"], "top");
+        assert_eq!(g[1]["rect"], serde_json::json!([0, 18, 48, 36]));
+        let n = |i: usize, k: &str| g[i][k].as_f64().unwrap();
+        let flip = r["flip"].as_f64().unwrap();
+        let rmse = r["rmse"].as_f64().unwrap();
+        assert!(flip > 0.0, "{r}");
+        assert!((n(0, "flip_share") + n(1, "flip_share") - 1.0).abs() < 1e-6, "{r}");
+        assert!(((n(0, "flip_mean") + n(1, "flip_mean")) / 2.0 - flip).abs() < 1e-6, "{r}");
+        let ms = (n(0, "rmse").powi(2) + n(1, "rmse").powi(2)) / 2.0;
+        assert!((ms - rmse * rmse).abs() < 1e-6 * rmse * rmse + 1e-12, "{ms} vs {}", rmse * rmse);
+    }
+    for (name, extra) in [
+        ("regions-noref", &["--region", "a=0,0,10,10"][..]),
+        ("regions-out", &["--reference", "distributed:bvh:spp=4", "--region", "a=0,0,49,10"]),
+        ("regions-empty", &["--reference", "distributed:bvh:spp=4", "--region", "a=5,0,5,10"]),
+    ] {
+        let mut args = vec!["spheres", "--methods", "whitted:bvh"];
+        args.extend_from_slice(extra);
+        let (code, _, err, d, json) = small_bench(name, &args);
+        assert_eq!(code, 2, "{extra:?}: {err}");
+        one_error_line(&err);
+        assert!(json.is_none() && !d.join("spheres-whitted_bvh.png").exists(), "{extra:?} rendered");
+    }
+}
+
 /// `--sweep`: distributed at 1, 2, 4, … spp until it is slower and better than every method;
 /// each method gets its equal-time row; the sweep's error falls with spp; the plot exists.
 #[test]

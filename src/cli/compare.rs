@@ -74,8 +74,9 @@ pub fn parse_region(s: &str, w: u32, h: u32) -> Result<Region> {
     Ok(Region { name, x0, y0, x1, y1 })
 }
 
-/// Per-region figures: (mean FLIP, share of `total`, the image's FLIP sum, RMSE).
-fn region_figures(r: &Region, flip: &[f32], total: f64, a: &[glam::Vec3], b: &[glam::Vec3], w: u32) -> (f64, f64, f64) {
+/// Per-region figures: (mean FLIP, share of `total` — the image's FLIP sum —, RMSE), from the
+/// whole image's per-pixel FLIP values `flip` and the two images `a` (reference) and `b`.
+pub fn region_figures(r: &Region, flip: &[f32], total: f64, a: &[glam::Vec3], b: &[glam::Vec3], w: u32) -> (f64, f64, f64) {
     let (mut fsum, mut sq, mut n) = (0.0f64, 0.0f64, 0usize);
     for y in r.y0..r.y1 {
         for x in r.x0..r.x1 {

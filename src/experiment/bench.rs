@@ -23,6 +23,7 @@
 use super::run;
 use crate::baseline::accel::AccelKind;
 use crate::baseline::render::RenderOpts;
+use crate::cli::compare::{parse_region, region_figures, Region};
 use crate::cli::Method;
 use crate::error::{Error, Result};
 use crate::film::Film;
@@ -65,6 +66,11 @@ pub struct BenchArgs {
     /// Largest spp of the sweep.
     #[arg(long, default_value_t = 256)]
     pub sweep_max_spp: u32,
+    /// Split each row's error by image region, `NAME=X0,Y0,X1,Y1` (pixels, half-open, rows
+    /// from the top), repeatable, as `lodtrace compare --region`: mean FLIP, share of the
+    /// image's FLIP error, RMSE per region. Needs `--reference`.
+    #[arg(long = "region", value_name = "NAME=X0,Y0,X1,Y1")]
+    pub regions: Vec<String>,
     #[arg(long)]
     pub quiet: bool,
 }
@@ -233,6 +239,9 @@ pub struct BenchRow {
     pub rmse: Option<f64>,
     pub psnr: Option<f64>,
     pub flip: Option<f64>,
+    /// `--region` split of the error against the reference.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub regions: Vec<RegionRow>,
     pub image: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub lod_vs_full: Option<LodComparison>,
@@ -242,6 +251,19 @@ pub struct BenchRow {
     /// True for the rows the sweep rendered.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub sweep: bool,
+}
+
+/// One `--region` of a row: where in the image its error sits.
+#[derive(Serialize, Debug, Clone)]
+pub struct RegionRow {
+    pub name: String,
+    /// Half-open pixel rectangle `[x0, y0, x1, y1]`.
+    pub rect: [u32; 4],
+    pub flip_mean: f64,
+    /// The region's part of the image's total FLIP error (the regions' shares add up to 1
+    /// when they tile the image).
+    pub flip_share: f64,
+    pub rmse: f64,
 }
 
 /// A method against the stochastic sweep at equal time and at equal error (Wand & Straßer
@@ -448,8 +470,9 @@ pub fn run_spec(
     Ok((r.out.film, stats, r.lod.map(|l| l.maps)))
 }
 
-/// Errors of `film` against `reference`: (RMSE, PSNR dB, mean FLIP) and the FLIP error map.
-pub fn errors(film: &Film, reference: &Film) -> Result<(f64, f64, f64, image::RgbImage)> {
+/// Errors of `film` against `reference`: (RMSE, PSNR dB, mean FLIP), the per-pixel FLIP values
+/// and the FLIP error map.
+pub fn errors(film: &Film, reference: &Film) -> Result<(f64, f64, f64, Vec<f32>, image::RgbImage)> {
     use crate::film::metrics;
     let (w, h) = (film.width, film.height);
     if (w, h) != (reference.width, reference.height) {
@@ -457,8 +480,8 @@ pub fn errors(film: &Film, reference: &Film) -> Result<(f64, f64, f64, image::Rg
     }
     let rmse = metrics::rmse(&reference.color, &film.color, w, h);
     let psnr = metrics::psnr(&reference.color, &film.color, w, h);
-    let (flip, map) = metrics::flip_mean(&reference.color, &film.color, w, h)?;
-    Ok((rmse, psnr, flip, map))
+    let (values, map) = metrics::flip_map(&reference.color, &film.color, w, h)?;
+    Ok((rmse, psnr, metrics::mean_finite(&values), values, map))
 }
 
 pub fn run(a: &BenchArgs) -> Result<()> {
@@ -475,6 +498,10 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
         r.seed = REFERENCE_SEED;
     }
     let sweep = a.sweep.as_deref().map(MethodSpec::parse).transpose()?;
+    let regions = a.regions.iter().map(|r| parse_region(r, a.width, a.height)).collect::<Result<Vec<_>>>()?;
+    if !regions.is_empty() && reference.is_none() {
+        return Err(Error::Usage("--region splits the error against the reference: it needs --reference".into()));
+    }
     if let Some(sw) = &sweep {
         if reference.is_none() {
             return Err(Error::Usage("--sweep compares errors: it needs --reference".into()));
@@ -596,7 +623,7 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
                 }
             }
             let t0 = *first_time.get_or_insert(stats.render_seconds);
-            let mut row = finish_row(scene, spec, &film, stats, ref_film.as_ref(), a.out.as_deref(), a.quiet)?;
+            let mut row = finish_row(scene, spec, &film, stats, ref_film.as_ref(), &regions, a.out.as_deref(), a.quiet)?;
             row.speedup_vs_first = t0 / row.stats.render_seconds.max(1e-12);
             row.lod_vs_full = lod_vs_full;
             rows.push(row);
@@ -618,7 +645,7 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
                 spec.first_pass_spp = spec.first_pass_spp.min(spp);
                 spec.text = format!("{}:spp={spp}", sw.text);
                 let (film, stats, _) = run_spec(scene, &spec, a.width, a.height, a.threads, a.repeat, a.quiet)?;
-                let mut row = finish_row(scene, &spec, &film, stats, Some(rf), a.out.as_deref(), a.quiet)?;
+                let mut row = finish_row(scene, &spec, &film, stats, Some(rf), &regions, a.out.as_deref(), a.quiet)?;
                 row.speedup_vs_first = t0 / row.stats.render_seconds.max(1e-12);
                 row.sweep = true;
                 let (t, f) = (row.stats.render_seconds, row.flip.unwrap_or(0.0));
@@ -657,12 +684,25 @@ fn finish_row(
     film: &Film,
     stats: run::Stats,
     reference: Option<&Film>,
+    regions: &[Region],
     out: Option<&Path>,
     quiet: bool,
 ) -> Result<BenchRow> {
+    let mut region_rows = Vec::new();
     let (rmse, psnr, flip) = match reference {
         Some(r) => {
-            let (x, y, z, map) = errors(film, r)?;
+            let (x, y, z, values, map) = errors(film, r)?;
+            let total = z * values.len() as f64;
+            for g in regions {
+                let (f, share, e) = region_figures(g, &values, total, &r.color, &film.color, film.width);
+                region_rows.push(RegionRow {
+                    name: g.name.clone(),
+                    rect: [g.x0, g.y0, g.x1, g.y1],
+                    flip_mean: f,
+                    flip_share: share,
+                    rmse: e,
+                });
+            }
             if let Some(out) = out {
                 crate::film::io::write_rgb8_png(&out.join(format!("{}-{}-flip.png", scene.name, spec.slug())), &map)?;
             }
@@ -690,6 +730,7 @@ fn finish_row(
         rmse,
         psnr,
         flip,
+        regions: region_rows,
         image,
         lod_vs_full: None,
         equal_time: None,
@@ -794,6 +835,25 @@ pub fn table_string(report: &BenchReport) -> String {
             r.stats.counters.get("triangle_tests").copied().unwrap_or(0),
             r.stats.counters.get("node_tests").copied().unwrap_or(0),
         ));
+    }
+    if let Some(first) = report.rows.iter().find(|r| !r.regions.is_empty()) {
+        s.push_str("\nError by region (mean FLIP against the reference; in brackets the region's share of the image's FLIP error):\n\n");
+        s.push_str("| scene | method | render s | FLIP (whole) |");
+        let mut rule = String::from("|---|---|---:|---:|");
+        for g in &first.regions {
+            s.push_str(&format!(" {} {},{},{},{} |", g.name, g.rect[0], g.rect[1], g.rect[2], g.rect[3]));
+            rule.push_str("---:|");
+        }
+        s.push('\n');
+        s.push_str(&rule);
+        s.push('\n');
+        for r in report.rows.iter().filter(|r| !r.regions.is_empty()) {
+            s.push_str(&format!("| {} | {} | {:.3} | {:.4} |", r.scene, r.spec, r.stats.render_seconds, r.flip.unwrap_or(0.0)));
+            for g in &r.regions {
+                s.push_str(&format!(" {:.4} ({:.0} %) |", g.flip_mean, 100.0 * g.flip_share));
+            }
+            s.push('\n');
+        }
     }
     let eq: Vec<&BenchRow> = report.rows.iter().filter(|r| r.equal_time.is_some()).collect();
     if !eq.is_empty() {

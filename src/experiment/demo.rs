@@ -26,6 +26,20 @@ struct Job {
     reference: Option<String>,
     /// Stochastic spec swept over spp for the equal-time comparison (`bench --sweep`).
     sweep: Option<String>,
+    /// `bench --region` rectangles: where in the image the error sits.
+    regions: Vec<String>,
+}
+
+/// `complex`'s parts as `--region` rectangles, measured at 640×480 and scaled to `w`×`h`:
+/// the plant rows (far foliage, the paper's §7 problem case), the animals, the open
+/// checkerboard (prefiltered texture detail), the front glass bunny (refraction).
+fn complex_regions(w: u32, h: u32) -> Vec<String> {
+    let sx = |x: u32| x * w / 640;
+    let sy = |y: u32| y * h / 480;
+    [("plants", 0, 128, 640, 250), ("animals", 0, 250, 640, 370), ("board", 0, 370, 640, 480), ("bunny", 40, 230, 210, 370)]
+        .iter()
+        .map(|&(n, x0, y0, x1, y1)| format!("{n}={},{},{},{}", sx(x0), sy(y0), sx(x1), sy(y1)))
+        .collect()
 }
 
 fn jobs(quick: bool) -> Vec<Job> {
@@ -58,13 +72,13 @@ fn jobs(quick: bool) -> Vec<Job> {
     let lod = lod.join(",");
     let (lw, lh) = if quick { (256, 256) } else { (512, 512) };
     vec![
-        Job { scene: "spheres", width: swd, height: sh, methods: methods.clone(), reference: r(sref), sweep: sw.clone() },
-        Job { scene: "complex", width: cw, height: ch, methods, reference: r(cref), sweep: sw.clone() },
+        Job { scene: "spheres", width: swd, height: sh, methods: methods.clone(), reference: r(sref), sweep: sw.clone(), regions: vec![] },
+        Job { scene: "complex", width: cw, height: ch, methods, reference: r(cref), sweep: sw.clone(), regions: complex_regions(cw, ch) },
         // Fig. 8: soft shadows, depth of field, blurry reflections at three roughnesses.
-        Job { scene: "effects", width: swd, height: sh, methods: fx, reference: r(sref), sweep: sw },
-        Job { scene: "chessboard", width: lw, height: lh, methods: lod_cb, reference: None, sweep: None },
-        Job { scene: "cabinet", width: lw, height: lh, methods: lod.clone(), reference: None, sweep: None },
-        Job { scene: "reflector", width: lw, height: lh, methods: lod, reference: None, sweep: None },
+        Job { scene: "effects", width: swd, height: sh, methods: fx, reference: r(sref), sweep: sw, regions: vec![] },
+        Job { scene: "chessboard", width: lw, height: lh, methods: lod_cb, reference: None, sweep: None, regions: vec![] },
+        Job { scene: "cabinet", width: lw, height: lh, methods: lod.clone(), reference: None, sweep: None, regions: vec![] },
+        Job { scene: "reflector", width: lw, height: lh, methods: lod, reference: None, sweep: None, regions: vec![] },
     ]
 }
 
@@ -97,6 +111,7 @@ pub fn run(a: &DemoArgs) -> Result<()> {
             quiet: false,
             sweep: job.sweep.clone(),
             sweep_max_spp: if a.quick { 64 } else { 128 },
+            regions: job.regions.clone(),
         };
         let report = bench::bench(&args)?;
         bench::print_table(&report);
@@ -222,6 +237,28 @@ fn index_html(sections: &[(Job, BenchReport)]) -> String {
                     row.flip.map(|v| format!("{v:.4}")).unwrap_or("-".into())
                 );
             }
+        }
+        if let Some(first) = r.rows.iter().find(|row| !row.regions.is_empty()) {
+            h.push_str("<h3>Where the error sits</h3><p>Mean FLIP against the reference inside each pixel rectangle (x0,y0,x1,y1), from the whole image's FLIP map; in brackets the region's share of the image's FLIP error.</p><table><tr><th>method</th><th>spec</th><th>render s</th><th>whole</th>");
+            for g in &first.regions {
+                let _ = write!(h, "<th>{} {},{},{},{}</th>", esc(&g.name), g.rect[0], g.rect[1], g.rect[2], g.rect[3]);
+            }
+            h.push_str("</tr>");
+            for row in r.rows.iter().filter(|row| !row.regions.is_empty()) {
+                let _ = write!(
+                    h,
+                    "<tr><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.4}</td>",
+                    esc(&row.stats.method),
+                    esc(&row.spec),
+                    row.stats.render_seconds,
+                    row.flip.unwrap_or(0.0)
+                );
+                for g in &row.regions {
+                    let _ = write!(h, "<td>{:.4} ({:.0} %)</td>", g.flip_mean, 100.0 * g.flip_share);
+                }
+                h.push_str("</tr>");
+            }
+            h.push_str("</table>");
         }
         let eq: Vec<_> = r.rows.iter().filter_map(|row| row.equal_time.as_ref().map(|e| (row, e))).collect();
         if let Some((_, e0)) = eq.first() {
