@@ -623,7 +623,7 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
                 }
             }
             let t0 = *first_time.get_or_insert(stats.render_seconds);
-            let mut row = finish_row(scene, spec, &film, stats, ref_film.as_ref(), &regions, a.out.as_deref(), a.quiet)?;
+            let mut row = finish_row(scene, spec, &film, stats, ref_film.as_ref().map(|f| (f, &regions[..])), a.out.as_deref(), a.quiet)?;
             row.speedup_vs_first = t0 / row.stats.render_seconds.max(1e-12);
             row.lod_vs_full = lod_vs_full;
             rows.push(row);
@@ -645,7 +645,7 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
                 spec.first_pass_spp = spec.first_pass_spp.min(spp);
                 spec.text = format!("{}:spp={spp}", sw.text);
                 let (film, stats, _) = run_spec(scene, &spec, a.width, a.height, a.threads, a.repeat, a.quiet)?;
-                let mut row = finish_row(scene, &spec, &film, stats, Some(rf), &regions, a.out.as_deref(), a.quiet)?;
+                let mut row = finish_row(scene, &spec, &film, stats, Some((rf, &regions[..])), a.out.as_deref(), a.quiet)?;
                 row.speedup_vs_first = t0 / row.stats.render_seconds.max(1e-12);
                 row.sweep = true;
                 let (t, f) = (row.stats.render_seconds, row.flip.unwrap_or(0.0));
@@ -683,14 +683,13 @@ fn finish_row(
     spec: &MethodSpec,
     film: &Film,
     stats: run::Stats,
-    reference: Option<&Film>,
-    regions: &[Region],
+    reference: Option<(&Film, &[Region])>,
     out: Option<&Path>,
     quiet: bool,
 ) -> Result<BenchRow> {
     let mut region_rows = Vec::new();
     let (rmse, psnr, flip) = match reference {
-        Some(r) => {
+        Some((r, regions)) => {
             let (x, y, z, values, map) = errors(film, r)?;
             let total = z * values.len() as f64;
             for g in regions {
