@@ -94,7 +94,8 @@ fn bench_writes_table_json_images_and_plots() {
 
 /// `--region`: each row's error split by pixel rectangle. Two halves tiling the image: their
 /// FLIP shares add up to 1, their mean FLIPs average to the whole image's, their mean squared
-/// errors to the whole image's; the split is in the table and bench.json. A region needs the
+/// errors to the whole image's; the split is in the table and bench.json, and with `--sweep`
+/// each method meets the sweep region by region. A region needs the
 /// reference and must lie inside the image (exit 2 before anything renders).
 #[test]
 fn bench_regions_split_each_rows_error() {
@@ -110,15 +111,29 @@ fn bench_regions_split_each_rows_error() {
             "top=0,0,48,18",
             "--region",
             "bottom=0,18,48,36",
+            "--sweep",
+            "distributed:bvh:vt=0",
+            "--sweep-max-spp",
+            "8",
         ],
     );
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("Error by region"), "{out}");
+    assert!(out.contains("Equal time by region"), "{out}");
     assert!(out.contains("top 0,0,48,18"), "{out}");
     let v = json.unwrap();
     for r in v["rows"].as_array().unwrap() {
         let g = r["regions"].as_array().unwrap();
         assert_eq!(g.len(), 2, "{r}");
+        // The methods' rows (not the sweep's) are compared with the sweep region by region.
+        if r["sweep"] != true {
+            let e = r["equal_time"]["regions"].as_array().unwrap();
+            assert_eq!(e.len(), 2, "{r}");
+            for (eg, gg) in e.iter().zip(g) {
+                assert_eq!(eg["name"], gg["name"]);
+                assert_eq!(eg["flip"], gg["flip_mean"]);
+            }
+        }
         assert_eq!(g[0]["name"], "top");
         assert_eq!(g[1]["rect"], serde_json::json!([0, 18, 48, 36]));
         let n = |i: usize, k: &str| g[i][k].as_f64().unwrap();

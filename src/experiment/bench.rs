@@ -187,7 +187,7 @@ impl MethodSpec {
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen, tri, term, pw, spread; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen, tri, term, pw, spread, groups, agg, tight, mask; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact)"
                         )))
                     }
                 }
@@ -282,6 +282,22 @@ pub struct EqualTime {
     /// The sweep's time ÷ this row's time at equal error (> 1: this method is faster).
     pub time_ratio_at_equal_error: Option<f64>,
     pub sweep_max_seconds: f64,
+    /// The same comparison inside each `--region`: the sweep's curve of that region's mean
+    /// FLIP against this row's. A method can win one part of the image at equal time (the
+    /// prefiltered floor) and lose another (the foliage).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub regions: Vec<RegionEqualTime>,
+}
+
+/// [`EqualTime`] inside one `--region`.
+#[derive(Serialize, Debug, Clone)]
+pub struct RegionEqualTime {
+    pub name: String,
+    /// This row's mean FLIP in the region.
+    pub flip: f64,
+    pub sweep_flip_at_equal_time: Option<f64>,
+    pub sweep_seconds_to_match: Option<f64>,
+    pub time_ratio_at_equal_error: Option<f64>,
 }
 
 /// Interpolates the sweep curve (`(seconds, spp, flip)`, sorted by spp) for a method at
@@ -328,6 +344,7 @@ pub fn equal_time(sweep: &[(f64, f64, f64)], t: f64, flip: f64, name: &str) -> E
         sweep_spp_at_equal_time: at_t.map(|x| x.1),
         sweep_seconds_to_match: to_match,
         time_ratio_at_equal_error: to_match.map(|m| m / t.max(1e-12)),
+        regions: Vec::new(),
         sweep_max_seconds: sweep.iter().map(|x| x.0).fold(0.0, f64::max),
     }
 }
@@ -638,6 +655,7 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
             let t_slowest = others.iter().map(|o| o.0).fold(0.0, f64::max);
             let f_best = others.iter().map(|o| o.1).fold(f64::INFINITY, f64::min);
             let mut curve = Vec::new();
+            let mut region_curves: Vec<Vec<(f64, f64, f64)>> = Vec::new();
             let mut spp = 1u32;
             loop {
                 let mut spec = sw.clone();
@@ -650,6 +668,10 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
                 row.sweep = true;
                 let (t, f) = (row.stats.render_seconds, row.flip.unwrap_or(0.0));
                 curve.push((t, spp as f64, f));
+                region_curves.resize(row.regions.len(), Vec::new());
+                for (c, g) in region_curves.iter_mut().zip(&row.regions) {
+                    c.push((t, spp as f64, g.flip_mean));
+                }
                 rows.push(row);
                 if (t >= t_slowest && f <= f_best) || spp.saturating_mul(2) > a.sweep_max_spp {
                     break;
@@ -658,7 +680,18 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
             }
             for r in &mut rows[first..first + specs.len()] {
                 if let Some(f) = r.flip {
-                    r.equal_time = Some(equal_time(&curve, r.stats.render_seconds, f, &sw.text));
+                    let mut e = equal_time(&curve, r.stats.render_seconds, f, &sw.text);
+                    for (g, c) in r.regions.iter().zip(&region_curves) {
+                        let ge = equal_time(c, r.stats.render_seconds, g.flip_mean, &sw.text);
+                        e.regions.push(RegionEqualTime {
+                            name: g.name.clone(),
+                            flip: g.flip_mean,
+                            sweep_flip_at_equal_time: ge.sweep_flip_at_equal_time,
+                            sweep_seconds_to_match: ge.sweep_seconds_to_match,
+                            time_ratio_at_equal_error: ge.time_ratio_at_equal_error,
+                        });
+                    }
+                    r.equal_time = Some(e);
                 }
             }
         }
@@ -885,6 +918,31 @@ pub fn table_string(report: &BenchReport) -> String {
                 m,
                 q
             ));
+        }
+    }
+    let eqr: Vec<&BenchRow> = report.rows.iter().filter(|r| r.equal_time.as_ref().is_some_and(|e| !e.regions.is_empty())).collect();
+    if let Some(first) = eqr.first() {
+        s.push_str("\nEqual time by region (the row's mean FLIP in the region / the sweep's there at the row's time; in brackets the time ratio at equal error, > 1: the method is faster):\n\n");
+        s.push_str("| scene | method | render s |");
+        let mut rule = String::from("|---|---|---:|");
+        for g in &first.equal_time.as_ref().expect("filtered").regions {
+            s.push_str(&format!(" {} |", g.name));
+            rule.push_str("---:|");
+        }
+        s.push('\n');
+        s.push_str(&rule);
+        s.push('\n');
+        for r in eqr {
+            let e = r.equal_time.as_ref().expect("filtered");
+            s.push_str(&format!("| {} | {} | {:.3} |", r.scene, r.spec, r.stats.render_seconds));
+            for g in &e.regions {
+                let at = g.sweep_flip_at_equal_time.map_or("-".into(), |f| format!("{f:.4}"));
+                let q = g
+                    .time_ratio_at_equal_error
+                    .map_or_else(|| format!("> {:.2}x", e.sweep_max_seconds / r.stats.render_seconds.max(1e-12)), |q| format!("{q:.2}x"));
+                s.push_str(&format!(" {:.4} / {at} ({q}) |", g.flip));
+            }
+            s.push('\n');
         }
     }
     let lod: Vec<&BenchRow> = report.rows.iter().filter(|r| r.lod_vs_full.is_some()).collect();
