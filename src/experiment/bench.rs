@@ -19,6 +19,12 @@
 //! render on the other exact back-end (Embree ↔ bvh), which in chaotic glass scenes already
 //! differs by tens of per cent in a few pixels.
 //! Examples: `whitted:embree`, `whitted:bvh:threads=1`, `distributed:embree:spp=64`.
+//!
+//! `--region NAME=X0,Y0,X1,Y1` (repeatable, with `--reference`) splits every row's error by
+//! pixel rectangle as `lodtrace compare --region` does ([`RegionRow`]); with `--sweep` each
+//! method also meets the sweep's curve of each region's error ([`RegionEqualTime`]), so a
+//! method that wins on one part of the image (prefiltered texture) and loses on another
+//! (foliage) shows both.
 
 use super::run;
 use crate::baseline::accel::AccelKind;
