@@ -840,6 +840,14 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
     Ok(())
 }
 
+/// A Markdown header and rule: `fixed` columns (scene and method left-aligned, the rest
+/// right-aligned) followed by one right-aligned column per entry of `extra` (the regions).
+fn table_header(fixed: &[&str], extra: &[String]) -> String {
+    let names: Vec<&str> = fixed.iter().copied().chain(extra.iter().map(String::as_str)).collect();
+    let rule: Vec<&str> = (0..names.len()).map(|i| if i < 2 { "---" } else { "---:" }).collect();
+    format!("| {} |\n|{}|\n", names.join(" | "), rule.join("|"))
+}
+
 /// The table as Markdown (printed to stdout and written to bench.md).
 pub fn table_string(report: &BenchReport) -> String {
     let mut s = String::new();
@@ -876,15 +884,9 @@ pub fn table_string(report: &BenchReport) -> String {
     }
     if let Some(first) = report.rows.iter().find(|r| !r.regions.is_empty()) {
         s.push_str("\nError by region (mean FLIP against the reference; in brackets the region's share of the image's FLIP error):\n\n");
-        s.push_str("| scene | method | render s | FLIP (whole) |");
-        let mut rule = String::from("|---|---|---:|---:|");
-        for g in &first.regions {
-            s.push_str(&format!(" {} {},{},{},{} |", g.name, g.rect[0], g.rect[1], g.rect[2], g.rect[3]));
-            rule.push_str("---:|");
-        }
-        s.push('\n');
-        s.push_str(&rule);
-        s.push('\n');
+        let cols: Vec<String> =
+            first.regions.iter().map(|g| format!("{} {},{},{},{}", g.name, g.rect[0], g.rect[1], g.rect[2], g.rect[3])).collect();
+        s.push_str(&table_header(&["scene", "method", "render s", "FLIP (whole)"], &cols));
         for r in report.rows.iter().filter(|r| !r.regions.is_empty()) {
             s.push_str(&format!("| {} | {} | {:.3} | {:.4} |", r.scene, r.spec, r.stats.render_seconds, r.flip.unwrap_or(0.0)));
             for g in &r.regions {
@@ -929,15 +931,8 @@ pub fn table_string(report: &BenchReport) -> String {
     let eqr: Vec<&BenchRow> = report.rows.iter().filter(|r| r.equal_time.as_ref().is_some_and(|e| !e.regions.is_empty())).collect();
     if let Some(first) = eqr.first() {
         s.push_str("\nEqual time by region (the row's mean FLIP in the region / the sweep's there at the row's time; in brackets the time ratio at equal error, > 1: the method is faster):\n\n");
-        s.push_str("| scene | method | render s |");
-        let mut rule = String::from("|---|---|---:|");
-        for g in &first.equal_time.as_ref().expect("filtered").regions {
-            s.push_str(&format!(" {} |", g.name));
-            rule.push_str("---:|");
-        }
-        s.push('\n');
-        s.push_str(&rule);
-        s.push('\n');
+        let cols: Vec<String> = first.equal_time.as_ref().expect("filtered").regions.iter().map(|g| g.name.clone()).collect();
+        s.push_str(&table_header(&["scene", "method", "render s"], &cols));
         for r in eqr {
             let e = r.equal_time.as_ref().expect("filtered");
             s.push_str(&format!("| {} | {} | {:.3} |", r.scene, r.spec, r.stats.render_seconds));
