@@ -120,6 +120,7 @@ fn bench_regions_split_each_rows_error() {
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("Error by region"), "{out}");
     assert!(out.contains("Equal time by region"), "{out}");
+    assert!(out.contains("Kind of error by region"), "{out}");
     assert!(out.contains("top 0,0,48,18"), "{out}");
     let v = json.unwrap();
     for r in v["rows"].as_array().unwrap() {
@@ -144,6 +145,11 @@ fn bench_regions_split_each_rows_error() {
         assert!(((n(0, "flip_mean") + n(1, "flip_mean")) / 2.0 - flip).abs() < 1e-6, "{r}");
         let ms = (n(0, "rmse").powi(2) + n(1, "rmse").powi(2)) / 2.0;
         assert!((ms - rmse * rmse).abs() < 1e-6 * rmse * rmse + 1e-12, "{ms} vs {}", rmse * rmse);
+        // The kind of error: a share in [0, 1] and a finite bias.
+        for i in 0..2 {
+            assert!((0.0..=1.0).contains(&n(i, "smooth_share")), "{r}");
+            assert!(n(i, "luma_bias").is_finite() && n(i, "luma_bias") > -1.0, "{r}");
+        }
     }
     for (name, extra) in [
         ("regions-noref", &["--region", "a=0,0,10,10"][..]),

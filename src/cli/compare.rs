@@ -74,25 +74,68 @@ pub fn parse_region(s: &str, w: u32, h: u32) -> Result<Region> {
     Ok(Region { name, x0, y0, x1, y1 })
 }
 
-/// Per-region figures: (mean FLIP, share of `total` — the image's FLIP sum —, RMSE), from the
-/// whole image's per-pixel FLIP values `flip` and the two images `a` (reference) and `b`.
-pub fn region_figures(r: &Region, flip: &[f32], total: f64, a: &[glam::Vec3], b: &[glam::Vec3], w: u32) -> (f64, f64, f64) {
+/// Side of the blocks [`region_figures`] splits a region's squared error over: error that
+/// survives averaging over 8×8 pixels is systematic (coverage, colour, shading), the rest is
+/// fine-scale (aliasing, noise).
+pub const SMOOTH_BLOCK: u32 = 8;
+
+/// Where a region's error sits and what kind it is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RegionFigures {
+    /// Mean of the whole image's per-pixel FLIP values over the region.
+    pub flip_mean: f64,
+    /// The region's part of the image's FLIP sum.
+    pub flip_share: f64,
+    pub rmse: f64,
+    /// Relative luminance bias, mean Y(b) ÷ mean Y(a) − 1 (Rec. 709 weights on linear
+    /// values): above 0 the image under test is brighter than the reference there (for
+    /// foliage, typically too much coverage of a bright surface or too little of a dark one).
+    pub luma_bias: f64,
+    /// The part of the region's squared error at scales of [`SMOOTH_BLOCK`] pixels or more:
+    /// Σ over blocks of n·(block mean of the difference)² ÷ Σ difference², per channel
+    /// summed. It is exact: the remainder is the within-block variance of the difference.
+    /// Near 0 the error is aliasing or noise; near 1 it is bias that no amount of samples
+    /// would remove.
+    pub smooth_share: f64,
+}
+
+/// Per-region figures ([`RegionFigures`]) from the whole image's per-pixel FLIP values
+/// `flip` (their sum `total`) and the two images `a` (reference) and `b`.
+pub fn region_figures(r: &Region, flip: &[f32], total: f64, a: &[glam::Vec3], b: &[glam::Vec3], w: u32) -> RegionFigures {
+    // As `metrics::rmse`: a non-finite channel counts as 0.
+    let fz = |v: f32| if v.is_finite() { v as f64 } else { 0.0 };
+    let luma = |v: glam::Vec3| 0.2126 * fz(v.x) + 0.7152 * fz(v.y) + 0.0722 * fz(v.z);
     let (mut fsum, mut sq, mut n) = (0.0f64, 0.0f64, 0usize);
-    for y in r.y0..r.y1 {
-        for x in r.x0..r.x1 {
-            let i = (y * w + x) as usize;
-            let f = flip[i];
-            fsum += if f.is_finite() { f as f64 } else { 0.0 };
-            // As `metrics::rmse`: a non-finite channel counts as 0.
-            let fz = |v: f32| if v.is_finite() { v as f64 } else { 0.0 };
-            for c in 0..3 {
-                let d = fz(a[i][c]) - fz(b[i][c]);
-                sq += d * d;
+    let (mut ya, mut yb, mut smooth) = (0.0f64, 0.0f64, 0.0f64);
+    for by in (r.y0..r.y1).step_by(SMOOTH_BLOCK as usize) {
+        for bx in (r.x0..r.x1).step_by(SMOOTH_BLOCK as usize) {
+            let (mut dsum, mut nb) = ([0.0f64; 3], 0usize);
+            for y in by..(by + SMOOTH_BLOCK).min(r.y1) {
+                for x in bx..(bx + SMOOTH_BLOCK).min(r.x1) {
+                    let i = (y * w + x) as usize;
+                    let f = flip[i];
+                    fsum += if f.is_finite() { f as f64 } else { 0.0 };
+                    for (c, ds) in dsum.iter_mut().enumerate() {
+                        let d = fz(b[i][c]) - fz(a[i][c]);
+                        sq += d * d;
+                        *ds += d;
+                    }
+                    ya += luma(a[i]);
+                    yb += luma(b[i]);
+                    n += 1;
+                    nb += 1;
+                }
             }
-            n += 1;
+            smooth += dsum.iter().map(|d| d * d).sum::<f64>() / nb as f64;
         }
     }
-    (fsum / n as f64, if total > 0.0 { fsum / total } else { 0.0 }, (sq / (3 * n) as f64).sqrt())
+    RegionFigures {
+        flip_mean: fsum / n as f64,
+        flip_share: if total > 0.0 { fsum / total } else { 0.0 },
+        rmse: (sq / (3 * n) as f64).sqrt(),
+        luma_bias: if ya > 0.0 { yb / ya - 1.0 } else { 0.0 },
+        smooth_share: if sq > 0.0 { (smooth / sq).min(1.0) } else { 0.0 },
+    }
 }
 
 pub fn run(a: &CompareArgs) -> Result<i32> {
@@ -122,7 +165,7 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
     if let Some(p) = &a.diff {
         io::write_rgb8_png(p, &flip_map)?;
     }
-    let per_region: Vec<(f64, f64, f64)> =
+    let per_region: Vec<RegionFigures> =
         regions.iter().map(|r| region_figures(r, &flip_values, flip * flip_values.len() as f64, &ia, &ib, w)).collect();
 
     let mut failed = Vec::new();
@@ -147,9 +190,10 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
             "psnr_db": if psnr.is_finite() { Some(psnr) } else { None },
             "flip_mean": flip,
             "ssim": ssim,
-            "regions": regions.iter().zip(&per_region).map(|(r, &(f, share, e))| serde_json::json!({
+            "regions": regions.iter().zip(&per_region).map(|(r, g)| serde_json::json!({
                 "name": r.name, "x0": r.x0, "y0": r.y0, "x1": r.x1, "y1": r.y1,
-                "flip_mean": f, "flip_share": share, "rmse": e,
+                "flip_mean": g.flip_mean, "flip_share": g.flip_share, "rmse": g.rmse,
+                "luma_bias": g.luma_bias, "smooth_share": g.smooth_share,
             })).collect::<Vec<_>>(),
             "pass": failed.is_empty(),
             "failed": failed,
@@ -166,11 +210,23 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
         }
         if !regions.is_empty() {
             let nw = regions.iter().map(|r| r.name.len()).max().unwrap_or(0).max(6);
-            println!("  {:<nw$}  {:>19}  {:>6}  {:>9}  {:>11}  {:>9}", "region", "x0,y0,x1,y1", "area", "mean FLIP", "FLIP share", "RMSE");
-            for (r, &(f, share, e)) in regions.iter().zip(&per_region) {
+            println!(
+                "  {:<nw$}  {:>19}  {:>6}  {:>9}  {:>11}  {:>9}  {:>10}  {:>12}",
+                "region", "x0,y0,x1,y1", "area", "mean FLIP", "FLIP share", "RMSE", "luma bias", "smooth share"
+            );
+            for (r, g) in regions.iter().zip(&per_region) {
                 let area = ((r.x1 - r.x0) as f64 * (r.y1 - r.y0) as f64) / (w as f64 * h as f64);
                 let rect = format!("{},{},{},{}", r.x0, r.y0, r.x1, r.y1);
-                println!("  {:<nw$}  {rect:>19}  {:>5.1}%  {f:>9.6}  {:>10.1}%  {e:>9.6}", r.name, 100.0 * area, 100.0 * share);
+                println!(
+                    "  {:<nw$}  {rect:>19}  {:>5.1}%  {:>9.6}  {:>10.1}%  {:>9.6}  {:>+9.1}%  {:>11.1}%",
+                    r.name,
+                    100.0 * area,
+                    g.flip_mean,
+                    100.0 * g.flip_share,
+                    g.rmse,
+                    100.0 * g.luma_bias,
+                    100.0 * g.smooth_share
+                );
             }
         }
     }
@@ -178,4 +234,55 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
         eprintln!("lodtrace: compare: FAIL: {f}");
     }
     Ok(if failed.is_empty() { 0 } else { 1 })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    fn figures(b: impl Fn(u32, u32) -> Vec3, r: Region) -> RegionFigures {
+        let (w, h) = (21u32, 13u32);
+        let a = vec![Vec3::splat(0.5); (w * h) as usize];
+        let b: Vec<Vec3> = (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).map(|(x, y)| b(x, y)).collect();
+        let flip = vec![0.1f32; (w * h) as usize];
+        region_figures(&r, &flip, 0.1 * (w * h) as f64, &a, &b, w)
+    }
+
+    fn region(x0: u32, y0: u32, x1: u32, y1: u32) -> Region {
+        Region { name: "r".into(), x0, y0, x1, y1 }
+    }
+
+    #[test]
+    fn a_uniform_offset_is_all_smooth_error_and_shows_as_bias() {
+        // Blocks cut by the region's edges (21×13 is not a multiple of 8) still sum exactly.
+        let g = figures(|_, _| Vec3::splat(0.6), region(0, 0, 21, 13));
+        assert!((g.smooth_share - 1.0).abs() < 1e-9, "{g:?}");
+        assert!((g.luma_bias - 0.2).abs() < 1e-6, "{g:?}");
+        assert!((g.rmse - 0.1).abs() < 1e-6, "{g:?}");
+        assert!((g.flip_mean - 0.1).abs() < 1e-6 && (g.flip_share - 1.0).abs() < 1e-6, "{g:?}");
+    }
+
+    #[test]
+    fn pixel_scale_noise_is_fine_error_without_bias() {
+        // ±0.1 in a pixel checkerboard: every 8×8 block (even sides) averages to zero.
+        let g = figures(|x, y| Vec3::splat(if (x + y) % 2 == 0 { 0.6 } else { 0.4 }), region(1, 2, 17, 10));
+        assert!(g.smooth_share.abs() < 1e-9, "{g:?}");
+        assert!(g.luma_bias.abs() < 1e-6, "{g:?}");
+        assert!((g.rmse - 0.1).abs() < 1e-6, "{g:?}");
+    }
+
+    #[test]
+    fn smooth_share_splits_mixed_error_exactly() {
+        // Offset +0.1 plus ±0.1 checkerboard: a smooth part of 0.01 and a fine part of 0.01
+        // per pixel and channel, so half the squared error is smooth.
+        let g = figures(|x, y| Vec3::splat(if (x + y) % 2 == 0 { 0.7 } else { 0.5 }), region(0, 0, 16, 8));
+        assert!((g.smooth_share - 0.5).abs() < 1e-9, "{g:?}");
+        // A black reference region: no bias figure to divide by, reported as 0, not NaN.
+        let w = 4u32;
+        let a = vec![Vec3::ZERO; 16];
+        let b = vec![Vec3::ONE; 16];
+        let z = region_figures(&region(0, 0, 4, 4), &[0.0; 16], 0.0, &a, &b, w);
+        assert!(z.luma_bias == 0.0 && z.flip_share == 0.0 && z.smooth_share == 1.0, "{z:?}");
+    }
 }
