@@ -88,12 +88,13 @@ pub struct RegionFigures {
     pub flip_share: f64,
     pub rmse: f64,
     /// Relative luminance bias, mean Y(b) ÷ mean Y(a) − 1 (Rec. 709 weights on linear
-    /// values): above 0 the image under test is brighter than the reference there (for
+    /// display values, clamped to [0, 1] as FLIP sees them): above 0 the image under test is brighter than the reference there (for
     /// foliage, typically too much coverage of a bright surface or too little of a dark one).
     pub luma_bias: f64,
     /// The part of the region's squared error at scales of [`SMOOTH_BLOCK`] pixels or more:
     /// Σ over blocks of n·(block mean of the difference)² ÷ Σ difference², per channel
-    /// summed. It is exact: the remainder is the within-block variance of the difference.
+    /// summed, on display values (clamped to [0, 1]). It is exact: the remainder is the
+    /// within-block variance of the difference.
     /// Near 0 the error is aliasing or noise; near 1 it is bias that no amount of samples
     /// would remove.
     pub smooth_share: f64,
@@ -104,9 +105,12 @@ pub struct RegionFigures {
 pub fn region_figures(r: &Region, flip: &[f32], total: f64, a: &[glam::Vec3], b: &[glam::Vec3], w: u32) -> RegionFigures {
     // As `metrics::rmse`: a non-finite channel counts as 0.
     let fz = |v: f32| if v.is_finite() { v as f64 } else { 0.0 };
-    let luma = |v: glam::Vec3| 0.2126 * fz(v.x) + 0.7152 * fz(v.y) + 0.0722 * fz(v.z);
+    // The kind of error is judged on display values, as FLIP is: unclamped, the squared
+    // error of a film is dominated by a few highlights far above 1.
+    let fd = |v: f32| fz(v).clamp(0.0, 1.0);
+    let luma = |v: glam::Vec3| 0.2126 * fd(v.x) + 0.7152 * fd(v.y) + 0.0722 * fd(v.z);
     let (mut fsum, mut sq, mut n) = (0.0f64, 0.0f64, 0usize);
-    let (mut ya, mut yb, mut smooth) = (0.0f64, 0.0f64, 0.0f64);
+    let (mut ya, mut yb, mut smooth, mut sq_display) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
     for by in (r.y0..r.y1).step_by(SMOOTH_BLOCK as usize) {
         for bx in (r.x0..r.x1).step_by(SMOOTH_BLOCK as usize) {
             let (mut dsum, mut nb) = ([0.0f64; 3], 0usize);
@@ -118,7 +122,9 @@ pub fn region_figures(r: &Region, flip: &[f32], total: f64, a: &[glam::Vec3], b:
                     for (c, ds) in dsum.iter_mut().enumerate() {
                         let d = fz(b[i][c]) - fz(a[i][c]);
                         sq += d * d;
-                        *ds += d;
+                        let dd = fd(b[i][c]) - fd(a[i][c]);
+                        sq_display += dd * dd;
+                        *ds += dd;
                     }
                     ya += luma(a[i]);
                     yb += luma(b[i]);
@@ -134,7 +140,7 @@ pub fn region_figures(r: &Region, flip: &[f32], total: f64, a: &[glam::Vec3], b:
         flip_share: if total > 0.0 { fsum / total } else { 0.0 },
         rmse: (sq / (3 * n) as f64).sqrt(),
         luma_bias: if ya > 0.0 { yb / ya - 1.0 } else { 0.0 },
-        smooth_share: if sq > 0.0 { (smooth / sq).min(1.0) } else { 0.0 },
+        smooth_share: if sq_display > 0.0 { (smooth / sq_display).min(1.0) } else { 0.0 },
     }
 }
 
@@ -284,5 +290,9 @@ mod tests {
         let b = vec![Vec3::ONE; 16];
         let z = region_figures(&region(0, 0, 4, 4), &[0.0; 16], 0.0, &a, &b, w);
         assert!(z.luma_bias == 0.0 && z.flip_share == 0.0 && z.smooth_share == 1.0, "{z:?}");
+        // A highlight far above 1 counts as display white for bias, not as 9.5² of error.
+        let g = figures(|x, y| Vec3::splat(if (x, y) == (3, 3) { 10.0 } else { 0.5 }), region(0, 0, 8, 8));
+        assert!((g.luma_bias - 0.5 / 64.0 / 0.5).abs() < 1e-9, "{g:?}");
+        assert!((g.smooth_share - 1.0 / 64.0).abs() < 1e-9, "{g:?}");
     }
 }
