@@ -80,7 +80,7 @@ pub fn parse_region(s: &str, w: u32, h: u32) -> Result<Region> {
 pub const SMOOTH_BLOCK: u32 = 8;
 
 /// Where a region's error sits and what kind it is.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct RegionFigures {
     /// Mean of the whole image's per-pixel FLIP values over the region.
     pub flip_mean: f64,

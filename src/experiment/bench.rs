@@ -29,7 +29,7 @@
 use super::run;
 use crate::baseline::accel::AccelKind;
 use crate::baseline::render::RenderOpts;
-use crate::cli::compare::{parse_region, region_figures, Region};
+use crate::cli::compare::{parse_region, region_figures, Region, RegionFigures};
 use crate::cli::Method;
 use crate::error::{Error, Result};
 use crate::film::Film;
@@ -265,15 +265,11 @@ pub struct RegionRow {
     pub name: String,
     /// Half-open pixel rectangle `[x0, y0, x1, y1]`.
     pub rect: [u32; 4],
-    pub flip_mean: f64,
-    /// The region's part of the image's total FLIP error (the regions' shares add up to 1
-    /// when they tile the image).
-    pub flip_share: f64,
-    pub rmse: f64,
-    /// Mean luminance ÷ the reference's − 1 (see [`crate::cli::compare::RegionFigures`]).
-    pub luma_bias: f64,
-    /// The part of the squared error at scales of 8 pixels or more: bias, not aliasing.
-    pub smooth_share: f64,
+    /// Mean FLIP, its share of the image's FLIP error (the shares add up to 1 when the
+    /// regions tile the image), RMSE, luminance bias and smooth share, flattened into the
+    /// row's JSON.
+    #[serde(flatten)]
+    pub figures: RegionFigures,
 }
 
 /// A method against the stochastic sweep at equal time and at equal error (Wand & Straßer
@@ -680,7 +676,7 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
                 curve.push((t, spp as f64, f));
                 region_curves.resize(row.regions.len(), Vec::new());
                 for (c, g) in region_curves.iter_mut().zip(&row.regions) {
-                    c.push((t, spp as f64, g.flip_mean));
+                    c.push((t, spp as f64, g.figures.flip_mean));
                 }
                 rows.push(row);
                 if (t >= t_slowest && f <= f_best) || spp.saturating_mul(2) > a.sweep_max_spp {
@@ -692,10 +688,10 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
                 if let Some(f) = r.flip {
                     let mut e = equal_time(&curve, r.stats.render_seconds, f, &sw.text);
                     for (g, c) in r.regions.iter().zip(&region_curves) {
-                        let ge = equal_time(c, r.stats.render_seconds, g.flip_mean, &sw.text);
+                        let ge = equal_time(c, r.stats.render_seconds, g.figures.flip_mean, &sw.text);
                         e.regions.push(RegionEqualTime {
                             name: g.name.clone(),
-                            flip: g.flip_mean,
+                            flip: g.figures.flip_mean,
                             sweep_flip_at_equal_time: ge.sweep_flip_at_equal_time,
                             sweep_seconds_to_match: ge.sweep_seconds_to_match,
                             time_ratio_at_equal_error: ge.time_ratio_at_equal_error,
@@ -736,15 +732,10 @@ fn finish_row(
             let (x, y, z, values, map) = errors(film, r)?;
             let total = z * values.len() as f64;
             for g in regions {
-                let f = region_figures(g, &values, total, &r.color, &film.color, film.width);
                 region_rows.push(RegionRow {
                     name: g.name.clone(),
                     rect: [g.x0, g.y0, g.x1, g.y1],
-                    flip_mean: f.flip_mean,
-                    flip_share: f.flip_share,
-                    rmse: f.rmse,
-                    luma_bias: f.luma_bias,
-                    smooth_share: f.smooth_share,
+                    figures: region_figures(g, &values, total, &r.color, &film.color, film.width),
                 });
             }
             if let Some(out) = out {
@@ -896,7 +887,7 @@ pub fn table_string(report: &BenchReport) -> String {
         for r in report.rows.iter().filter(|r| !r.regions.is_empty()) {
             s.push_str(&format!("| {} | {} | {:.3} | {:.4} |", r.scene, r.spec, r.stats.render_seconds, r.flip.unwrap_or(0.0)));
             for g in &r.regions {
-                s.push_str(&format!(" {:.4} ({:.0} %) |", g.flip_mean, 100.0 * g.flip_share));
+                s.push_str(&format!(" {:.4} ({:.0} %) |", g.figures.flip_mean, 100.0 * g.figures.flip_share));
             }
             s.push('\n');
         }
@@ -909,7 +900,7 @@ pub fn table_string(report: &BenchReport) -> String {
         for r in report.rows.iter().filter(|r| !r.regions.is_empty()) {
             s.push_str(&format!("| {} | {} |", r.scene, r.spec));
             for g in &r.regions {
-                s.push_str(&format!(" {:+.1} % / {:.0} % |", 100.0 * g.luma_bias, 100.0 * g.smooth_share));
+                s.push_str(&format!(" {:+.1} % / {:.0} % |", 100.0 * g.figures.luma_bias, 100.0 * g.figures.smooth_share));
             }
             s.push('\n');
         }

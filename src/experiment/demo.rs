@@ -257,10 +257,10 @@ fn index_html(sections: &[(Job, BenchReport)]) -> String {
                     let _ = write!(
                         h,
                         "<td>{:.4} ({:.0} %)<br><small>{:+.1} % / {:.0} % smooth</small></td>",
-                        g.flip_mean,
-                        100.0 * g.flip_share,
-                        100.0 * g.luma_bias,
-                        100.0 * g.smooth_share
+                        g.figures.flip_mean,
+                        100.0 * g.figures.flip_share,
+                        100.0 * g.figures.luma_bias,
+                        100.0 * g.figures.smooth_share
                     );
                 }
                 h.push_str("</tr>");
