@@ -569,3 +569,63 @@ fn render_method_surfel() {
     assert_eq!(code, 2, "{err}");
     one_error_line(&err);
 }
+
+/// Bad input found by a robustness sweep (stop 27): each case gets one error line and exit 2
+/// before any work, and a failed run leaves no output behind: not the image when a later
+/// output cannot be written, not an output folder it created.
+#[test]
+fn failed_runs_leave_nothing_behind() {
+    let d = tmp("leftovers");
+    let p = |name: &str| d.join(name).to_str().unwrap().to_string();
+    // A triangle at 1e18: Embree asserts (and aborts) on ray origins beyond 1.8e18.
+    std::fs::write(d.join("huge.obj"), "v 0 0 0\nv 1e18 0 0\nv 0 1e18 0\nf 1 2 3\n").unwrap();
+    let small = ["--width", "16", "--height", "12", "--quiet"];
+    let cases: Vec<(Vec<String>, Vec<String>)> = vec![
+        // (arguments, paths that must not exist afterwards)
+        (vec!["render".into(), "plane".into(), "--method".into(), "multires".into(), "--time-budget".into(), "1e20".into()], vec![]),
+        (vec!["render".into(), p("huge.obj"), "--out".into(), p("huge.png")], vec![p("huge.png")]),
+        (vec!["render".into(), "plane".into(), "--out".into(), p("a.png"), "--stats".into(), "/proc/s.json".into()], vec![p("a.png")]),
+        (vec!["render".into(), "plane".into(), "--out".into(), p("a.png"), "--aov".into(), "depth=/proc/d.exr".into()], vec![p("a.png")]),
+        (
+            vec!["render".into(), "plane".into(), "--out".into(), p("a.exr"), "--aov".into(), format!("depth={}", p("a.exr"))],
+            vec![p("a.exr")],
+        ),
+        (vec!["bench".into(), "plane".into(), "--methods".into(), "multires:budget=1e300".into(), "--out".into(), p("b1")], vec![p("b1")]),
+        (vec!["bench".into(), "plane".into(), "--methods".into(), "whitted:depth=100000".into(), "--out".into(), p("b2")], vec![p("b2")]),
+        (vec!["bench".into(), "plane".into(), "--methods".into(), "multires:k=2.5".into(), "--out".into(), p("b3")], vec![p("b3")]),
+        (vec!["bench".into(), "plane".into(), "--methods".into(), "multires:k=0".into(), "--out".into(), p("b4/x/y")], vec![p("b4")]),
+        (vec!["bench".into(), "plane".into(), "--methods".into(), "whitted".into(), "--repeat".into(), "0".into()], vec![]),
+        (vec!["render".into(), "plane".into(), "--out".into(), "".into()], vec![]),
+        (vec!["bench".into(), p("huge.obj"), "--methods".into(), "whitted".into(), "--out".into(), p("b5")], vec![p("b5")]),
+        (vec!["animate".into(), p("missing.ply"), "--frames".into(), "1".into(), "--out".into(), p("f1")], vec![p("f1")]),
+        (vec!["demo".into(), "--quick".into(), "--threads".into(), "100000".into(), "--out".into(), p("dq")], vec![p("dq")]),
+    ];
+    for (args, gone) in &cases {
+        let mut all: Vec<&str> = args.iter().map(String::as_str).collect();
+        if all[0] != "demo" {
+            all.extend_from_slice(&small);
+        }
+        let (code, _, err) = lodtrace(&all);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        for g in gone {
+            assert!(!std::path::Path::new(g).exists(), "{args:?} left {g} behind");
+        }
+    }
+    // compare: an impossible threshold is bad input (2, not a failed check), and the FLIP
+    // map may not overwrite an input or take another format's name.
+    let (a, b) = (p("a.png"), p("b.png"));
+    assert_eq!(lodtrace(&["render", "plane", "--out", &a, "--width", "16", "--height", "12", "--quiet"]).0, 0);
+    std::fs::copy(&a, &b).unwrap();
+    let before = std::fs::read(&b).unwrap();
+    for extra in [&["--max-flip=-1"][..], &["--diff", &b], &["--diff", &p("d.exr")], &["--region", "x=0,0,4,4", "--region", "x=4,4,8,8"]] {
+        let mut all = vec!["compare", a.as_str(), b.as_str()];
+        all.extend_from_slice(extra);
+        let (code, _, err) = lodtrace(&all);
+        assert_eq!(code, 2, "{extra:?}: {err}");
+        one_error_line(&err);
+    }
+    assert_eq!(std::fs::read(&b).unwrap(), before, "--diff overwrote an input");
+    // An image compared with itself is fine.
+    assert_eq!(lodtrace(&["compare", &a, &a, "--diff", &p("d.png")]).0, 0);
+}

@@ -88,8 +88,8 @@ impl RenderOpts {
         if self.packet != 1 && self.packet != 8 {
             return Err(Error::Usage(format!("--packet {} must be 1 or 8", self.packet)));
         }
-        if self.first_pass_spp == 0 {
-            return Err(Error::Usage("--first-pass-spp must be at least 1".into()));
+        if self.first_pass_spp == 0 || self.first_pass_spp > 65536 {
+            return Err(Error::Usage(format!("--first-pass-spp {} out of range (1..=65536)", self.first_pass_spp)));
         }
         if !(self.variance_threshold >= 0.0) || !self.variance_threshold.is_finite() {
             return Err(Error::Usage("--variance-threshold must be a finite number >= 0".into()));

@@ -157,12 +157,16 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
     if let Some(p) = &a.stats {
         super::render::check_out_path(p)?;
     }
-    if let Some(d) = &a.out {
-        std::fs::create_dir_all(d).map_err(|e| Error::io(d, e))?;
-    }
     let pool = crate::core::thread_pool(a.threads)?;
     let threads = pool.current_num_threads();
-    pool.install(|| animate_in_pool(a, mode, threads))
+    // A failed run removes the output folder again if it created it.
+    io::discard_dir_on_error(a.out.as_deref(), || {
+        if let Some(d) = &a.out {
+            std::fs::create_dir_all(d).map_err(|e| Error::io(d, e))?;
+            io::check_writable_dir(d)?;
+        }
+        pool.install(|| animate_in_pool(a, mode, threads))
+    })
 }
 
 fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<AnimateStats> {
@@ -173,7 +177,11 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     } else {
         let p = std::path::Path::new(&a.scene);
         if !p.is_file() {
-            return Err(Error::UnknownScene(format!("{} (sequences: {})", a.scene, Sequence::BUILTIN.join(", "))));
+            return Err(Error::Usage(format!(
+                "unknown sequence '{}' (built-in: {}; or give an .obj, .off or .ply file)",
+                a.scene,
+                Sequence::BUILTIN.join(", ")
+            )));
         }
         if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply")) {
             Sequence::from_points(crate::deform::ply::load_ply(p).map_err(derr)?, &opts).map_err(derr)?

@@ -50,6 +50,17 @@ pub struct Region {
 }
 
 /// Parses `NAME=X0,Y0,X1,Y1` (or `X0,Y0,X1,Y1`) and checks it against a `w`×`h` image.
+/// All `--region` options: each parsed, and their names distinct (they key the JSON).
+pub fn parse_regions(list: &[String], w: u32, h: u32) -> Result<Vec<Region>> {
+    let regions = list.iter().map(|s| parse_region(s, w, h)).collect::<Result<Vec<_>>>()?;
+    for (i, r) in regions.iter().enumerate() {
+        if regions[..i].iter().any(|q| q.name == r.name) {
+            return Err(Error::Usage(format!("--region name '{}' given twice", r.name)));
+        }
+    }
+    Ok(regions)
+}
+
 pub fn parse_region(s: &str, w: u32, h: u32) -> Result<Region> {
     let bad = |why: &str| Error::Usage(format!("--region '{s}': {why} (expected NAME=X0,Y0,X1,Y1 inside the {w}x{h} image)"));
     let (name, rect) = match s.split_once('=') {
@@ -152,6 +163,21 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
             }
         }
     }
+    // Mean FLIP lies in [0, 1]; a negative bound could never pass. (`--min-psnr inf` is
+    // meaningful: it asks for identical images.)
+    if let Some(m) = a.max_flip {
+        if !(0.0..=1.0).contains(&m) {
+            return Err(Error::Usage(format!("--max-flip {m} out of range [0, 1]")));
+        }
+    }
+    if let Some(p) = &a.diff {
+        super::render::check_out_path(p)?;
+        if p.extension().map(|e| e.to_ascii_lowercase()) != Some("png".into()) {
+            return Err(Error::Usage(format!("{}: the --diff map is written as .png", p.display())));
+        }
+        io::check_distinct(&[&a.a, p])?;
+        io::check_distinct(&[&a.b, p])?;
+    }
     let (wa, ha, ia) = io::read_image_linear(&a.a)?;
     let (wb, hb, ib) = io::read_image_linear(&a.b)?;
     if (wa, ha) != (wb, hb) {
@@ -162,7 +188,7 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
         )));
     }
     let (w, h) = (wa, ha);
-    let regions = a.regions.iter().map(|s| parse_region(s, w, h)).collect::<Result<Vec<_>>>()?;
+    let regions = parse_regions(&a.regions, w, h)?;
     let rmse = metrics::rmse(&ia, &ib, w, h);
     let psnr = metrics::psnr(&ia, &ib, w, h);
     let ssim = metrics::ssim(&ia, &ib, w, h);

@@ -33,7 +33,7 @@ pub fn check_out_path(p: &Path) -> Result<()> {
     if p.is_dir() {
         return Err(Error::Usage(format!("{}: is a folder", p.display())));
     }
-    Ok(())
+    io::check_writable_dir(dir)
 }
 
 pub fn opts_from(a: &RenderArgs) -> RenderOpts {
@@ -57,6 +57,9 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     let opts = opts_from(a);
     opts.validate()?;
     let out = a.out.clone().unwrap_or_else(|| "render.png".into());
+    if out.as_os_str().is_empty() {
+        return Err(Error::Usage("--out needs a file name".into()));
+    }
     check_out_path(&out)?;
     io::check_beauty_ext(&out)?;
     for (k, p) in &a.aov {
@@ -73,6 +76,10 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     if let Some(p) = &a.stats {
         check_out_path(p)?;
     }
+    let mut paths: Vec<&Path> = vec![&out];
+    paths.extend(a.aov.iter().map(|(_, p)| p.as_path()));
+    paths.extend(a.stats.as_deref());
+    io::check_distinct(&paths)?;
     if a.method == crate::cli::Method::Surfel {
         if a.no_shadows {
             return Err(Error::Usage("--no-shadows is not available for --method surfel".into()));
@@ -82,31 +89,35 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     let mut scene = crate::scene::load::load_scene(&a.scene)?;
     apply_camera(&mut scene, &a.camera)?;
     if let Some(d) = a.max_depth {
-        if d > 64 {
-            return Err(Error::Usage(format!("--max-depth {d} is absurd (max 64)")));
+        if d > crate::scene::MAX_DEPTH {
+            return Err(Error::Usage(format!("--max-depth {d} is absurd (max {})", crate::scene::MAX_DEPTH)));
         }
         scene.max_depth = d;
     }
     scene.shadows = !a.no_shadows;
     let r = run::run(&scene, a.method, a.accel, &opts, &a.multires, &a.lod)?;
-    io::write_beauty(&out, &r.out.film)?;
+    // A failed write removes the outputs written before it.
+    let mut outs = io::Outputs::default();
+    outs.wrote(&out, io::write_beauty(&out, &r.out.film))?;
     for (kind, p) in &a.aov {
-        match kind.as_str() {
-            "depth" => io::write_exr_depth(p, &r.out.film)?,
-            "normal" => io::write_exr_normal(p, &r.out.film)?,
-            "color" => io::write_film_exr(p, &r.out.film)?,
+        let w = match kind.as_str() {
+            "depth" => io::write_exr_depth(p, &r.out.film),
+            "normal" => io::write_exr_normal(p, &r.out.film),
+            "color" => io::write_film_exr(p, &r.out.film),
             k @ ("disparity-r" | "disparity-t" | "lod-r" | "lod-t") => {
                 let m = &r.lod.as_ref().expect("lod method").maps;
-                io::write_rgb8_png(p, &crate::lod::maps_image(m, k))?
+                io::write_rgb8_png(p, &crate::lod::maps_image(m, k))
             }
-            other => return Err(Error::Usage(format!("--aov {other}: unknown AOV"))),
-        }
+            other => Err(Error::Usage(format!("--aov {other}: unknown AOV"))),
+        };
+        outs.wrote(p, w)?;
     }
     let stats = r.stats(&scene, a.method, a.accel, &opts);
     if let Some(p) = &a.stats {
         let json = serde_json::to_string_pretty(&stats).expect("stats serialise");
-        io::write_atomic(p, |tmp| std::fs::write(tmp, json.as_bytes()).map_err(|e| Error::io(p, e)))?;
+        outs.wrote(p, io::write_atomic(p, |tmp| std::fs::write(tmp, json.as_bytes()).map_err(|e| Error::io(p, e))))?;
     }
+    outs.keep();
     if !r.finished {
         eprintln!("lodtrace: warning: the time budget ran out; the image is incomplete");
     }

@@ -30,7 +30,9 @@ fn scalar(p: &Property) -> Option<f32> {
 /// error) as one line: whitespace collapsed, the nested debug dump dropped.
 fn one_line(msg: &str) -> String {
     let head = msg.split("Error: Custom").next().unwrap_or(msg);
-    head.split_whitespace().collect::<Vec<_>>().join(" ")
+    let head = head.split("Error: ParseError").next().unwrap_or(head);
+    // ply-rs spells it so.
+    head.replace("Couln't", "Could not").split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
 /// Reads a PLY point file (ASCII or binary) into a single-collection surfel model.

@@ -29,7 +29,7 @@
 use super::run;
 use crate::baseline::accel::AccelKind;
 use crate::baseline::render::RenderOpts;
-use crate::cli::compare::{parse_region, region_figures, Region, RegionFigures};
+use crate::cli::compare::{parse_regions, region_figures, Region, RegionFigures};
 use crate::cli::Method;
 use crate::error::{Error, Result};
 use crate::film::Film;
@@ -138,14 +138,22 @@ impl MethodSpec {
                 let num = |v: &str| {
                     v.parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0).ok_or_else(|| bad(format!("bad value '{v}' for {k}")))
                 };
+                // Counts are whole numbers: `k=2.5` is an error, not k = 2.
+                let int = |v: &str| v.parse::<u32>().map_err(|_| bad(format!("bad value '{v}' for {k}: a whole number")));
                 match k {
-                    "spp" => spec.spp = num(v)? as u32,
-                    "threads" => spec.threads = Some(num(v)? as usize),
-                    "packet" => spec.packet = num(v)? as u32,
-                    "fps" => spec.first_pass_spp = num(v)? as u32,
+                    "spp" => spec.spp = int(v)?,
+                    "threads" => spec.threads = Some(int(v)? as usize),
+                    "packet" => spec.packet = int(v)?,
+                    "fps" => spec.first_pass_spp = int(v)?,
                     "vt" => spec.variance_threshold = num(v)? as f32,
-                    "depth" => spec.max_depth = Some(num(v)? as u32),
-                    "k" => spec.multires.k = num(v)? as u32,
+                    "depth" => {
+                        let d = int(v)?;
+                        if d > crate::scene::MAX_DEPTH {
+                            return Err(bad(format!("depth={d} out of range [0, {}]", crate::scene::MAX_DEPTH)));
+                        }
+                        spec.max_depth = Some(d)
+                    }
+                    "k" => spec.multires.k = int(v)?,
                     "c" => spec.multires.oversampling = num(v)? as f32,
                     "clamp" => spec.multires.anisotropy_clamp = num(v)? as f32,
                     "lod" => spec.multires.lod_scale = num(v)? as f32,
@@ -175,7 +183,7 @@ impl MethodSpec {
                     "a" => spec.lod.lod_a = num(v)? as f32,
                     "thres" => spec.lod.lod_threshold = num(v)? as f32,
                     "sel" => spec.lod.no_selective = num(v)? == 0.0,
-                    "levels" => spec.lod.lod_levels = num(v)? as u32,
+                    "levels" => spec.lod.lod_levels = int(v)?,
                     "dist" => spec.lod.lod_distance = Some(num(v)? as f32),
                     "force" => spec.lod.lod_force = Some(num(v)? as f32),
                     "net" => spec.lod.lod_net_disparity = num(v)? != 0.0,
@@ -183,10 +191,10 @@ impl MethodSpec {
                         spec.lod.lod_selector = crate::lod::trace::Selector::from_str(v, true).map_err(|_| bad(format!("select={v}: disparity or cone")))?
                     }
                     "update" => spec.surfel.update = v.to_string(),
-                    "frames" => spec.surfel.frames = Some(num(v)? as u32),
+                    "frames" => spec.surfel.frames = Some(int(v)?),
                     "detail" => spec.surfel.detail = num(v)? as f32,
                     "shadows" => spec.surfel.shadows = num(v)? != 0.0,
-                    "exact" => spec.surfel.exact_below = num(v)? as u32,
+                    "exact" => spec.surfel.exact_below = int(v)?,
                     "eigen" => {
                         spec.multires.eigen = crate::multires::trace::EigenMode::from_str(v, true)
                             .map_err(|_| bad(format!("eigen={v}: per-box or exact")))?
@@ -515,13 +523,21 @@ pub fn run(a: &BenchArgs) -> Result<()> {
 
 /// Runs the whole bench and writes its outputs; returns the report.
 pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
+    if a.repeat == 0 || a.repeat > 1000 {
+        return Err(Error::Usage(format!("--repeat {} out of range [1, 1000]", a.repeat)));
+    }
+    // A failed bench removes the output folder again if it created it.
+    crate::film::io::discard_dir_on_error(a.out.as_deref(), || bench_in(a))
+}
+
+fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
     let specs = parse_list(&a.methods)?;
     let mut reference = a.reference.as_deref().map(MethodSpec::parse).transpose()?;
     if let Some(r) = &mut reference {
         r.seed = REFERENCE_SEED;
     }
     let sweep = a.sweep.as_deref().map(MethodSpec::parse).transpose()?;
-    let regions = a.regions.iter().map(|r| parse_region(r, a.width, a.height)).collect::<Result<Vec<_>>>()?;
+    let regions = parse_regions(&a.regions, a.width, a.height)?;
     if !regions.is_empty() && reference.is_none() {
         return Err(Error::Usage("--region splits the error against the reference: it needs --reference".into()));
     }
@@ -556,6 +572,7 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
         }
         if let Some(out) = &a.out {
             std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+            crate::film::io::check_writable_dir(out)?;
         }
         let deform = super::deform_bench::run(&a.scenes, &specs, a.width, a.height, a.threads, a.repeat, a.out.as_deref(), a.quiet)?;
         let report =
@@ -569,10 +586,11 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
     for s in specs.iter().chain(reference.iter()).chain(sweep.iter()) {
         s.opts(a.width, a.height, a.threads, true).validate()?;
     }
+    let scenes: Vec<Scene> = a.scenes.iter().map(|s| crate::scene::load::load_scene(s)).collect::<Result<_>>()?;
     if let Some(out) = &a.out {
         std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+        crate::film::io::check_writable_dir(out)?;
     }
-    let scenes: Vec<Scene> = a.scenes.iter().map(|s| crate::scene::load::load_scene(s)).collect::<Result<_>>()?;
     let mut rows = Vec::new();
     for scene in &scenes {
         let ref_film = match &reference {

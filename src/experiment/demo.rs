@@ -83,7 +83,14 @@ fn jobs(quick: bool) -> Vec<Job> {
 }
 
 pub fn run(a: &DemoArgs) -> Result<()> {
+    crate::core::check_threads(a.threads)?;
+    // A failed demo removes its output folder again if it created it.
+    crate::film::io::discard_dir_on_error(Some(&a.out), || run_in(a))
+}
+
+fn run_in(a: &DemoArgs) -> Result<()> {
     std::fs::create_dir_all(&a.out).map_err(|e| Error::io(&a.out, e))?;
+    crate::film::io::check_writable_dir(&a.out)?;
     let mut sections = Vec::new();
     for job in jobs(a.quick) {
         if crate::scene::builtin::get(job.scene).is_err() {

@@ -36,6 +36,81 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Res
     })
 }
 
+/// Fails early, before any work, when a file cannot be created in `dir` (a folder that is
+/// read-only or, like `/proc`, takes no new files): creates and removes a probe file there.
+pub fn check_writable_dir(dir: &Path) -> Result<()> {
+    let probe = dir.join(format!(".lodtrace-probe.{}", std::process::id()));
+    match std::fs::File::create(&probe) {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) => Err(Error::Usage(format!("{}: cannot create files in this folder ({e})", dir.display()))),
+    }
+}
+
+/// Paths must differ: two outputs of one run must not overwrite each other (or an input).
+pub fn check_distinct(paths: &[&Path]) -> Result<()> {
+    let key = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    for (i, a) in paths.iter().enumerate() {
+        if paths[..i].iter().any(|b| key(a) == key(b)) {
+            return Err(Error::Usage(format!("{}: given twice (as an output, or as an input and an output)", a.display())));
+        }
+    }
+    Ok(())
+}
+
+/// The output files of one run, written one after another (each atomically): if the run
+/// fails before [`Outputs::keep`], the files it already wrote are removed again, so a failed
+/// run leaves no outputs behind.
+#[derive(Default)]
+pub struct Outputs {
+    written: Vec<PathBuf>,
+    keep: bool,
+}
+
+impl Outputs {
+    /// Records `path` as written when `r` (its write) succeeded.
+    pub fn wrote(&mut self, path: &Path, r: Result<()>) -> Result<()> {
+        r?;
+        self.written.push(path.to_path_buf());
+        Ok(())
+    }
+    /// The run succeeded: keep everything.
+    pub fn keep(mut self) {
+        self.keep = true;
+    }
+}
+
+impl Drop for Outputs {
+    fn drop(&mut self) {
+        if !self.keep {
+            for p in &self.written {
+                let _ = std::fs::remove_file(p);
+            }
+        }
+    }
+}
+
+/// Runs `f`, which may create the output folder `dir` (and its missing parents); if `f`
+/// fails, whatever of that path did not exist before is removed again, with the files `f`
+/// wrote there. A folder that existed is kept as it is (its files are each written
+/// atomically, so none is half-written).
+pub fn discard_dir_on_error<T>(dir: Option<&Path>, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    // The top-most ancestor of `dir` that does not exist yet.
+    let fresh = dir.and_then(|d| {
+        let abs = std::path::absolute(d).ok()?;
+        abs.ancestors().take_while(|a| !a.exists()).last().map(Path::to_path_buf)
+    });
+    let r = f();
+    if r.is_err() {
+        if let Some(d) = fresh {
+            let _ = std::fs::remove_dir_all(d);
+        }
+    }
+    r
+}
+
 /// 8-bit sRGB pixels of the beauty image.
 pub fn to_rgb8(film: &Film) -> image::RgbImage {
     let mut img = image::RgbImage::new(film.width, film.height);

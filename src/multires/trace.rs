@@ -238,6 +238,7 @@ impl TraceParams {
     }
 
     pub fn validate(&self) -> Result<()> {
+        const MAX_TIME_BUDGET: f64 = 7.0 * 86400.0;
         let bad = |m: String| Err(Error::Usage(m));
         if !(self.clamp > 0.0 && self.clamp <= 1.0) {
             return bad(format!("--anisotropy-clamp {} out of range (0, 1]", self.clamp));
@@ -258,8 +259,10 @@ impl TraceParams {
             return bad(format!("--min-importance {} out of range [0, 1)", self.min_importance));
         }
         if let Some(b) = self.time_budget {
-            if !(b > 0.0 && b.is_finite()) {
-                return bad(format!("--time-budget {b} must be a positive number of seconds"));
+            // Capped at a week so the deadline (an `Instant`) cannot overflow.
+            if !(b > 0.0 && b <= MAX_TIME_BUDGET) {
+                let b = if b.abs() < 1e9 { format!("{b}") } else { format!("{b:e}") };
+                return bad(format!("--time-budget {b} out of range (0, {MAX_TIME_BUDGET}] seconds"));
             }
         }
         Ok(())

@@ -53,11 +53,17 @@ impl Camera {
             && self.aperture >= 0.0
             && self.focal_dist.is_finite()
             && self.focal_dist > 0.0;
-        if ok {
-            Ok(())
-        } else {
-            Err(Error::Usage("camera: eye and look must differ, up must not be parallel to the view, 0 < fovy < 180".into()))
+        if !ok {
+            return Err(Error::Usage(
+                "camera: eye and look must differ, up must not be parallel to the view, 0 < fovy < 180, aperture ≥ 0, focal distance > 0"
+                    .into(),
+            ));
         }
+        let far = self.eye.abs().max(self.look.abs()).max_element();
+        if far > super::MAX_COORD {
+            return Err(Error::Usage(format!("camera: eye or look at coordinate {far:.3e}, beyond ±{:e}", super::MAX_COORD)));
+        }
+        Ok(())
     }
 
     pub fn frame(&self, width: u32, height: u32) -> CameraFrame {

@@ -148,6 +148,15 @@ pub struct LeafInstance {
     pub material: Option<u32>,
 }
 
+/// Upper limit of a scene's recursion depth (`--max-depth`, bench `depth=`): deeper recursion
+/// would overflow the stack of the recursive tracers.
+pub const MAX_DEPTH: u32 = 64;
+
+/// Largest coordinate a scene or camera may have. Embree rejects rays whose origin lies
+/// beyond ±1.8e18 (an assertion that aborts the process), and at such magnitudes f32 has
+/// no precision left for hit offsets anyway.
+pub const MAX_COORD: f32 = 1e15;
+
 #[derive(Clone, Debug)]
 pub struct Scene {
     pub name: String,
@@ -161,7 +170,7 @@ pub struct Scene {
     pub background: Vec3,
     /// Constant ambient term added to every diffuse surface (× albedo).
     pub ambient: Vec3,
-    /// Maximum recursion depth for reflection and refraction.
+    /// Maximum recursion depth for reflection and refraction (at most [`MAX_DEPTH`]).
     pub max_depth: u32,
     /// Lights are tested for visibility (shadow rays and cones); off (`render --no-shadows`,
     /// a diagnostic) every light counts as visible.
@@ -289,11 +298,19 @@ impl Scene {
                 mesh.compute_normals();
             }
         }
-        self.camera.validate()?;
         let (inst, _) = self.triangle_counts()?;
         if inst == 0 {
             return Err(Error::Scene(format!("scene '{}' has no triangles", self.name)));
         }
+        let (lo, hi) = self.bounds()?;
+        let ext = lo.abs().max(hi.abs()).max_element();
+        if ext.is_nan() || ext > MAX_COORD {
+            return Err(Error::Scene(format!(
+                "scene '{}' reaches coordinate {ext:.3e}, beyond ±{MAX_COORD:e}: scale the model down",
+                self.name
+            )));
+        }
+        self.camera.validate()?;
         for l in &self.lights {
             if !l.center().is_finite() || !l.intensity().is_finite() {
                 return Err(Error::Scene("a light has non-finite values".into()));
