@@ -86,6 +86,10 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         }
         return render_surfel(a, &out);
     }
+    if a.method == crate::cli::Method::Lod && a.accel == crate::baseline::accel::AccelKind::Octree {
+        // Before loading, so that the error is the only line (no mesh warnings first).
+        return Err(Error::Usage("--method lod runs on --accel bvh or --accel embree".into()));
+    }
     let mut scene = crate::scene::load::load_scene(&a.scene)?;
     apply_camera(&mut scene, &a.camera)?;
     if let Some(d) = a.max_depth {

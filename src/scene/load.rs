@@ -118,7 +118,11 @@ pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
     }
     let opts = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     let (models, mtls) = tobj::load_obj(path, &opts).map_err(|e| Error::parse(path, e.to_string()))?;
-    let mtls = mtls.unwrap_or_default();
+    let mtls = mtls.unwrap_or_else(|e| {
+        // The geometry is still usable: grey diffuse, as for a file without materials.
+        eprintln!("lodtrace: warning: {}: materials not loaded ({e}); using the default material", path.display());
+        Vec::new()
+    });
     let mut mesh = Mesh::new(path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default());
     let mut normals_ok = true;
     for m in &models {
