@@ -612,6 +612,48 @@ fn failed_runs_leave_nothing_behind() {
             assert!(!std::path::Path::new(g).exists(), "{args:?} left {g} behind");
         }
     }
+    // An output must not replace an input, another output under a different spelling, or
+    // a device or pipe (written as a temporary file renamed over it, it would be replaced).
+    std::fs::write(d.join("tri.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let obj_before = std::fs::read(d.join("tri.obj")).unwrap();
+    std::fs::create_dir_all(d.join("sub")).unwrap();
+    let fifo = p("fifo");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    for args in [
+        vec!["render".to_string(), p("tri.obj"), "--out".into(), p("t.png"), "--stats".into(), p("tri.obj")],
+        vec!["render".into(), "plane".into(), "--out".into(), p("o.png"), "--stats".into(), p("sub/../o.png")],
+        vec!["render".into(), "plane".into(), "--out".into(), p("o.png"), "--stats".into(), fifo.clone()],
+        vec!["bench".into(), "plane".into(), "--methods".into(), "whitted:spp=2:spp=4".into()],
+        vec!["bench".into(), "plane".into(), "--methods".into(), "whitted:embree:bvh".into()],
+    ] {
+        let mut all: Vec<&str> = args.iter().map(String::as_str).collect();
+        all.extend_from_slice(&small);
+        let (code, _, err) = lodtrace(&all);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+    }
+    assert_eq!(std::fs::read(d.join("tri.obj")).unwrap(), obj_before, "the scene file was overwritten");
+    assert!(!std::fs::metadata(&fifo).unwrap().is_file(), "the pipe was replaced");
+    // `animate --stats` may go into the folder `--out` creates.
+    let (code, _, err) = lodtrace(&[
+        "animate",
+        "heads",
+        "--frames",
+        "1",
+        "--detail",
+        "0.03",
+        "--out",
+        &p("af"),
+        "--stats",
+        &p("af/s.json"),
+        "--width",
+        "16",
+        "--height",
+        "12",
+        "--quiet",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(d.join("af/s.json").is_file());
     // compare: an impossible threshold is bad input (2, not a failed check), and the FLIP
     // map may not overwrite an input or take another format's name.
     let (a, b) = (p("a.png"), p("b.png"));

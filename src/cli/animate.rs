@@ -154,9 +154,6 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
     if a.packet != 1 && a.packet != 8 {
         return Err(Error::Usage(format!("--packet {}: 1 or 8", a.packet)));
     }
-    if let Some(p) = &a.stats {
-        super::render::check_out_path(p)?;
-    }
     let pool = crate::core::thread_pool(a.threads)?;
     let threads = pool.current_num_threads();
     // A failed run removes the output folder again if it created it.
@@ -164,6 +161,14 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
         if let Some(d) = &a.out {
             std::fs::create_dir_all(d).map_err(|e| Error::io(d, e))?;
             io::check_writable_dir(d)?;
+        }
+        // After the folder exists: `--stats` may go inside it.
+        if let Some(p) = &a.stats {
+            super::render::check_out_path(p)?;
+            let scene_file = std::path::Path::new(&a.scene);
+            if scene_file.is_file() {
+                io::check_distinct(&[scene_file, p])?;
+            }
         }
         pool.install(|| animate_in_pool(a, mode, threads))
     })

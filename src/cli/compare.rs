@@ -167,6 +167,7 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
     // meaningful: it asks for identical images.)
     if let Some(m) = a.max_flip {
         if !(0.0..=1.0).contains(&m) {
+            let m = if m.abs() < 1e9 { format!("{m}") } else { format!("{m:e}") };
             return Err(Error::Usage(format!("--max-flip {m} out of range [0, 1]")));
         }
     }

@@ -33,6 +33,11 @@ pub fn check_out_path(p: &Path) -> Result<()> {
     if p.is_dir() {
         return Err(Error::Usage(format!("{}: is a folder", p.display())));
     }
+    // Outputs are written to a temporary file and renamed over the target: that would
+    // replace a device or pipe (`/dev/full`) with a plain file.
+    if p.exists() && !p.is_file() {
+        return Err(Error::Usage(format!("{}: not a regular file", p.display())));
+    }
     io::check_writable_dir(dir)
 }
 
@@ -76,7 +81,8 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     if let Some(p) = &a.stats {
         check_out_path(p)?;
     }
-    let mut paths: Vec<&Path> = vec![&out];
+    let scene_file = Path::new(&a.scene);
+    let mut paths: Vec<&Path> = if scene_file.is_file() { vec![scene_file, &out] } else { vec![&out] };
     paths.extend(a.aov.iter().map(|(_, p)| p.as_path()));
     paths.extend(a.stats.as_deref());
     io::check_distinct(&paths)?;

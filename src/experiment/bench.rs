@@ -133,7 +133,14 @@ impl MethodSpec {
             surfel: Default::default(),
             seed: 0,
         };
+        let mut seen: Vec<&str> = Vec::new();
         for p in parts {
+            // Each key (and the accelerator) once: `spp=2:spp=4` is a typo, not "the last wins".
+            let key = p.split_once('=').map_or("accel", |(k, _)| k);
+            if seen.contains(&key) {
+                return Err(bad(format!("{key} given twice")));
+            }
+            seen.push(key);
             if let Some((k, v)) = p.split_once('=') {
                 let num = |v: &str| {
                     v.parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0).ok_or_else(|| bad(format!("bad value '{v}' for {k}")))

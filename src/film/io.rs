@@ -50,8 +50,15 @@ pub fn check_writable_dir(dir: &Path) -> Result<()> {
 }
 
 /// Paths must differ: two outputs of one run must not overwrite each other (or an input).
+/// Paths are compared with their folders resolved (`sub/../a.png` is `a.png`).
 pub fn check_distinct(paths: &[&Path]) -> Result<()> {
-    let key = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    let key = |p: &Path| {
+        let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        match (std::fs::canonicalize(dir), p.file_name()) {
+            (Ok(d), Some(f)) => d.join(f),
+            _ => std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf()),
+        }
+    };
     for (i, a) in paths.iter().enumerate() {
         if paths[..i].iter().any(|b| key(a) == key(b)) {
             return Err(Error::Usage(format!("{}: given twice (as an output, or as an input and an output)", a.display())));

@@ -59,9 +59,12 @@ impl Camera {
                     .into(),
             ));
         }
+        // The automatic framing of a scene at the ±MAX_COORD limit puts the eye a few
+        // extents away: the camera gets 100× the room (still far inside Embree's ±1.8e18).
         let far = self.eye.abs().max(self.look.abs()).max_element();
-        if far > super::MAX_COORD {
-            return Err(Error::Usage(format!("camera: eye or look at coordinate {far:.3e}, beyond ±{:e}", super::MAX_COORD)));
+        let lim = 100.0 * super::MAX_COORD;
+        if far > lim {
+            return Err(Error::Usage(format!("camera: eye or look at coordinate {far:.3e}, beyond ±{lim:e}")));
         }
         Ok(())
     }
