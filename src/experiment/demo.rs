@@ -32,11 +32,12 @@ struct Job {
 
 /// `complex`'s parts as `--region` rectangles, measured at 640×480 and scaled to `w`×`h`:
 /// the plant rows (far foliage, the paper's §7 problem case), the animals, the open
-/// checkerboard (prefiltered texture detail), the front glass bunny (refraction).
+/// checkerboard (prefiltered texture detail), the front glass bunny (refraction; its box
+/// starts below the plant rows behind it, which stop 27 found carried much of its error).
 fn complex_regions(w: u32, h: u32) -> Vec<String> {
     let sx = |x: u32| x * w / 640;
     let sy = |y: u32| y * h / 480;
-    [("plants", 0, 128, 640, 250), ("animals", 0, 250, 640, 370), ("board", 0, 370, 640, 480), ("bunny", 40, 230, 210, 370)]
+    [("plants", 0, 128, 640, 250), ("animals", 0, 250, 640, 370), ("board", 0, 370, 640, 480), ("bunny", 40, 262, 210, 370)]
         .iter()
         .map(|&(n, x0, y0, x1, y1)| format!("{n}={},{},{},{}", sx(x0), sy(y0), sx(x1), sy(y1)))
         .collect()
