@@ -35,6 +35,27 @@ fn one_line(msg: &str) -> String {
     head.replace("Couln't", "Could not").split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
+/// An ASCII PLY body must hold exactly the rows its header declares: ply-rs reads the
+/// declared counts and silently drops what follows (a wrong count, or two files run
+/// together). Binary files are left to the parser.
+fn ascii_rows_match_header(buf: &[u8]) -> Result<(), String> {
+    let text = String::from_utf8_lossy(buf);
+    let Some((head, body)) = text.split_once("end_header") else { return Ok(()) };
+    if !head.lines().any(|l| l.trim_start().starts_with("format ascii")) {
+        return Ok(());
+    }
+    let declared: u64 = head
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("element "))
+        .filter_map(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
+        .sum();
+    let rows = body.lines().filter(|l| !l.trim().is_empty()).count() as u64;
+    if rows > declared {
+        return Err(format!("the header declares {declared} rows, the file holds {rows}"));
+    }
+    Ok(())
+}
+
 /// Reads a PLY point file (ASCII or binary) into a single-collection surfel model.
 pub fn load_ply(path: &Path) -> Result<SurfelModel, DeformError> {
     let err = |msg: String| DeformError::Ply { path: path.to_path_buf(), msg };
@@ -46,8 +67,11 @@ pub fn load_ply(path: &Path) -> Result<SurfelModel, DeformError> {
 /// As [`load_ply`], from any reader (`path` only names the source in errors).
 pub fn read_ply<R: std::io::BufRead>(r: &mut R, path: &Path) -> Result<SurfelModel, DeformError> {
     let err = |msg: String| DeformError::Ply { path: path.to_path_buf(), msg };
+    let mut buf = Vec::new();
+    r.read_to_end(&mut buf).map_err(|e| err(e.to_string()))?;
+    ascii_rows_match_header(&buf).map_err(err)?;
     let parser = Parser::<DefaultElement>::new();
-    let ply = parser.read_ply(r).map_err(|e| err(format!("parse error: {}", one_line(&e.to_string()))))?;
+    let ply = parser.read_ply(&mut buf.as_slice()).map_err(|e| err(format!("parse error: {}", one_line(&e.to_string()))))?;
     let verts = ply.payload.get("vertex").ok_or_else(|| err("no 'vertex' element".into()))?;
     let get = |e: &DefaultElement, k: &str, i: usize| -> Result<Option<f32>, DeformError> {
         match e.get(k) {
@@ -131,6 +155,10 @@ mod tests {
         r[9] = r[2];
         assert!(matches!(read_ply(&mut ply_text(&r).as_bytes(), Path::new("t.ply")), Err(DeformError::DuplicatePoint { .. })));
         assert!(matches!(read_ply(&mut "garbage".as_bytes(), Path::new("t.ply")), Err(DeformError::Ply { .. })));
+        // The header declares 10 vertices, the body holds 20.
+        let t = ply_text(&rows()).replace("element vertex 20", "element vertex 10");
+        let e = read_ply(&mut t.as_bytes(), Path::new("t.ply"));
+        assert!(matches!(e, Err(DeformError::Ply { .. })), "{:?}", e.map(|m| m.len()));
         assert!(load_ply(Path::new("/nonexistent/x.ply")).is_err());
     }
 }
