@@ -165,10 +165,7 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
         // After the folder exists: `--stats` may go inside it.
         if let Some(p) = &a.stats {
             super::render::check_out_path(p)?;
-            let scene_file = std::path::Path::new(&a.scene);
-            if scene_file.is_file() {
-                io::check_distinct(&[scene_file, p])?;
-            }
+            io::check_outputs_apart_from_scene(&a.scene, &[p])?;
         }
         pool.install(|| animate_in_pool(a, mode, threads))
     })

@@ -81,11 +81,10 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     if let Some(p) = &a.stats {
         check_out_path(p)?;
     }
-    let scene_file = Path::new(&a.scene);
-    let mut paths: Vec<&Path> = if scene_file.is_file() { vec![scene_file, &out] } else { vec![&out] };
+    let mut paths: Vec<&Path> = vec![&out];
     paths.extend(a.aov.iter().map(|(_, p)| p.as_path()));
     paths.extend(a.stats.as_deref());
-    io::check_distinct(&paths)?;
+    io::check_outputs_apart_from_scene(&a.scene, &paths)?;
     if a.method == crate::cli::Method::Surfel {
         if a.no_shadows {
             return Err(Error::Usage("--no-shadows is not available for --method surfel".into()));

@@ -29,10 +29,7 @@ pub fn run(a: &VerifyArgs) -> Result<i32> {
     }
     if let Some(p) = &a.json {
         super::render::check_out_path(p)?;
-        let scene_file = std::path::Path::new(&a.scene);
-        if scene_file.is_file() {
-            crate::film::io::check_distinct(&[scene_file, p])?;
-        }
+        crate::film::io::check_outputs_apart_from_scene(&a.scene, &[p])?;
     }
     let scene = crate::scene::load::load_scene(&a.scene)?;
     let t0 = std::time::Instant::now();

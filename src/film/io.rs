@@ -67,6 +67,15 @@ pub fn check_distinct(paths: &[&Path]) -> Result<()> {
     Ok(())
 }
 
+/// [`check_distinct`] for a command's outputs and its scene argument, when that names a file
+/// (a built-in scene name is no file and cannot be overwritten).
+pub fn check_outputs_apart_from_scene(scene: &str, outputs: &[&Path]) -> Result<()> {
+    let scene = Path::new(scene);
+    let mut all: Vec<&Path> = if scene.is_file() { vec![scene] } else { Vec::new() };
+    all.extend_from_slice(outputs);
+    check_distinct(&all)
+}
+
 /// The output files of one run, written one after another (each atomically): if the run
 /// fails before [`Outputs::keep`], the files it already wrote are removed again, so a failed
 /// run leaves no outputs behind.
