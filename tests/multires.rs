@@ -67,7 +67,7 @@ fn opaque_plane_head_on_is_opaque_and_exact() {
         let ms = MultiresScene::build(&scene, &BuildParams::default()).unwrap();
         let tp = TraceParams { cone_scale, ..Default::default() };
         let abort = AtomicBool::new(false);
-        let tr = Tracer { ms: &ms, p: &tp, floor: 1e-7, abort: &abort, deadline: None };
+        let tr = Tracer::new(&ms, &tp, 1e-7, &abort, None);
         let cam = scene.camera.frame(64, 64);
         let mut ss = ShadeScratch::new(16, scene.max_depth);
         let mut c = Counters::default();
@@ -120,7 +120,7 @@ fn instance_level_points_keep_a_tiled_floor_opaque_and_exact() {
     let mut colours = vec![];
     for group_points in [true, false] {
         let tp = TraceParams { cone_scale, group_points, ..Default::default() };
-        let tr = Tracer { ms: &ms, p: &tp, floor: 1e-7, abort: &abort, deadline: None };
+        let tr = Tracer::new(&ms, &tp, 1e-7, &abort, None);
         let mut ss = ShadeScratch::new(16, scene.max_depth);
         let mut c = Counters::default();
         let mut cols = vec![];
@@ -160,7 +160,7 @@ fn point_weight_sums_cover_the_surface() {
     for cone_scale in [3.0f32, 6.0, 12.0] {
         // The whole footprint's sum: no early termination at alpha 1 inside a fragment.
         let tp = TraceParams { cone_scale, termination: Termination::Final, ..Default::default() };
-        let tr = Tracer { ms: &ms, p: &tp, floor: 1e-7, abort: &abort, deadline: None };
+        let tr = Tracer::new(&ms, &tp, 1e-7, &abort, None);
         // Pixels well inside the sphere's disc (radius ≈ 15 pixels around the centre).
         for (i, j) in [(32, 32), (28, 30), (36, 34), (30, 36), (34, 27)] {
             let mut ab = ABuffer::new(16);
@@ -204,7 +204,7 @@ fn area_point_weights_sum_to_one_at_any_orientation() {
         let ms = MultiresScene::build(&scene, &BuildParams { weights, ..Default::default() }).unwrap();
         let tp = TraceParams { cone_scale: 6.0, termination: Termination::Final, ..Default::default() };
         let abort = AtomicBool::new(false);
-        let tr = Tracer { ms: &ms, p: &tp, floor: 1e-7, abort: &abort, deadline: None };
+        let tr = Tracer::new(&ms, &tp, 1e-7, &abort, None);
         let cam = scene.camera.frame(64, 64);
         let (mut sc, mut c) = (Scratch::default(), Counters::default());
         let mut sums = vec![];
@@ -238,7 +238,7 @@ fn normal_spread_shades_aggregates_by_their_mean_cosine() {
     let shade = |normal_spread: bool| {
         let tp = TraceParams { cone_scale: 6.0, primary_only: true, normal_spread, ..Default::default() };
         let abort = AtomicBool::new(false);
-        let tr = Tracer { ms: &ms, p: &tp, floor: 1e-7, abort: &abort, deadline: None };
+        let tr = Tracer::new(&ms, &tp, 1e-7, &abort, None);
         let mut ss = ShadeScratch::new(16, s.max_depth);
         let mut c = Counters::default();
         let mut sum = 0.0;
@@ -488,8 +488,8 @@ fn floor_behind_an_object_does_not_hide_it() {
 /// so those reflected cones started below the floor and saw the sky (a blue rim where Embree
 /// sees green). Wherever Embree's pixel is clearly floor-coloured inside the sphere, the
 /// multires pixel must be too.
-#[test]
-fn reflections_of_a_touching_floor_are_not_skipped() {
+/// A mirror ball standing on a green checkerboard floor under a blue sky.
+fn mirror_on_floor() -> Scene {
     let mut scene = Scene::empty("mirror-on-floor");
     scene.materials[0] = Material::diffuse("green", Vec3::new(0.1, 0.7, 0.1));
     let mirror = scene.add_material(Material { name: "mirror".into(), color: Vec3::ZERO, kd: 0.0, reflect: 1.0, ..Default::default() });
@@ -505,6 +505,12 @@ fn reflections_of_a_touching_floor_are_not_skipped() {
     scene.background = Vec3::new(0.1, 0.2, 0.9);
     scene.ambient = Vec3::splat(0.3);
     scene.validate().unwrap();
+    scene
+}
+
+#[test]
+fn reflections_of_a_touching_floor_are_not_skipped() {
+    let scene = mirror_on_floor();
     let (w, h) = (48, 48);
     let reference = conventional(&scene, reference_accel(), &RenderOpts { width: w, height: h, ..Default::default() });
     let on_ball = |f: &Film, i: i32, j: i32| f.depth[(j as u32 * w + i as u32) as usize] < 6.5;
@@ -523,6 +529,54 @@ fn reflections_of_a_touching_floor_are_not_skipped() {
     }
     assert!(floor_seen > 30, "the mirror shows the floor in {floor_seen} interior pixels");
     assert!(sky_instead <= floor_seen / 20, "{sky_instead} of {floor_seen} pixels reflecting the floor show the sky instead");
+}
+
+/// `--secondary-clamp` changes the cones below the first surface only: unset or equal to
+/// `--anisotropy-clamp` it renders the paper's image bit for bit; at 1 (round secondary
+/// cones) the pixels away from the mirror are unchanged, those on it change, and the mirror
+/// still shows the floor.
+#[test]
+fn secondary_clamp_changes_secondary_cones_only() {
+    let scene = mirror_on_floor();
+    let (w, h) = (48, 48);
+    let paper = TraceParams::default();
+    let base = cones(&scene, &paper, w, h);
+    let same = cones(&scene, &TraceParams { secondary_clamp: Some(paper.clamp), ..paper.clone() }, w, h);
+    assert!(base.color == same.color && base.depth == same.depth, "an explicit clamp equal to the primary one changed the image");
+    let round = cones(&scene, &TraceParams { secondary_clamp: Some(1.0), ..paper.clone() }, w, h);
+    // The ball's pixels: a surface not facing straight up (the floor does).
+    let ball = |k: usize| base.depth[k].is_finite() && base.normal[k].y < 0.999;
+    let near_ball = |i: i32, j: i32| {
+        (-1..=1).any(|dj| {
+            (-1..=1).any(|di| {
+                let (x, y) = (i + di, j + dj);
+                x >= 0 && y >= 0 && x < w as i32 && y < h as i32 && ball((y as u32 * w + x as u32) as usize)
+            })
+        })
+    };
+    let greenish = |c: Vec3| c.y > 2.0 * c.z;
+    let (mut off_ball, mut on_ball, mut changed, mut floor_b, mut floor_r) = (0, 0, 0, 0, 0);
+    for j in 0..h as i32 {
+        for i in 0..w as i32 {
+            let k = (j as u32 * w + i as u32) as usize;
+            if ball(k) {
+                on_ball += 1;
+                changed += (round.color[k] != base.color[k]) as u32;
+                floor_b += greenish(base.color[k]) as u32;
+                floor_r += greenish(round.color[k]) as u32;
+            } else if !near_ball(i, j) {
+                off_ball += 1;
+                assert_eq!(round.color[k], base.color[k], "pixel {i},{j} away from the mirror changed");
+            }
+        }
+    }
+    assert!(on_ball > 100 && off_ball > 100, "{on_ball} / {off_ball} pixels on / away from the ball");
+    assert!(changed > on_ball / 10, "only {changed} of {on_ball} mirror pixels changed with round secondary cones");
+    // Round cones blur the reflected horizon across the narrow direction of the reflection
+    // (floor pixels at 1/4, 1/2, 1: 337, 320, 307 of the paper's 371), but keep the floor.
+    assert!(floor_b > 30 && floor_r * 5 >= floor_b * 4, "round cones show the floor in {floor_r} mirror pixels, the paper's in {floor_b}");
+    assert!(TraceParams { secondary_clamp: Some(0.0), ..paper.clone() }.validate().is_err());
+    assert!(TraceParams { secondary_clamp: Some(f32::NAN), ..paper }.validate().is_err());
 }
 
 /// Issue test: a mesh seen through `cone` and `multires` at close range (leaves reached)

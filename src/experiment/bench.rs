@@ -5,7 +5,7 @@
 //!
 //! A method spec is `METHOD[:ACCEL][:key=value...]`, keys: `spp`, `threads`, `packet`,
 //! `fps` (distributed first-pass spp), `vt` (distributed variance threshold), `depth`; for
-//! the cone tracers (`multires`, `cone`): `k`, `c` (oversampling), `clamp`, `lod`, `dtol`,
+//! the cone tracers (`multires`, `cone`): `k`, `c` (oversampling), `clamp`, `clamp2` (secondary cones), `lod`, `dtol`,
 //! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage|mass`, `term=paper|final`, `pw=area|voxel`, `spread=0`, `groups=0`, `agg=0` (surface shadow skip for aggregates too), `tight=1` (a triangle fragment's depth interval from its vertices, not its plane), `mask=1` (`--coverage-masks`);
 //! for `lod`: `f`, `a` (a_LOD), `thres`, `sel=0` (no selective tracing), `levels`, `dist`
 //! (distance criterion), `force` (fixed LOD), `net=1` (net disparity), `select=cone` (the
@@ -163,6 +163,7 @@ impl MethodSpec {
                     "k" => spec.multires.k = int(v)?,
                     "c" => spec.multires.oversampling = num(v)? as f32,
                     "clamp" => spec.multires.anisotropy_clamp = num(v)? as f32,
+                    "clamp2" => spec.multires.secondary_clamp = Some(num(v)? as f32),
                     "lod" => spec.multires.lod_scale = num(v)? as f32,
                     "dtol" => spec.multires.depth_tolerance = num(v)? as f32,
                     "cs" => spec.multires.cone_scale = num(v)? as f32,
@@ -208,7 +209,7 @@ impl MethodSpec {
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, lod, dtol, cs, mip, primary, budget, eigen, tri, term, pw, spread, groups, agg, tight, mask; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, mip, primary, budget, eigen, tri, term, pw, spread, groups, agg, tight, mask; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact)"
                         )))
                     }
                 }

@@ -34,13 +34,8 @@ pub fn render(ms: &MultiresScene, tp: &TraceParams, cam: &CameraFrame, opts: &Re
     let cpu0 = crate::baseline::render::process_cpu_seconds();
     let abort = AtomicBool::new(false);
     let (lo, hi) = ms.scene.bounds()?;
-    let tracer = Tracer {
-        ms,
-        p: tp,
-        floor: 1e-7 * (hi - lo).max_element().max(1e-6),
-        abort: &abort,
-        deadline: tp.time_budget.map(|b| start + Duration::from_secs_f64(b)),
-    };
+    let tracer =
+        Tracer::new(ms, tp, 1e-7 * (hi - lo).max_element().max(1e-6), &abort, tp.time_budget.map(|b| start + Duration::from_secs_f64(b)));
     let (w, h) = (opts.width, opts.height);
     let ts = tiles(w, h);
     let prog = Progress::new(ts.len() as u64, &opts.label, opts.quiet);

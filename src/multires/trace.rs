@@ -157,6 +157,11 @@ pub fn half_erfc(x: f32) -> f32 {
 pub struct TraceParams {
     /// Anisotropy limit: minor ≥ clamp · major (§5.1: "typically 1/4–1/16").
     pub clamp: f32,
+    /// The anisotropy limit of reflected and refracted cones and of the shadow cones from
+    /// their hits; `None` (the default, the paper): `clamp`. A larger value is the paper's
+    /// own performance lever (§5.1: anisotropic cones against the symmetric octree are what
+    /// costs) applied where the cone's width is an estimate from ∇n anyway.
+    pub secondary_clamp: Option<f32>,
     /// Level of detail: points are used when λ·σ_min ≥ h.
     pub lod_scale: f32,
     /// Mipmap blend one level down (§5.1).
@@ -202,6 +207,7 @@ impl Default for TraceParams {
     fn default() -> Self {
         TraceParams {
             clamp: 0.125,
+            secondary_clamp: None,
             lod_scale: 2.0,
             mipmap: true,
             depth_tol: 1.0,
@@ -224,6 +230,10 @@ impl Default for TraceParams {
 }
 
 impl TraceParams {
+    /// The anisotropy clamp of reflected and refracted cones ([`TraceParams::secondary_clamp`]).
+    pub fn clamp_secondary(&self) -> f32 {
+        self.secondary_clamp.unwrap_or(self.clamp)
+    }
     /// The cut distance of the node (and instance) test, in footprint units: the largest at
     /// which anything a node holds can still weigh ≥ 2% — its points (√Q_CUT) and, per box,
     /// its triangles ([`TriWeight::cut`]); a node whose sphere lies farther is skipped, with
@@ -242,6 +252,11 @@ impl TraceParams {
         let bad = |m: String| Err(Error::Usage(m));
         if !(self.clamp > 0.0 && self.clamp <= 1.0) {
             return bad(format!("--anisotropy-clamp {} out of range (0, 1]", self.clamp));
+        }
+        if let Some(c) = self.secondary_clamp {
+            if !(c > 0.0 && c <= 1.0) {
+                return bad(format!("--secondary-clamp {c} out of range (0, 1]"));
+            }
         }
         if !(self.lod_scale.is_finite() && self.lod_scale >= 0.25 && self.lod_scale <= 64.0) {
             return bad(format!("--lod-scale {} out of range [0.25, 64]", self.lod_scale));
@@ -1450,9 +1465,14 @@ pub enum Collect {
     Alpha,
 }
 
+#[derive(Clone, Copy)]
 pub struct Tracer<'s, 'a> {
     pub ms: &'s MultiresScene<'a>,
     pub p: &'s TraceParams,
+    /// Anisotropy clamp of the cones this tracer traverses: `p.clamp` for primary cones and
+    /// their shadows, [`TraceParams::clamp_secondary`] below the first surface
+    /// ([`Tracer::secondary`]).
+    pub clamp: f32,
     /// Floor of the footprint semi-axes (world units): keeps zero footprints finite.
     pub floor: f32,
     pub abort: &'s AtomicBool,
@@ -1460,6 +1480,16 @@ pub struct Tracer<'s, 'a> {
 }
 
 impl<'s, 'a> Tracer<'s, 'a> {
+    pub fn new(ms: &'s MultiresScene<'a>, p: &'s TraceParams, floor: f32, abort: &'s AtomicBool, deadline: Option<Instant>) -> Self {
+        Tracer { ms, p, clamp: p.clamp, floor, abort, deadline }
+    }
+
+    /// The tracer of reflected and refracted cones (and, through their hits, of everything
+    /// below them): the same but for the anisotropy clamp (`--secondary-clamp`).
+    fn secondary(&self) -> Self {
+        Tracer { clamp: self.p.clamp_secondary(), ..*self }
+    }
+
     /// Traverses the scene with `cone` (world space), filling `ab`.
     pub fn traverse(&self, cone: &Cone, ab: &mut ABuffer, mode: Collect, sc: &mut Scratch, c: &mut Counters) {
         self.traverse_own(cone, Own::NONE, ab, mode, sc, c)
@@ -1483,7 +1513,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         sc.entries.clear();
         sc.locals.clear();
         sc.eigs.clear();
-        let clamp = self.p.clamp;
+        let clamp = self.clamp;
         let floor = self.floor;
         let cut = self.p.node_cut();
         let reach = BoxReach::cone(cone, cut, floor);
@@ -1611,7 +1641,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let tree = &self.ms.trees[leaf.tree as usize];
         let n = e.node as usize;
         let nodes = &tree.nodes;
-        let clamp = self.p.clamp;
+        let clamp = self.clamp;
         // The per-box decomposition at the node's centre depth, solved by the node test that
         // admitted this node; only the anisotropy clamp is left to apply.
         let boxe = clamp_eigen(&sc.eigs[e.eig as usize], clamp);
@@ -1737,7 +1767,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             &arr(&tree.nodes.cy),
             &arr(&tree.nodes.cz),
             &arr(&tree.nodes.r),
-            self.p.clamp,
+            self.clamp,
             self.floor * s,
             self.p.node_cut(),
         );
@@ -1827,7 +1857,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         }
         let inv_s = 1.0 / s;
         let share = POINT_MARGIN * h * h / (std::f32::consts::PI * MASS_IN_CUT);
-        point_w_x8(cone, blk, if exact { None } else { Some(boxe) }, self.p.clamp, self.floor * s, blend * share, hits);
+        point_w_x8(cone, blk, if exact { None } else { Some(boxe) }, self.clamp, self.floor * s, blend * share, hits);
         let dz = self.p.depth_tol * h * inv_s;
         for k in 0..hits.len {
             let (j, t, w) = (start + hits.idx[k] as usize, hits.t[k], hits.w[k]);
@@ -1861,11 +1891,11 @@ impl<'s, 'a> Tracer<'s, 'a> {
             let pv = pw.map(|p| lc.coords(p));
             c.add(Counter::eigen_decompositions, 3);
             let lf = self.floor * s;
-            let ev = pv.map(|p| eigen_1(lc.sigma(p.z.max(lc.tmin).max(0.0)), self.p.clamp, lf));
+            let ev = pv.map(|p| eigen_1(lc.sigma(p.z.max(lc.tmin).max(0.0)), self.clamp, lf));
             let (w, b1, b2, t) = triangle_weight(pv, ev, self.p.tri_weight)?;
             Some((w, b1, b2, t, ev[0]))
         } else {
-            let (w, b1, b2, t) = triangle_weight_per_box(lc, pw, boxe, self.p.clamp, self.floor * s, self.p.tri_weight)?;
+            let (w, b1, b2, t) = triangle_weight_per_box(lc, pw, boxe, self.clamp, self.floor * s, self.p.tri_weight)?;
             Some((w, b1, b2, t, *boxe))
         }
     }
@@ -1914,7 +1944,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let tw = t * inv_s;
         let mut f = Frag { z0: z0 * inv_s, z1: z1 * inv_s, w, wt: w * tw, best_w: w, ..Default::default() };
         if self.p.coverage_masks {
-            f.mask = super::mask::tri_mask(super::mask::whiten(lc, pw, t, self.p.clamp, self.floor * s));
+            f.mask = super::mask::tri_mask(super::mask::whiten(lc, pw, t, self.clamp, self.floor * s));
         }
         if mode == Collect::Shade {
             let [i0, i1, i2] = mesh.tris[tri as usize];
@@ -2052,7 +2082,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             n = -n;
             w = -w;
         }
-        let fs = cone.footprint_and_spread(t, self.p.clamp, self.floor);
+        let fs = cone.footprint_and_spread(t, self.clamp, self.floor);
         let (f0, f1) = (fs[0], fs[1]);
         let g0 = cone::project_on_plane(f0, cone.dir, n);
         let g1 = cone::project_on_plane(f1, cone.dir, n);
@@ -2178,7 +2208,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                     if importance * transmit > self.p.min_importance {
                         rc.tmin = t_self(rc.dir);
                         c.inc(Counter::rays_refract);
-                        let r = self.radiance_own(&rc, own, depth + 1, importance * transmit, ss, c);
+                        let r = self.secondary().radiance_own(&rc, own, depth + 1, importance * transmit, ss, c);
                         l += r.color * color * transmit;
                     }
                 }
@@ -2189,7 +2219,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             if let Some(mut rc) = cone::secondary(p, cone.dir, n, &w, fs, Outgoing::Reflect, roughness) {
                 rc.tmin = t_self(rc.dir);
                 c.inc(Counter::rays_reflect);
-                let r = self.radiance_own(&rc, own, depth + 1, importance * reflect_w, ss, c);
+                let r = self.secondary().radiance_own(&rc, own, depth + 1, importance * reflect_w, ss, c);
                 l += r.color * reflect_w;
             }
         }
