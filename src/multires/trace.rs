@@ -16,6 +16,10 @@
 //! the children are tested (one cone against the 8 child spheres in one f32x8 step) and
 //! queued. Classic cone tracing (`--method cone`) skips step 2–3 and always descends.
 //!
+//! Option beyond the paper's defaults: `--secondary-clamp` gives reflected and refracted
+//! cones (and the shadow cones of their hits) their own anisotropy clamp ([`Tracer::clamp`],
+//! [`TraceParams::secondary_clamp`]); unset, every cone uses the paper's one clamp.
+//!
 //! Tests.
 //! - Node (§4.6): the sphere centre is projected into the principal axes of the footprint
 //!   at its depth; the ellipse's extents (over the sphere's depth range, enlarged by the
