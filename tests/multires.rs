@@ -482,12 +482,6 @@ fn floor_behind_an_object_does_not_hide_it() {
     }
 }
 
-/// Self-exclusion of secondary cones is per instance: a mirror sphere standing on a green
-/// floor under a blue sky. Near its bottom the mirror reflects the floor a short way off; the
-/// first version skipped the whole scene up to the sphere's self-intersection threshold,
-/// so those reflected cones started below the floor and saw the sky (a blue rim where Embree
-/// sees green). Wherever Embree's pixel is clearly floor-coloured inside the sphere, the
-/// multires pixel must be too.
 /// A mirror ball standing on a green checkerboard floor under a blue sky.
 fn mirror_on_floor() -> Scene {
     let mut scene = Scene::empty("mirror-on-floor");
@@ -508,6 +502,12 @@ fn mirror_on_floor() -> Scene {
     scene
 }
 
+/// Self-exclusion of secondary cones is per instance: a mirror sphere standing on a green
+/// floor under a blue sky. Near its bottom the mirror reflects the floor a short way off; the
+/// first version skipped the whole scene up to the sphere's self-intersection threshold,
+/// so those reflected cones started below the floor and saw the sky (a blue rim where Embree
+/// sees green). Wherever Embree's pixel is clearly floor-coloured inside the sphere, the
+/// multires pixel must be too.
 #[test]
 fn reflections_of_a_touching_floor_are_not_skipped() {
     let scene = mirror_on_floor();
