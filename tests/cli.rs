@@ -250,6 +250,111 @@ fn render_writes_exr_aovs() {
     assert!(n.iter().filter(|v| v.length() > 0.5).all(|v| (v.length() - 1.0).abs() < 1e-3));
 }
 
+/// The cone tracers' profile: `--stats` `cone_profile` breaks the traversal work down by cone
+/// kind (the kinds add up to the frame's counters, and their cones to the ray counters), and
+/// `--aov cost=` maps it over the pixels (the EXR's counts add up to the same total). Only the
+/// cone tracers have it; a cost map is .png or .exr.
+#[test]
+fn render_profiles_cone_kinds_and_pixels() {
+    let d = tmp("cost");
+    let (png, exr, st, out) = (d.join("c.png"), d.join("c.exr"), d.join("s.json"), d.join("o.png"));
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            "spheres",
+            "--method",
+            "multires",
+            "--width",
+            "48",
+            "--height",
+            "36",
+            "--quiet",
+            "--out",
+            out.to_str().unwrap(),
+            "--stats",
+            st.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 0, "{err}");
+        serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(&st).unwrap()).unwrap()
+    };
+    let v = run(&["--aov", &format!("cost={}", png.display()), "--aov", &format!("cost={}", exr.display())]);
+    let c = &v["counters"];
+    let kinds = v["cone_profile"]["kinds"].as_object().unwrap();
+    assert_eq!(kinds.len(), 4);
+    let tests = ["instance_tests", "node_tests", "triangle_bound_tests", "triangle_tests", "surfel_tests"];
+    for name in tests.iter().chain(&["eigen_decompositions", "fragments_merged"]) {
+        let sum: u64 = kinds.values().map(|k| k[*name].as_u64().unwrap()).sum();
+        assert_eq!(sum, c[*name].as_u64().unwrap(), "{name}");
+    }
+    let cones = |k: &str| kinds[k]["cones"].as_u64().unwrap();
+    let ray = |k: &str| c[k].as_u64().unwrap();
+    assert_eq!(cones("primary"), 48 * 36);
+    assert_eq!(cones("primary"), ray("rays_primary"));
+    assert_eq!(cones("primary_shadow") + cones("secondary_shadow"), ray("rays_shadow"));
+    assert_eq!(cones("secondary"), ray("rays_reflect") + ray("rays_refract"));
+    // The spheres scene has all four kinds, each with work and time.
+    for (k, x) in kinds {
+        assert!(x["cones"].as_u64().unwrap() > 0 && x["node_tests"].as_u64().unwrap() > 0, "{k}");
+        assert!(x["traversal_cpu_seconds"].as_f64().unwrap() > 0.0, "{k}");
+    }
+    let share: f64 = kinds.values().map(|k| k["share_of_tests"].as_f64().unwrap()).sum();
+    assert!((share - 1.0).abs() < 1e-9, "{share}");
+    // The per-pixel counts add up to the frame's tests.
+    let total: u64 = tests.iter().map(|n| c[*n].as_u64().unwrap()).sum();
+    let (w, h, px) = lodtrace::film::io::read_image_linear(&exr).unwrap();
+    assert_eq!((w, h), (48, 36));
+    assert_eq!(px.iter().map(|p| p.x as u64).sum::<u64>(), total);
+    let pt = &v["cone_profile"]["pixel_tests"];
+    assert_eq!(pt["max"].as_u64().unwrap(), px.iter().map(|p| p.x as u64).max().unwrap());
+    assert!(pt["median"].as_u64().unwrap() <= pt["p95"].as_u64().unwrap());
+    let heat = image::open(&png).unwrap().to_rgb8();
+    assert_eq!(heat.dimensions(), (48, 36));
+    let distinct: std::collections::HashSet<_> = heat.pixels().map(|p| p.0).collect();
+    assert!(distinct.len() > 10, "a flat heat map");
+    // Without shadows and secondary cones, the primary cones are all the work.
+    let v = run(&["--no-shadows", "--max-depth", "0"]);
+    let kinds = v["cone_profile"]["kinds"].as_object().unwrap();
+    assert_eq!(kinds["primary"]["share_of_tests"].as_f64().unwrap(), 1.0);
+    for k in ["primary_shadow", "secondary", "secondary_shadow"] {
+        assert_eq!(kinds[k]["cones"].as_u64().unwrap(), 0, "{k}");
+    }
+    // The conventional tracers have neither.
+    let (code, _, err) = lodtrace(&[
+        "render",
+        "spheres",
+        "--width",
+        "8",
+        "--height",
+        "8",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+        "--stats",
+        st.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(std::fs::read_to_string(&st).unwrap().find("cone_profile").is_none());
+    let _ = std::fs::remove_file(&png);
+    for (m, f) in [("whitted", "x.png"), ("multires", "x.jpg"), ("multires", "x")] {
+        let p = d.join(f);
+        let (code, _, err) =
+            lodtrace(&["render", "spheres", "--method", m, "--out", out.to_str().unwrap(), "--aov", &format!("cost={}", p.display())]);
+        assert_eq!(code, 2, "{m} {f}: {err}");
+        one_error_line(&err);
+        assert!(!p.exists());
+    }
+    // bench: the profile table and a heat map per cone-tracer row.
+    let (code, out, err, d, json) = small_bench("costbench", &["spheres", "--methods", "whitted:bvh,multires"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("Where the cone tracers' traversal work goes") && out.contains("| spheres | multires |"), "{out}");
+    assert!(image::open(d.join("spheres-multires-cost.png")).is_ok());
+    assert!(!d.join("spheres-whitted_bvh-cost.png").exists());
+    let rows = json.unwrap()["rows"].as_array().unwrap().clone();
+    assert!(rows[0]["stats"].get("cone_profile").is_none() && rows[1]["stats"]["cone_profile"]["kinds"].is_object());
+}
+
 /// `--no-shadows` (a diagnostic): every light counts as visible. With it the image is
 /// nowhere darker and somewhere brighter (the spheres' shadows on the floor), for the
 /// conventional and the cone tracer; `--method surfel` refuses it.

@@ -92,7 +92,9 @@ pub struct RenderArgs {
     /// Output image (default render.png): `.png` is 8-bit sRGB, `.exr` linear float.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// AOV output, `depth=FILE.exr` or `normal=FILE.exr` (repeatable).
+    /// AOV output (repeatable): `depth=`, `normal=`, `color=FILE.exr`; `disparity-r|t=`,
+    /// `lod-r|t=FILE.png` (--method lod); `cost=FILE.png|.exr` (--method multires, cone: tests
+    /// per pixel, log-scale heat map or counts).
     #[arg(long, value_parser = parse_aov)]
     pub aov: Vec<(String, PathBuf)>,
     #[arg(long)]
@@ -138,8 +140,9 @@ pub fn parse_vec3(s: &str) -> Result<glam::Vec3, String> {
 }
 
 /// AOV names: EXR depth, normal, colour; PNG maps of `--method lod` (disparities d_r, d_t
-/// ×20, and the level-1 LOD of the reflected / transmitted rays).
-pub const AOVS: &[&str] = &["depth", "normal", "color", "disparity-r", "disparity-t", "lod-r", "lod-t"];
+/// ×20, and the level-1 LOD of the reflected / transmitted rays); `cost`, the cone tracers'
+/// tests per pixel (PNG heat map or EXR counts).
+pub const AOVS: &[&str] = &["depth", "normal", "color", "disparity-r", "disparity-t", "lod-r", "lod-t", "cost"];
 
 fn parse_aov(s: &str) -> Result<(String, PathBuf), String> {
     let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}': expected depth=FILE.exr, normal=FILE.exr or color=FILE.exr"))?;

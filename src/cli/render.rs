@@ -69,10 +69,24 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     io::check_beauty_ext(&out)?;
     for (k, p) in &a.aov {
         check_out_path(p)?;
+        let ext = p.extension().map(|e| e.to_ascii_lowercase());
+        if k == "cost" {
+            // The cone tracers' tests per pixel: a heat map (.png) or the counts (.exr).
+            if ext != Some("png".into()) && ext != Some("exr".into()) {
+                return Err(Error::Usage(format!(
+                    "{}: the cost AOV is written as .png (log-scale heat map) or .exr (tests per pixel)",
+                    p.display()
+                )));
+            }
+            if !matches!(a.method, crate::cli::Method::Multires | crate::cli::Method::Cone) {
+                return Err(Error::Usage("the cost AOV exists for --method multires and cone only".into()));
+            }
+            continue;
+        }
         let png = k.starts_with("disparity") || k.starts_with("lod");
-        let ext = if png { "png" } else { "exr" };
-        if p.extension().map(|e| e.to_ascii_lowercase()) != Some(ext.into()) {
-            return Err(Error::Usage(format!("{}: the {k} AOV is written as .{ext}", p.display())));
+        let want = if png { "png" } else { "exr" };
+        if ext != Some(want.into()) {
+            return Err(Error::Usage(format!("{}: the {k} AOV is written as .{want}", p.display())));
         }
         if png && a.method != crate::cli::Method::Lod {
             return Err(Error::Usage(format!("the {k} AOV exists for --method lod only")));
@@ -113,6 +127,15 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             "depth" => io::write_exr_depth(p, &r.out.film),
             "normal" => io::write_exr_normal(p, &r.out.film),
             "color" => io::write_film_exr(p, &r.out.film),
+            "cost" => {
+                let c = r.cones.as_ref().expect("cone method");
+                if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
+                    crate::film::metrics::cost_map(&c.pixel_tests, opts.width, opts.height).and_then(|img| io::write_rgb8_png(p, &img))
+                } else {
+                    let v: Vec<f32> = c.pixel_tests.iter().map(|&x| x as f32).collect();
+                    io::write_exr_scalar(p, opts.width, opts.height, &v)
+                }
+            }
             k @ ("disparity-r" | "disparity-t" | "lod-r" | "lod-t") => {
                 let m = &r.lod.as_ref().expect("lod method").maps;
                 io::write_rgb8_png(p, &crate::lod::maps_image(m, k))

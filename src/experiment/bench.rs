@@ -450,7 +450,7 @@ fn floor_diff(scene: &Scene, fs: &MethodSpec, ff: &Film, a: &BenchArgs) -> Resul
     let mut spec = fs.clone();
     spec.accel = other;
     spec.text = format!("{} on {}", fs.text, other.name());
-    let (film, _, _) = run_spec(scene, &spec, a.width, a.height, a.threads, 1, a.quiet)?;
+    let (film, ..) = run_spec(scene, &spec, a.width, a.height, a.threads, 1, a.quiet)?;
     Ok(Some((spec.text, pixel_diff(&film, ff))))
 }
 
@@ -477,16 +477,12 @@ pub struct BenchReport {
     pub deform: Vec<super::deform_bench::DeformRow>,
 }
 
+/// One bench row's render: the image, its stats, the LOD maps (`--method lod`) and the tests
+/// per pixel (the cone tracers).
+pub type SpecRun = (Film, run::Stats, Option<crate::lod::trace::LodMaps>, Option<Vec<u32>>);
+
 /// Renders `spec` on `scene` (best of `repeat` renders).
-pub fn run_spec(
-    scene: &Scene,
-    spec: &MethodSpec,
-    width: u32,
-    height: u32,
-    threads: usize,
-    repeat: u32,
-    quiet: bool,
-) -> Result<(Film, run::Stats, Option<crate::lod::trace::LodMaps>)> {
+pub fn run_spec(scene: &Scene, spec: &MethodSpec, width: u32, height: u32, threads: usize, repeat: u32, quiet: bool) -> Result<SpecRun> {
     let mut sc;
     let scene = if let Some(d) = spec.max_depth {
         sc = scene.clone();
@@ -506,7 +502,7 @@ pub fn run_spec(
     }
     let r = best.expect("at least one run");
     let stats = r.stats(scene, spec.method, spec.accel, &opts);
-    Ok((r.out.film, stats, r.lod.map(|l| l.maps)))
+    Ok((r.out.film, stats, r.lod.map(|l| l.maps), r.cones.map(|c| c.pixel_tests)))
 }
 
 /// Errors of `film` against `reference`: (RMSE, PSNR dB, mean FLIP), the per-pixel FLIP values
@@ -603,7 +599,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
     for scene in &scenes {
         let ref_film = match &reference {
             Some(r) => {
-                let (film, _, _) = run_spec(scene, r, a.width, a.height, a.threads, 1, a.quiet)?;
+                let (film, ..) = run_spec(scene, r, a.width, a.height, a.threads, 1, a.quiet)?;
                 if let Some(out) = &a.out {
                     crate::film::io::write_png(&out.join(format!("{}-reference-{}.png", scene.name, r.slug())), &film)?;
                 }
@@ -617,7 +613,14 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
         // Floor differences already rendered: (full-detail spec, (other back-end, difference)).
         let mut floors: Vec<(String, Option<(String, Vec<f32>)>)> = Vec::new();
         for spec in &specs {
-            let (film, stats, maps) = run_spec(scene, spec, a.width, a.height, a.threads, a.repeat, a.quiet)?;
+            let (film, stats, maps, pixel_tests) = run_spec(scene, spec, a.width, a.height, a.threads, a.repeat, a.quiet)?;
+            if let (Some(out), Some(v)) = (&a.out, &pixel_tests) {
+                // Where the cone tracer's work went: tests per pixel, log-scale heat map.
+                crate::film::io::write_rgb8_png(
+                    &out.join(format!("{}-{}-cost.png", scene.name, spec.slug())),
+                    &crate::film::metrics::cost_map(v, film.width, film.height)?,
+                )?;
+            }
             let mut lod_vs_full = None;
             if spec.method == Method::Lod {
                 if let Some((fs, ff, fst)) = full.iter().find(|(f, _, _)| {
@@ -694,7 +697,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                 spec.spp = spp;
                 spec.first_pass_spp = spec.first_pass_spp.min(spp);
                 spec.text = format!("{}:spp={spp}", sw.text);
-                let (film, stats, _) = run_spec(scene, &spec, a.width, a.height, a.threads, a.repeat, a.quiet)?;
+                let (film, stats, ..) = run_spec(scene, &spec, a.width, a.height, a.threads, a.repeat, a.quiet)?;
                 let mut row = finish_row(scene, &spec, &film, stats, Some((rf, &regions[..])), a.out.as_deref(), a.quiet)?;
                 row.speedup_vs_first = t0 / row.stats.render_seconds.max(1e-12);
                 row.sweep = true;
@@ -980,6 +983,33 @@ pub fn table_string(report: &BenchReport) -> String {
                 s.push_str(&format!(" {:.4} / {at} ({q}) |", g.flip));
             }
             s.push('\n');
+        }
+    }
+    let cones: Vec<&BenchRow> = report.rows.iter().filter(|r| r.stats.cone_profile.is_some()).collect();
+    if !cones.is_empty() {
+        s.push_str(
+            "\nWhere the cone tracers' traversal work goes, by cone kind (traversal CPU seconds summed over threads, \
+             tests per cone, share of the frame's tests; tests = instance, node, triangle-bound, triangle and surfel \
+             tests), and over the pixels:\n\n",
+        );
+        s.push_str("| scene | method | render s | primary | shadow of primary | reflected / refracted | shadow of secondary | tests per pixel: median / p95 / max | top 5 % pixels' share |\n");
+        s.push_str("|---|---|---:|---:|---:|---:|---:|---:|---:|\n");
+        for r in cones {
+            let p = r.stats.cone_profile.as_ref().expect("filtered");
+            s.push_str(&format!("| {} | {} | {:.3} |", r.scene, r.spec, r.stats.render_seconds));
+            for k in crate::multires::trace::ConeKind::ALL {
+                match p.kinds.get(k.name()) {
+                    Some(c) if c.cones > 0 => s.push_str(&format!(
+                        " {:.3} s, {:.0}/cone, {:.0} % |",
+                        c.traversal_cpu_seconds,
+                        c.tests_per_cone,
+                        100.0 * c.share_of_tests
+                    )),
+                    _ => s.push_str(" - |"),
+                }
+            }
+            let t = &p.pixel_tests;
+            s.push_str(&format!(" {} / {} / {} | {:.0} % |\n", t.median, t.p95, t.max, 100.0 * t.top_5_percent_share));
         }
     }
     let lod: Vec<&BenchRow> = report.rows.iter().filter(|r| r.lod_vs_full.is_some()).collect();

@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 use crate::lod::chain::LodScenes;
 use crate::lod::trace::LodTracer;
 use crate::lod::LodArgs;
-use crate::multires::trace::MultiresScene;
+use crate::multires::trace::{ConeKind, ConeProfile, MultiresScene};
 use crate::multires::MultiresArgs;
 use crate::scene::Scene;
 use serde::Serialize;
@@ -27,6 +27,97 @@ pub struct RunResult {
     pub hierarchy: Option<HierarchyStats>,
     /// `--method lod`: chain figures and the pass-1 maps.
     pub lod: Option<LodResult>,
+    /// The cone tracers: traversal work by cone kind and per pixel.
+    pub cones: Option<ConeReport>,
+}
+
+/// Where a cone tracer's traversal work went (`--stats` `cone_profile`, `--aov cost=`).
+pub struct ConeReport {
+    pub profile: ConeProfile,
+    /// Bounding-volume and primitive tests per pixel, row-major.
+    pub pixel_tests: Vec<u32>,
+}
+
+/// One cone kind in `cone_profile.kinds`: how many cones, the CPU time inside their
+/// traversals (summed over threads, shading excluded), their share of the frame's tests, and
+/// the work counters (same names as `counters`).
+#[derive(Serialize, Debug, Clone)]
+pub struct ConeKindStats {
+    pub cones: u64,
+    pub traversal_cpu_seconds: f64,
+    /// Share of the frame's bounding-volume and primitive tests (instance, node,
+    /// triangle-bound, triangle, surfel).
+    pub share_of_tests: f64,
+    /// Those tests per cone.
+    pub tests_per_cone: f64,
+    #[serde(flatten)]
+    pub counters: BTreeMap<String, u64>,
+}
+
+/// How the tests spread over the pixels (each pixel with every cone it spawned).
+#[derive(Serialize, Debug, Clone, Default)]
+pub struct PixelTests {
+    pub mean: f64,
+    pub median: u32,
+    pub p95: u32,
+    pub max: u32,
+    /// Share of all tests spent in the 5 % most expensive pixels.
+    pub top_5_percent_share: f64,
+}
+
+/// `--stats` `cone_profile` (`--method multires` and `cone`).
+#[derive(Serialize, Debug, Clone)]
+pub struct ConeProfileStats {
+    /// `primary`, `primary_shadow` (shadow cones of primary hits), `secondary` (reflected
+    /// and refracted cones), `secondary_shadow` (shadow cones of their hits).
+    pub kinds: BTreeMap<String, ConeKindStats>,
+    pub pixel_tests: PixelTests,
+}
+
+impl ConeReport {
+    pub fn stats(&self) -> ConeProfileStats {
+        let p = &self.profile;
+        let tests = |k: usize| p.work[k][..5].iter().sum::<u64>();
+        let total: u64 = (0..4).map(tests).sum();
+        let kinds = ConeKind::ALL
+            .iter()
+            .map(|&kind| {
+                let k = kind as usize;
+                let counters =
+                    ConeProfile::COUNTERS.iter().zip(p.work[k]).map(|(c, v)| (Counter::NAMES[*c as usize].to_string(), v)).collect();
+                let st = ConeKindStats {
+                    cones: p.cones[k],
+                    traversal_cpu_seconds: p.nanos[k] as f64 * 1e-9,
+                    share_of_tests: tests(k) as f64 / total.max(1) as f64,
+                    tests_per_cone: tests(k) as f64 / p.cones[k].max(1) as f64,
+                    counters,
+                };
+                (kind.name().to_string(), st)
+            })
+            .collect();
+        ConeProfileStats { kinds, pixel_tests: pixel_tests(&self.pixel_tests) }
+    }
+}
+
+/// Mean, median, 95th percentile, maximum and the top 5 %'s share of a per-pixel cost map.
+pub fn pixel_tests(v: &[u32]) -> PixelTests {
+    if v.is_empty() {
+        return PixelTests::default();
+    }
+    let mut s = v.to_vec();
+    s.sort_unstable();
+    let n = s.len();
+    let total: u64 = s.iter().map(|&x| x as u64).sum();
+    let at = |q: f64| s[((q * (n - 1) as f64).round() as usize).min(n - 1)];
+    let top = n.div_ceil(20);
+    let top_sum: u64 = s[n - top..].iter().map(|&x| x as u64).sum();
+    PixelTests {
+        mean: total as f64 / n as f64,
+        median: at(0.5),
+        p95: at(0.95),
+        max: s[n - 1],
+        top_5_percent_share: top_sum as f64 / total.max(1) as f64,
+    }
 }
 
 /// What `--method lod` reports besides the image.
@@ -102,6 +193,9 @@ pub struct Stats {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub lod: Option<LodStats>,
     pub counters: BTreeMap<String, u64>,
+    /// The cone tracers: the traversal work by cone kind and over the pixels.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cone_profile: Option<ConeProfileStats>,
 }
 
 fn unsupported(m: Method) -> Error {
@@ -130,7 +224,7 @@ pub fn run(scene: &Scene, method: Method, accel_kind: AccelKind, opts: &RenderOp
     let cam = scene.camera.frame(opts.width, opts.height);
     let o = RenderOpts { integrator, ..opts.clone() };
     let out = render(&ctx, &cam, &o)?;
-    Ok(RunResult { out, build_seconds, accel_bytes: acc.memory_bytes(), finished: true, hierarchy: None, lod: None })
+    Ok(RunResult { out, build_seconds, accel_bytes: acc.memory_bytes(), finished: true, hierarchy: None, lod: None, cones: None })
 }
 
 /// The cone tracers of Wand & Straßer: build the point hierarchies, then trace.
@@ -169,6 +263,7 @@ fn run_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &MultiresArgs)
         finished: r.finished,
         hierarchy: Some(h),
         lod: None,
+        cones: Some(ConeReport { profile: r.profile, pixel_tests: r.pixel_tests }),
     })
 }
 
@@ -201,7 +296,15 @@ fn run_lod(scene: &Scene, accel_kind: AccelKind, opts: &RenderOpts, la: &LodArgs
         reduced_transmit_share: r.maps.lod_t.iter().filter(|&&x| x < 1.0).count() as f64 / npix,
     };
     let accel_bytes = accels.iter().map(|a| a.memory_bytes()).sum();
-    Ok(RunResult { out: r.out, build_seconds, accel_bytes, finished: true, hierarchy: None, lod: Some(LodResult { stats, maps: r.maps }) })
+    Ok(RunResult {
+        out: r.out,
+        build_seconds,
+        accel_bytes,
+        finished: true,
+        hierarchy: None,
+        lod: Some(LodResult { stats, maps: r.maps }),
+        cones: None,
+    })
 }
 
 impl RunResult {
@@ -230,6 +333,7 @@ impl RunResult {
             hierarchy: self.hierarchy.clone(),
             lod: self.lod.as_ref().map(|l| l.stats.clone()),
             counters: self.out.counters.to_map(),
+            cone_profile: self.cones.as_ref().map(|c| c.stats()),
         }
     }
 }

@@ -208,6 +208,11 @@ pub fn write_exr_normal(path: &Path, film: &Film) -> Result<()> {
     write_rgb32f_exr(path, film.width, film.height, film.normal.iter().map(|n| n.to_array()))
 }
 
+/// A per-pixel scalar (`w*h`, row-major) as float EXR, the value in all three channels.
+pub fn write_exr_scalar(path: &Path, w: u32, h: u32, v: &[f32]) -> Result<()> {
+    write_rgb32f_exr(path, w, h, v.iter().map(|&x| [x, x, x]))
+}
+
 /// Reads a PNG (sRGB-encoded, converted to linear) or an EXR (already linear) as
 /// `(width, height, linear RGB row-major)`. Alpha is dropped.
 pub fn read_image_linear(path: &Path) -> Result<(u32, u32, Vec<Vec3>)> {

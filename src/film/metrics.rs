@@ -23,6 +23,9 @@
 //! - **diff image** — per-channel absolute difference of the linear values, normalised so the
 //!   largest difference is full white, then sRGB-encoded (which brightens small differences)
 //!   so that the structure of the error is visible.
+//! - **cost map** ([`cost_map`]) — not a metric: a per-pixel count (the cone tracers' tests
+//!   per pixel) on a log scale, ln(1 + v) / ln(1 + max), coloured with the same magma LUT
+//!   (black = 0, pale yellow = the maximum).
 
 use super::linear_to_srgb;
 use crate::error::{Error, Result};
@@ -184,6 +187,25 @@ pub fn ssim(a: &[Vec3], b: &[Vec3], w: u32, h: u32) -> f64 {
         sum += ((2.0 * ma * mb + C1) * (2.0 * cov + C2)) / ((ma * ma + mb * mb + C1) * (va + vb + C2));
     }
     sum / mu_a.len() as f64
+}
+
+/// The magma-coloured log-scale map of a per-pixel count (module docs); all black when every
+/// count is 0.
+pub fn cost_map(v: &[u32], w: u32, h: u32) -> Result<image::RgbImage> {
+    if v.len() != w as usize * h as usize {
+        return Err(Error::Image(format!("cost map: {} values for {w}x{h} pixels", v.len())));
+    }
+    let lut = nv_flip::magma_lut().to_vec();
+    let n = lut.len() / 3;
+    let max = v.iter().copied().max().unwrap_or(0);
+    let scale = if max > 0 { 1.0 / (max as f64).ln_1p() } else { 0.0 };
+    let mut img = image::RgbImage::new(w, h);
+    for (p, &x) in img.pixels_mut().zip(v) {
+        let i = (((x as f64).ln_1p() * scale) * (n - 1) as f64).round() as usize;
+        let i = i.min(n - 1);
+        *p = image::Rgb([lut[3 * i], lut[3 * i + 1], lut[3 * i + 2]]);
+    }
+    Ok(img)
 }
 
 /// Visible absolute difference: |a-b| per linear channel, normalised so the largest

@@ -2,10 +2,11 @@
 //! cone per pixel (§4.2), tiles in parallel with per-tile counters, a progress bar, and an
 //! optional time budget after which the remaining tiles are skipped and the frame is
 //! reported as unfinished (the paper's classic cone tracer with secondary rays "did not
-//! terminate within a reasonable amount of time").
+//! terminate within a reasonable amount of time"). Beside the image: the traversal work per
+//! pixel (`--aov cost=`) and by cone kind ([`ConeProfile`], `--stats` `cone_profile`).
 
 use super::cone::Cone;
-use super::trace::{MultiresScene, ShadeScratch, TraceParams, Tracer};
+use super::trace::{ConeProfile, MultiresScene, ShadeScratch, TraceParams, Tracer};
 use crate::baseline::render::{tiles, Progress, RenderOpts, RenderOutput};
 use crate::core::stats::{Counter, Counters};
 use crate::error::{Error, Result};
@@ -20,6 +21,11 @@ pub struct ConeRender {
     pub out: RenderOutput,
     /// False when the time budget ran out (the image is then incomplete).
     pub finished: bool,
+    /// Traversal work by cone kind.
+    pub profile: ConeProfile,
+    /// Bounding-volume and primitive tests per pixel, row-major ([`ConeProfile::tests`]):
+    /// every cone the pixel's primary cone spawned included.
+    pub pixel_tests: Vec<u32>,
 }
 
 pub fn render(ms: &MultiresScene, tp: &TraceParams, cam: &CameraFrame, opts: &RenderOpts) -> Result<ConeRender> {
@@ -40,7 +46,8 @@ pub fn render(ms: &MultiresScene, tp: &TraceParams, cam: &CameraFrame, opts: &Re
     let ts = tiles(w, h);
     let prog = Progress::new(ts.len() as u64, &opts.label, opts.quiet);
     let max_depth = ms.scene.max_depth;
-    let results: Vec<(Vec<(usize, Vec3, f32, Vec3)>, Counters)> = pool.install(|| {
+    type Px = (usize, Vec3, f32, Vec3, u32);
+    let results: Vec<(Vec<Px>, Counters, ConeProfile)> = pool.install(|| {
         ts.par_iter()
             .map_init(
                 || ShadeScratch::new(tp.max_fragments, max_depth),
@@ -48,20 +55,22 @@ pub fn render(ms: &MultiresScene, tp: &TraceParams, cam: &CameraFrame, opts: &Re
                     let mut c = Counters::default();
                     let mut out = Vec::with_capacity(((t.x1 - t.x0) * (t.y1 - t.y0)) as usize);
                     if abort.load(Ordering::Relaxed) {
-                        return (out, c);
+                        return (out, c, ConeProfile::default());
                     }
                     for j in t.y0..t.y1 {
                         for i in t.x0..t.x1 {
                             let cone = Cone::primary(cam, i, j, tp.cone_scale);
                             c.inc(Counter::rays_primary);
                             c.inc(Counter::samples);
+                            let before = ConeProfile::tests(&c);
                             let r = tracer.radiance(&cone, 0, 1.0, ss, &mut c);
+                            let tests = (ConeProfile::tests(&c) - before).min(u32::MAX as u64) as u32;
                             let col = if r.color.is_finite() { r.color } else { Vec3::ZERO };
-                            out.push(((j * w + i) as usize, col, r.depth, r.normal));
+                            out.push(((j * w + i) as usize, col, r.depth, r.normal, tests));
                         }
                     }
                     prog.tick();
-                    (out, c)
+                    (out, c, std::mem::take(&mut ss.profile))
                 },
             )
             .collect()
@@ -70,14 +79,18 @@ pub fn render(ms: &MultiresScene, tp: &TraceParams, cam: &CameraFrame, opts: &Re
     let mut film = Film::new(w, h);
     let mut counters = Counters::default();
     counters.add(Counter::trees_from_cache, ms.trees_from_cache() as u64);
-    for (px, c) in results {
+    let mut profile = ConeProfile::default();
+    let mut pixel_tests = vec![0u32; (w * h) as usize];
+    for (px, c, p) in results {
         counters.merge(&c);
-        for (k, col, d, n) in px {
+        profile.merge(&p);
+        for (k, col, d, n, tests) in px {
             film.color[k] = col;
             film.depth[k] = d;
             film.normal[k] = n;
+            pixel_tests[k] = tests;
         }
     }
     let finished = !abort.load(Ordering::Relaxed);
-    Ok(ConeRender { out: RenderOutput::timed(film, counters, start, cpu0, threads), finished })
+    Ok(ConeRender { out: RenderOutput::timed(film, counters, start, cpu0, threads), finished, profile, pixel_tests })
 }

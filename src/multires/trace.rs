@@ -2025,11 +2025,92 @@ pub struct ShadeScratch {
     pub trav: Scratch,
     /// One A-buffer per recursion level.
     pub bufs: Vec<ABuffer>,
+    /// Where the traversal work went, by cone kind (the caller takes it per tile).
+    pub profile: ConeProfile,
 }
 
 impl ShadeScratch {
     pub fn new(cap: usize, depth: u32) -> Self {
-        ShadeScratch { trav: Scratch::default(), bufs: (0..depth as usize + 2).map(|_| ABuffer::new(cap)).collect() }
+        ShadeScratch {
+            trav: Scratch::default(),
+            bufs: (0..depth as usize + 2).map(|_| ABuffer::new(cap)).collect(),
+            profile: ConeProfile::default(),
+        }
+    }
+}
+
+/// What a traversed cone is, for [`ConeProfile`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ConeKind {
+    /// A pixel's cone.
+    Primary = 0,
+    /// A shadow cone of a surface seen by a primary cone.
+    PrimaryShadow = 1,
+    /// A reflected or refracted cone, at any depth.
+    Secondary = 2,
+    /// A shadow cone of a surface seen by a reflected or refracted cone.
+    SecondaryShadow = 3,
+}
+
+impl ConeKind {
+    pub const ALL: [ConeKind; 4] = [ConeKind::Primary, ConeKind::PrimaryShadow, ConeKind::Secondary, ConeKind::SecondaryShadow];
+    /// The JSON name (`--stats` `cone_profile.kinds`).
+    pub fn name(self) -> &'static str {
+        ["primary", "primary_shadow", "secondary", "secondary_shadow"][self as usize]
+    }
+}
+
+/// Where a frame's traversal work goes, by [`ConeKind`]: cones, the CPU time inside their
+/// traversals (summed over threads; shading is not in it) and the work counters below.
+/// Each traversal is one window, so the four kinds add up to the frame's totals of these
+/// counters, which all count inside traversals. Kept on: one clock read and a copy of seven
+/// counters per cone (within the run-to-run noise on `spheres` and `complex`).
+#[derive(Clone, Debug, Default)]
+pub struct ConeProfile {
+    pub cones: [u64; 4],
+    pub nanos: [u64; 4],
+    pub work: [[u64; ConeProfile::COUNTERS.len()]; 4],
+}
+
+impl ConeProfile {
+    /// The counters broken down by kind.
+    pub const COUNTERS: [Counter; 7] = [
+        Counter::instance_tests,
+        Counter::node_tests,
+        Counter::triangle_bound_tests,
+        Counter::triangle_tests,
+        Counter::surfel_tests,
+        Counter::eigen_decompositions,
+        Counter::fragments_merged,
+    ];
+
+    fn snapshot(c: &Counters) -> [u64; Self::COUNTERS.len()] {
+        Self::COUNTERS.map(|k| c.get(k))
+    }
+
+    fn record(&mut self, kind: ConeKind, before: &[u64; Self::COUNTERS.len()], c: &Counters, since: Instant) {
+        let k = kind as usize;
+        self.cones[k] += 1;
+        self.nanos[k] += since.elapsed().as_nanos() as u64;
+        for (w, (&b, &id)) in self.work[k].iter_mut().zip(before.iter().zip(Self::COUNTERS.iter())) {
+            *w += c.get(id) - b;
+        }
+    }
+
+    pub fn merge(&mut self, o: &ConeProfile) {
+        for k in 0..4 {
+            self.cones[k] += o.cones[k];
+            self.nanos[k] += o.nanos[k];
+            for (a, b) in self.work[k].iter_mut().zip(o.work[k]) {
+                *a += b;
+            }
+        }
+    }
+
+    /// The traversal work counted in the per-pixel cost map: every bounding-volume and
+    /// primitive test (instance, node, triangle-bound, triangle, surfel).
+    pub fn tests(c: &Counters) -> u64 {
+        Self::COUNTERS[..5].iter().map(|&k| c.get(k)).sum()
     }
 }
 
@@ -2043,8 +2124,11 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let mut ab = std::mem::replace(&mut ss.bufs[depth as usize], ABuffer::new(0));
         ab.clear();
         ab.cap = self.p.max_fragments;
+        let (before, since) = (ConeProfile::snapshot(c), Instant::now());
         self.traverse_own(cone, own, &mut ab, Collect::Shade, &mut ss.trav, c);
         c.add(Counter::fragments_merged, ab.merges);
+        let kind = if depth == 0 { ConeKind::Primary } else { ConeKind::Secondary };
+        ss.profile.record(kind, &before, c, since);
         let scene = self.ms.scene;
         let mut res = ConeResult { color: Vec3::ZERO, alpha: 0.0, depth: f32::INFINITY, normal: Vec3::ZERO };
         let mut over = super::abuffer::Over::default();
@@ -2181,8 +2265,11 @@ impl<'s, 'a> Tracer<'s, 'a> {
                         let mut ab = std::mem::replace(&mut ss.bufs[depth as usize + 1], ABuffer::new(0));
                         ab.clear();
                         ab.cap = self.p.max_fragments;
+                        let (before, since) = (ConeProfile::snapshot(c), Instant::now());
                         self.traverse_own(&sh, Own::NONE, &mut ab, Collect::Alpha, &mut ss.trav, c);
                         c.add(Counter::fragments_merged, ab.merges);
+                        let kind = if depth == 0 { ConeKind::PrimaryShadow } else { ConeKind::SecondaryShadow };
+                        ss.profile.record(kind, &before, c, since);
                         let a = ab.alpha();
                         ss.bufs[depth as usize + 1] = ab;
                         1.0 - a
