@@ -77,19 +77,19 @@ pub struct ConeProfileStats {
 impl ConeReport {
     pub fn stats(&self) -> ConeProfileStats {
         let p = &self.profile;
-        let tests = |k: usize| p.work[k][..5].iter().sum::<u64>();
-        let total: u64 = (0..4).map(tests).sum();
+        let total: u64 = ConeKind::ALL.iter().map(|&k| p.kind_tests(k)).sum();
         let kinds = ConeKind::ALL
             .iter()
             .map(|&kind| {
                 let k = kind as usize;
+                let tests = p.kind_tests(kind);
                 let counters =
                     ConeProfile::COUNTERS.iter().zip(p.work[k]).map(|(c, v)| (Counter::NAMES[*c as usize].to_string(), v)).collect();
                 let st = ConeKindStats {
                     cones: p.cones[k],
                     traversal_cpu_seconds: p.nanos[k] as f64 * 1e-9,
-                    share_of_tests: tests(k) as f64 / total.max(1) as f64,
-                    tests_per_cone: tests(k) as f64 / p.cones[k].max(1) as f64,
+                    share_of_tests: tests as f64 / total.max(1) as f64,
+                    tests_per_cone: tests as f64 / p.cones[k].max(1) as f64,
                     counters,
                 };
                 (kind.name().to_string(), st)

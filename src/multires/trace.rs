@@ -2110,8 +2110,16 @@ impl ConeProfile {
     /// The traversal work counted in the per-pixel cost map: every bounding-volume and
     /// primitive test (instance, node, triangle-bound, triangle, surfel).
     pub fn tests(c: &Counters) -> u64 {
-        Self::COUNTERS[..5].iter().map(|&k| c.get(k)).sum()
+        Self::COUNTERS[..Self::TESTS].iter().map(|&k| c.get(k)).sum()
     }
+
+    /// The same tests of the cones of one kind.
+    pub fn kind_tests(&self, kind: ConeKind) -> u64 {
+        self.work[kind as usize][..Self::TESTS].iter().sum()
+    }
+
+    /// The first `TESTS` of [`ConeProfile::COUNTERS`] are the tests.
+    const TESTS: usize = 5;
 }
 
 impl<'s, 'a> Tracer<'s, 'a> {
