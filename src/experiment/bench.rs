@@ -996,20 +996,7 @@ pub fn table_string(report: &BenchReport) -> String {
         s.push_str("|---|---|---:|---:|---:|---:|---:|---:|---:|\n");
         for r in cones {
             let p = r.stats.cone_profile.as_ref().expect("filtered");
-            s.push_str(&format!("| {} | {} | {:.3} |", r.scene, r.spec, r.stats.render_seconds));
-            for k in crate::multires::trace::ConeKind::ALL {
-                match p.kinds.get(k.name()) {
-                    Some(c) if c.cones > 0 => s.push_str(&format!(
-                        " {:.3} s, {:.0}/cone, {:.0} % |",
-                        c.traversal_cpu_seconds,
-                        c.tests_per_cone,
-                        100.0 * c.share_of_tests
-                    )),
-                    _ => s.push_str(" - |"),
-                }
-            }
-            let t = &p.pixel_tests;
-            s.push_str(&format!(" {} / {} / {} | {:.0} % |\n", t.median, t.p95, t.max, 100.0 * t.top_5_percent_share));
+            s.push_str(&format!("| {} | {} | {:.3} | {} |\n", r.scene, r.spec, r.stats.render_seconds, p.cells().join(" | ")));
         }
     }
     let lod: Vec<&BenchRow> = report.rows.iter().filter(|r| r.lod_vs_full.is_some()).collect();

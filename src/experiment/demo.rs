@@ -345,22 +345,10 @@ fn index_html(sections: &[(Job, BenchReport)]) -> String {
             h.push_str("<h3>Where the cone tracer's work goes</h3><p>Per cone kind: traversal CPU seconds (summed over threads, shading excluded), tests per cone (instance, node, triangle-bound, triangle and surfel tests) and the kind's share of the frame's tests. The heat maps show the tests per pixel, every cone a pixel spawned included (log scale, magma: black none, pale yellow the most).</p><table><tr><th>method</th><th>primary</th><th>shadow of primary</th><th>reflected / refracted</th><th>shadow of secondary</th><th>tests per pixel: median / p95 / max</th><th>top 5 % pixels' share</th></tr>");
             for (row, p) in &prof {
                 let _ = write!(h, "<tr><td>{}</td>", esc(&row.spec));
-                for k in crate::multires::trace::ConeKind::ALL {
-                    match p.kinds.get(k.name()) {
-                        Some(c) if c.cones > 0 => {
-                            let _ = write!(
-                                h,
-                                "<td>{:.3} s, {:.0}/cone, {:.0} %</td>",
-                                c.traversal_cpu_seconds,
-                                c.tests_per_cone,
-                                100.0 * c.share_of_tests
-                            );
-                        }
-                        _ => h.push_str("<td>–</td>"),
-                    }
+                for cell in p.cells() {
+                    let _ = write!(h, "<td>{}</td>", esc(&cell));
                 }
-                let t = &p.pixel_tests;
-                let _ = write!(h, "<td>{} / {} / {}</td><td>{:.0} %</td></tr>", t.median, t.p95, t.max, 100.0 * t.top_5_percent_share);
+                h.push_str("</tr>");
             }
             h.push_str("</table>");
             for (row, _) in &prof {

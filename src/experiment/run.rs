@@ -74,6 +74,27 @@ pub struct ConeProfileStats {
     pub pixel_tests: PixelTests,
 }
 
+impl ConeProfileStats {
+    /// The table cells shared by `bench` and the demo: per kind in [`ConeKind::ALL`] order
+    /// "CPU s, tests/cone, share" ("–" for no cones), then "median / p95 / max" tests per
+    /// pixel and the top 5 %'s share.
+    pub fn cells(&self) -> Vec<String> {
+        let mut v: Vec<String> = ConeKind::ALL
+            .iter()
+            .map(|k| match self.kinds.get(k.name()) {
+                Some(c) if c.cones > 0 => {
+                    format!("{:.3} s, {:.0}/cone, {:.0} %", c.traversal_cpu_seconds, c.tests_per_cone, 100.0 * c.share_of_tests)
+                }
+                _ => "–".into(),
+            })
+            .collect();
+        let t = &self.pixel_tests;
+        v.push(format!("{} / {} / {}", t.median, t.p95, t.max));
+        v.push(format!("{:.0} %", 100.0 * t.top_5_percent_share));
+        v
+    }
+}
+
 impl ConeReport {
     pub fn stats(&self) -> ConeProfileStats {
         let p = &self.profile;
