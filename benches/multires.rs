@@ -408,7 +408,7 @@ fn centre_triangles() -> Vec<[Vec2; 3]> {
             if i % 2 == 0 {
                 std::array::from_fn(|_| c + Vec2::new(s.next() - 0.5, s.next() - 0.5) * 2.0)
             } else {
-                let dir = Vec2::from_angle(s.next() * 6.283);
+                let dir = Vec2::from_angle(s.next() * std::f32::consts::TAU);
                 [c - dir * 1.5, c + dir * 1.5, c + dir * 1.2 + dir.perp() * (0.05 + 0.2 * s.next())]
             }
         })
