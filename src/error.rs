@@ -35,3 +35,15 @@ impl Error {
         Error::Parse { path: path.into(), msg: msg.into() }
     }
 }
+
+/// An input must be a regular file (symbolic links followed): a FIFO would block the read
+/// forever and `/dev/zero` would fill the memory before any parser could object.
+pub fn check_input_file(path: &std::path::Path) -> Result<()> {
+    let m = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if m.is_file() {
+        Ok(())
+    } else {
+        let what = if m.is_dir() { "a folder" } else { "not a regular file" };
+        Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::InvalidInput, what)))
+    }
+}

@@ -5,7 +5,14 @@ fn main() {
     let cli = match lodtrace::cli::Cli::try_parse() {
         Ok(c) => c,
         Err(e) => match e.kind() {
-            ErrorKind::DisplayHelp | ErrorKind::DisplayVersion | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => e.exit(),
+            ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => e.exit(),
+            ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
+                // No subcommand: one line naming them, not the whole help on stderr.
+                let cmd = <lodtrace::cli::Cli as clap::CommandFactory>::command();
+                let subs: Vec<&str> = cmd.get_subcommands().map(|c| c.get_name()).filter(|n| *n != "help").collect();
+                eprintln!("lodtrace: error: give a subcommand ({}); `lodtrace --help` describes them", subs.join(", "));
+                std::process::exit(2);
+            }
             _ => {
                 // One clear line (clap's own message spans several).
                 let text = e.render().to_string();

@@ -776,3 +776,55 @@ fn failed_runs_leave_nothing_behind() {
     // An image compared with itself is fine.
     assert_eq!(lodtrace(&["compare", &a, &a, "--diff", &p("d.png")]).0, 0);
 }
+
+/// Inputs that would hang or exhaust the machine are refused up front, in one line with exit
+/// 2: no subcommand; a FIFO, a device and a folder as input files (a FIFO blocked the read
+/// forever, `/dev/zero` filled the memory); nested groups that multiply to billions of
+/// instances (2^40 filled 10 GB); recursion deeper than `MAX_DEPTH` (glass at depth 64 did
+/// not finish a thumbnail). Nothing is written by any of them.
+#[test]
+fn inputs_that_would_hang_are_refused() {
+    let d = tmp("hang");
+    let out = d.join("x.png");
+    let o = out.to_str().unwrap();
+    let (code, _, err) = lodtrace(&[]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains("render") && err.contains("animate"), "{err}");
+    let fifo = d.join("f.off");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let fifo_ply = d.join("f.ply");
+    assert!(Command::new("mkfifo").arg(&fifo_ply).status().unwrap().success());
+    let zero = d.join("z.toml");
+    std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
+    let folder = d.join("dir.obj");
+    std::fs::create_dir(&folder).unwrap();
+    let mut nested = String::from(
+        "[camera]\neye = [0.5, 2, 2]\nlook = [0.5, 0, 0.5]\n[meshes.q]\ngenerator = \"quad\"\n\
+         [[lights]]\ntype = \"point\"\npos = [0.5, 3, 0.5]\nintensity = 10\n[[instances]]\ntarget = \"g39\"\n",
+    );
+    for i in 0..40 {
+        let child = if i == 0 { "q".to_string() } else { format!("g{}", i - 1) };
+        nested += &format!(
+            "[[groups.g{i}.instances]]\ntarget = \"{child}\"\n[[groups.g{i}.instances]]\ntarget = \"{child}\"\ntranslate = [1, 0, 0]\n"
+        );
+    }
+    let deep = d.join("deep.toml");
+    std::fs::write(&deep, nested).unwrap();
+    let s = |p: &PathBuf| p.to_str().unwrap().to_string();
+    let (fifo, fifo_ply, zero, folder, deep) = (s(&fifo), s(&fifo_ply), s(&zero), s(&folder), s(&deep));
+    for args in [
+        vec!["render", &fifo, "--width", "16", "--height", "12", "--out", o],
+        vec!["render", &zero, "--width", "16", "--height", "12", "--out", o],
+        vec!["render", &folder, "--width", "16", "--height", "12", "--out", o],
+        vec!["animate", &fifo_ply, "--frames", "1", "--width", "16", "--height", "12"],
+        vec!["compare", &fifo, &fifo],
+        vec!["render", &deep, "--width", "16", "--height", "12", "--out", o],
+        vec!["render", "cabinet", "--width", "16", "--height", "12", "--max-depth", "17", "--out", o],
+    ] {
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(!out.exists(), "{args:?} left {o}");
+    }
+}

@@ -178,6 +178,11 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         Sequence::builtin(&a.scene, &opts).map_err(derr)?
     } else {
         let p = std::path::Path::new(&a.scene);
+        let named_file = ["ply", "off", "obj"].iter().any(|x| p.extension().is_some_and(|e| e.eq_ignore_ascii_case(x)));
+        if named_file || p.exists() {
+            // A file was meant: say what is wrong with it (missing, a folder, a FIFO).
+            crate::error::check_input_file(p)?;
+        }
         if !p.is_file() {
             return Err(Error::Usage(format!(
                 "unknown sequence '{}' (built-in: {}; or give an .obj, .off or .ply file)",

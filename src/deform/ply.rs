@@ -59,6 +59,7 @@ fn ascii_rows_match_header(buf: &[u8]) -> Result<(), String> {
 /// Reads a PLY point file (ASCII or binary) into a single-collection surfel model.
 pub fn load_ply(path: &Path) -> Result<SurfelModel, DeformError> {
     let err = |msg: String| DeformError::Ply { path: path.to_path_buf(), msg };
+    crate::error::check_input_file(path).map_err(|e| err(e.to_string()))?;
     let f = std::fs::File::open(path).map_err(|e| err(e.to_string()))?;
     let mut r = std::io::BufReader::new(f);
     read_ply(&mut r, path)

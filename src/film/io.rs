@@ -167,9 +167,13 @@ pub fn check_beauty_ext(path: &Path) -> Result<()> {
 }
 
 pub fn write_rgb8_png(path: &Path, img: &image::RgbImage) -> Result<()> {
-    write_atomic(path, |tmp| {
-        img.save_with_format(tmp, image::ImageFormat::Png).map_err(|e| Error::Image(format!("{}: {e}", path.display())))
-    })
+    // Encoded in memory, then written with `std::fs::write`, whose errors all surface:
+    // `image`'s `save` writes through a `BufWriter` whose final flush, on drop, swallows them
+    // (a full disk or a file-size limit left a truncated PNG and exit 0).
+    let mut buf = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut buf), image::ImageFormat::Png)
+        .map_err(|e| Error::Image(format!("{}: {e}", path.display())))?;
+    write_atomic(path, |tmp| std::fs::write(tmp, &buf).map_err(|e| Error::io(path, e)))
 }
 
 /// Writes `w*h` linear RGB triples as a 32-bit float RGB EXR, atomically.
@@ -217,6 +221,7 @@ pub fn write_exr_scalar(path: &Path, w: u32, h: u32, v: &[f32]) -> Result<()> {
 /// `(width, height, linear RGB row-major)`. Alpha is dropped.
 pub fn read_image_linear(path: &Path) -> Result<(u32, u32, Vec<Vec3>)> {
     let bad = |e: &dyn std::fmt::Display| Error::Image(format!("{}: cannot read image: {e}", path.display()));
+    crate::error::check_input_file(path)?;
     let reader = image::ImageReader::open(path).map_err(|e| Error::io(path, e))?;
     let reader = reader.with_guessed_format().map_err(|e| Error::io(path, e))?;
     let format = reader.format().ok_or_else(|| bad(&"not a PNG or EXR file"))?;

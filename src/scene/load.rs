@@ -34,6 +34,7 @@ pub fn load_mesh(path: &Path, mat: u32) -> Result<Mesh> {
 }
 
 fn read_to_string(path: &Path) -> Result<String> {
+    crate::error::check_input_file(path)?;
     std::fs::read_to_string(path).map_err(|e| Error::io(path, e))
 }
 
@@ -113,9 +114,7 @@ fn finish_mesh(path: &Path, mut mesh: Mesh) -> Result<Mesh> {
 /// OBJ via tobj (triangulated, single index). Returns the mesh and the MTL materials it uses;
 /// triangle materials are `mat` + the MTL material index (or `mat` when there is no MTL).
 pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
-    if !path.is_file() {
-        return Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "no such file")));
-    }
+    crate::error::check_input_file(path)?;
     let opts = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
     let (models, mtls) = tobj::load_obj(path, &opts).map_err(|e| Error::parse(path, e.to_string()))?;
     let mtls = mtls.unwrap_or_else(|e| {

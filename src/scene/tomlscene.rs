@@ -5,7 +5,7 @@
 //! name = "example"            # optional; default: the file's stem
 //! background = [0.5, 0.6, 0.8] # a colour is [r, g, b] or one number (grey); default dark blue
 //! ambient = 0.05              # constant ambient term (× albedo); default 0.03
-//! max_depth = 5               # reflection/refraction recursion limit (0..=64); default 5
+//! max_depth = 5               # reflection/refraction recursion limit (0..=16); default 5
 //!
 //! [camera]                    # optional; without it the scene is framed automatically
 //! eye = [0, 2, 8]             # required in [camera]
@@ -203,6 +203,7 @@ enum LightDef {
 /// Loads a TOML scene file (format in the module header). Mesh files are resolved relative
 /// to the TOML file's folder. The scene is validated; every error names `path`.
 pub fn load(path: &Path) -> Result<Scene> {
+    crate::error::check_input_file(path)?;
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
     from_str(&text, path)
 }
@@ -292,8 +293,8 @@ impl Builder<'_> {
             s.ambient = self.colour(v, "ambient")?;
         }
         if let Some(d) = def.max_depth {
-            if d > 64 {
-                return Err(self.err(format!("max_depth {d} is out of range (0..=64)")));
+            if d > super::MAX_DEPTH {
+                return Err(self.err(format!("max_depth {d} is out of range (0..={})", super::MAX_DEPTH)));
             }
             s.max_depth = d;
         }
