@@ -828,3 +828,70 @@ fn inputs_that_would_hang_are_refused() {
         assert!(!out.exists(), "{args:?} left {o}");
     }
 }
+
+/// Values that would be silently ignored or make nonsense are refused with one line, exit 2
+/// and no output: another method's options (render flags and bench keys), elliptical lights
+/// without area, materials that create light, images with NaN pixels. The octree baseline
+/// takes the octree's build options.
+#[test]
+fn ignored_options_and_meaningless_values_are_refused() {
+    let d = tmp("ignored");
+    let out = d.join("x.png");
+    let o = out.to_str().unwrap();
+    let small = ["--width", "16", "--height", "12", "--quiet", "--out", o];
+    let scene = |light: &str, mat: &str| {
+        format!(
+            "[camera]\neye = [0.5, 2, 2]\nlook = [0.5, 0, 0.5]\n[meshes.q]\ngenerator = \"quad\"\nmaterial = \"m\"\n\
+             [materials.m]\ncolor = [0.5, 0.5, 0.5]\n{mat}\n[[lights]]\n{light}\nintensity = 10\n[[instances]]\ntarget = \"q\"\n"
+        )
+    };
+    let ellipse = |b: &str| format!("type = \"ellipse\"\ncenter = [0.5, 3, 0.5]\naxis_a = [1, 0, 0]\naxis_b = {b}");
+    let write = |name: &str, text: String| {
+        let p = d.join(name);
+        std::fs::write(&p, text).unwrap();
+        p.to_str().unwrap().to_string()
+    };
+    let good = write("good.toml", scene(&ellipse("[0, 0, 1]"), "reflect = 0.3\ntransmit = 0.7"));
+    let parallel = write("parallel.toml", scene(&ellipse("[2, 0, 0]"), ""));
+    let flat = write("flat.toml", scene(&ellipse("[0, 0, 0]"), ""));
+    let bright = write("bright.toml", scene(&ellipse("[0, 0, 1]"), "reflect = 0.3\ntransmit = 0.8"));
+    let exr = d.join("nan.exr");
+    let mut img = image::Rgb32FImage::new(4, 4);
+    img.put_pixel(2, 1, image::Rgb([0.5, f32::NAN, 0.5]));
+    img.save(&exr).unwrap();
+    let ok_exr = d.join("ok.exr");
+    image::Rgb32FImage::new(4, 4).save(&ok_exr).unwrap();
+    let (exr, ok_exr) = (exr.to_str().unwrap(), ok_exr.to_str().unwrap());
+    let (code, _, err) = lodtrace(&[&["render", &good, "--method", "distributed", "--spp", "4"], &small[..]].concat());
+    assert_eq!(code, 0, "{err}");
+    std::fs::remove_file(&out).unwrap();
+    let (code, _, err) = lodtrace(&[&["render", "spheres", "--method", "whitted", "--accel", "octree", "--k", "8"], &small[..]].concat());
+    assert_eq!(code, 0, "the octree baseline takes --k: {err}");
+    std::fs::remove_file(&out).unwrap();
+    let (code, _, err) = lodtrace(&["compare", ok_exr, ok_exr]);
+    assert_eq!(code, 0, "{err}");
+    for (args, says) in [
+        (vec!["render", "spheres", "--method", "whitted", "--k", "0"], "--k"),
+        (vec!["render", "spheres", "--method", "whitted", "--time-budget", "nan"], "--time-budget"),
+        (vec!["render", "spheres", "--method", "lod", "--lod-scale", "3"], "--lod-scale"),
+        (vec!["render", "spheres", "--method", "multires", "--lod-f", "3"], "--lod-f"),
+        (vec!["render", "spheres", "--method", "whitted", "--variance-threshold", "0.1"], "--variance-threshold"),
+        (vec!["render", "armadillo-ball", "--method", "surfel", "--eye", "1,2,3"], "--eye"),
+        (vec!["render", &parallel], "non-parallel"),
+        (vec!["render", &flat], "non-parallel"),
+        (vec!["render", &bright], "exceeds 1"),
+        (vec!["compare", exr, ok_exr], "(2, 1)"),
+        (vec!["bench", "spheres", "--methods", "whitted:budget=5"], "budget"),
+        (vec!["bench", "spheres", "--methods", "whitted:embree:k=8"], "k is a key"),
+        (vec!["bench", "spheres", "--methods", "multires:f=12"], "f is a key"),
+        (vec!["bench", "spheres", "--methods", "lod:frames=3"], "frames"),
+        (vec!["bench", "bend", "--methods", "surfel:spp=4"], "spp"),
+    ] {
+        let args: Vec<&str> = if args[0] == "render" { [&args[..], &small[..]].concat() } else { args };
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(says), "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?} left {o}");
+    }
+}

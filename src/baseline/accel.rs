@@ -146,8 +146,15 @@ pub fn next_up(t: f32) -> f32 {
     f32::from_bits(if t > 0.0 { b + 1 } else { b - 1 })
 }
 
-/// Builds the requested back-end for a validated scene.
+/// Builds the requested back-end for a validated scene (the octree with the paper's defaults).
 pub fn build<'a>(kind: AccelKind, scene: &'a Scene) -> Result<Box<dyn Accel + 'a>> {
+    build_with(kind, scene, &crate::multires::build::BuildParams::default())
+}
+
+/// [`build`], with the octree's build parameters (`--k`, `--oversampling`, `--point-weights`),
+/// so that `--method whitted --accel octree` runs on the same octree as `--method multires`
+/// with the same options.
+pub fn build_with<'a>(kind: AccelKind, scene: &'a Scene, octree: &crate::multires::build::BuildParams) -> Result<Box<dyn Accel + 'a>> {
     match kind {
         AccelKind::Bvh => Ok(Box::new(super::bvh::BvhAccel::build(scene)?)),
         #[cfg(feature = "embree")]
@@ -156,6 +163,6 @@ pub fn build<'a>(kind: AccelKind, scene: &'a Scene) -> Result<Box<dyn Accel + 'a
         AccelKind::Embree => {
             Err(crate::error::Error::Usage("this build has no Embree (cargo feature 'embree' is off); use --accel bvh".into()))
         }
-        AccelKind::Octree => Ok(Box::new(crate::multires::octree_accel::OctreeAccel::build(scene)?)),
+        AccelKind::Octree => Ok(Box::new(crate::multires::octree_accel::OctreeAccel::build(scene, octree)?)),
     }
 }

@@ -58,9 +58,54 @@ pub fn opts_from(a: &RenderArgs) -> RenderOpts {
     }
 }
 
+/// Refuses options the chosen method would silently ignore (`--k 0` with `--method
+/// whitted`, `--time-budget` with anything but the cone tracers): a researcher who passes
+/// one believes it took effect.
+pub fn check_method_options(a: &RenderArgs) -> Result<()> {
+    use crate::baseline::accel::AccelKind;
+    use crate::cli::Method::*;
+    let m = a.method;
+    let cone = matches!(m, Multires | Cone);
+    let octree = matches!(m, Whitted | Distributed) && a.accel == AccelKind::Octree;
+    let (build, trace) = a.multires.changed();
+    let mut wrong: Vec<(&str, &str)> = Vec::new();
+    if !cone && !octree {
+        wrong.extend(build.iter().map(|o| (*o, "--method multires and cone, and of --accel octree")));
+    }
+    if !cone {
+        wrong.extend(trace.iter().map(|o| (*o, "--method multires and cone")));
+    }
+    if m != Lod {
+        wrong.extend(a.lod.changed().into_iter().map(|o| (o, "--method lod")));
+    }
+    let d = crate::baseline::render::RenderOpts::default();
+    if m != Distributed && a.first_pass_spp != d.first_pass_spp {
+        wrong.push(("--first-pass-spp", "--method distributed"));
+    }
+    if m != Distributed && a.variance_threshold != d.variance_threshold {
+        wrong.push(("--variance-threshold", "--method distributed"));
+    }
+    if m == Surfel {
+        // The sequence brings its own camera and has no recursion.
+        let c = &a.camera;
+        let set = [(c.eye.is_some(), "--eye"), (c.look.is_some(), "--look"), (c.up.is_some(), "--up"), (c.fovy.is_some(), "--fovy")];
+        if let Some((_, o)) = set.iter().find(|(s, _)| *s) {
+            return Err(Error::Usage(format!("{o}: --method surfel renders with the sequence's own camera")));
+        }
+        if a.max_depth.is_some() {
+            wrong.push(("--max-depth", "the methods with reflection and refraction"));
+        }
+    }
+    match wrong.first() {
+        Some((o, of)) => Err(Error::Usage(format!("{o} is an option of {of}; --method {} would ignore it", m.name()))),
+        None => Ok(()),
+    }
+}
+
 pub fn run(a: &RenderArgs) -> Result<()> {
     let opts = opts_from(a);
     opts.validate()?;
+    check_method_options(a)?;
     let out = a.out.clone().unwrap_or_else(|| "render.png".into());
     if out.as_os_str().is_empty() {
         return Err(Error::Usage("--out needs a file name".into()));

@@ -217,6 +217,26 @@ impl MethodSpec {
                 spec.accel = AccelKind::from_str(p, true).map_err(|_| bad(format!("unknown accel '{p}' (embree, bvh, octree)")))?;
             }
         }
+        // A key the method would ignore is an error, as for `render`'s options.
+        let cone = matches!(method, Method::Multires | Method::Cone);
+        let octree = matches!(method, Method::Whitted | Method::Distributed) && spec.accel == AccelKind::Octree;
+        for key in &seen {
+            let of = match *key {
+                "k" | "c" | "pw" if !(cone || octree) => "multires and cone, and of the accel octree",
+                "clamp" | "clamp2" | "lod" | "dtol" | "cs" | "mip" | "primary" | "budget" | "spread" | "groups" | "agg" | "tight"
+                | "mask" | "term" | "tri" | "eigen"
+                    if !cone =>
+                {
+                    "multires and cone"
+                }
+                "f" | "a" | "thres" | "sel" | "levels" | "dist" | "force" | "net" | "select" if method != Method::Lod => "lod",
+                "update" | "frames" | "detail" | "shadows" | "exact" if method != Method::Surfel => "surfel",
+                "fps" | "vt" if method != Method::Distributed => "distributed",
+                "spp" | "depth" | "accel" if method == Method::Surfel => "the scene-file methods",
+                _ => continue,
+            };
+            return Err(bad(format!("{key} is a key of {of}; {} would ignore it", method.name())));
+        }
         Ok(spec)
     }
 

@@ -237,9 +237,12 @@ pub fn run(scene: &Scene, method: Method, accel_kind: AccelKind, opts: &RenderOp
         m => return Err(unsupported(m)),
     };
     opts.validate()?;
+    // The octree baseline is built with the cone tracers' build options (its own defaults
+    // otherwise); the trace options do not apply to it.
+    let (octree, _) = mr.params(false)?;
     let leaves = scene.leaf_instances()?;
     let t0 = Instant::now();
-    let acc = accel::build(accel_kind, scene)?;
+    let acc = accel::build_with(accel_kind, scene, &octree)?;
     let build_seconds = t0.elapsed().as_secs_f64();
     let ctx = TraceCtx { scene, leaves: &leaves, accel: acc.as_ref(), max_depth: scene.max_depth };
     let cam = scene.camera.frame(opts.width, opts.height);

@@ -239,6 +239,12 @@ pub fn read_image_linear(path: &Path) -> Result<(u32, u32, Vec<Vec3>)> {
         return Err(bad(&"image is empty"));
     }
     let rgb = decoded.into_rgb32f();
+    // A NaN pixel means nothing to a metric (a float EXR can hold one). Infinity stays: the
+    // depth AOV writes it where a ray meets nothing.
+    if let Some((i, _)) = rgb.pixels().enumerate().find(|(_, p)| p.0.iter().any(|v| v.is_nan())) {
+        let (x, y) = (i as u32 % w, i as u32 / w);
+        return Err(bad(&format!("pixel ({x}, {y}) is NaN")));
+    }
     let px = rgb
         .pixels()
         .map(|p| {

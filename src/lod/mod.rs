@@ -69,6 +69,23 @@ impl Default for LodArgs {
 }
 
 impl LodArgs {
+    /// The options set away from their defaults, by their command-line names (`render`
+    /// refuses them for the other methods, which would ignore them).
+    pub fn changed(&self) -> Vec<&'static str> {
+        let d = Self::default();
+        let mut v = Vec::new();
+        macro_rules! diff {
+            ($($f:ident => $n:literal),* $(,)?) => { $( if self.$f != d.$f { v.push($n) } )* };
+        }
+        diff!(
+            lod_levels => "--lod-levels", lod_f => "--lod-f", lod_a => "--lod-a", lod_threshold => "--lod-threshold",
+            no_selective => "--no-selective", lod_selective_level => "--lod-selective-level",
+            lod_selective_ratio => "--lod-selective-ratio", lod_distance => "--lod-distance", lod_force => "--lod-force",
+            lod_net_disparity => "--lod-net-disparity", lod_selector => "--lod-selector",
+        );
+        v
+    }
+
     pub fn params(&self) -> Result<(ChainParams, LodParams)> {
         let p = LodParams {
             f: self.lod_f,

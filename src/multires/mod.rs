@@ -150,6 +150,30 @@ impl Default for MultiresArgs {
 }
 
 impl MultiresArgs {
+    /// The options set away from their defaults, by their command-line names: first those of
+    /// the octree build (`--k`, `--oversampling`, `--point-weights`, which `--accel octree`
+    /// uses too), then the cone tracers' own. `render` refuses them for a method that would
+    /// ignore them.
+    pub fn changed(&self) -> (Vec<&'static str>, Vec<&'static str>) {
+        let d = Self::default();
+        let mut build = Vec::new();
+        let mut trace = Vec::new();
+        macro_rules! diff {
+            ($v:ident: $($f:ident => $n:literal),* $(,)?) => { $( if self.$f != d.$f { $v.push($n) } )* };
+        }
+        // NaN differs from every default, so an invalid value is reported here too.
+        diff!(build: k => "--k", oversampling => "--oversampling", point_weights => "--point-weights");
+        diff!(trace:
+            anisotropy_clamp => "--anisotropy-clamp", secondary_clamp => "--secondary-clamp", lod_scale => "--lod-scale",
+            depth_tolerance => "--depth-tolerance", eigen => "--eigen", tri_weight => "--tri-weight", cone_scale => "--cone-scale",
+            no_mipmap => "--no-mipmap", primary_only => "--primary-only", termination => "--termination",
+            no_normal_spread => "--no-normal-spread", no_group_points => "--no-group-points",
+            no_aggregate_shadow => "--no-aggregate-shadow", tight_depth => "--tight-depth", coverage_masks => "--coverage-masks",
+            time_budget => "--time-budget",
+        );
+        (build, trace)
+    }
+
     pub fn params(&self, points: bool) -> Result<(BuildParams, TraceParams)> {
         let b = BuildParams { k: self.k, c: self.oversampling, weights: self.point_weights, ..Default::default() };
         let t = TraceParams {

@@ -23,8 +23,9 @@ pub struct OctreeAccel<'a> {
 }
 
 impl<'a> OctreeAccel<'a> {
-    pub fn build(scene: &'a Scene) -> Result<Self> {
-        Ok(OctreeAccel { ms: MultiresScene::build(scene, &BuildParams::default())? })
+    /// The octree of `--method multires` built with `params` (its points go unused).
+    pub fn build(scene: &'a Scene, params: &BuildParams) -> Result<Self> {
+        Ok(OctreeAccel { ms: MultiresScene::build(scene, params)? })
     }
 }
 

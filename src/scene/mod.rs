@@ -74,11 +74,18 @@ impl Material {
             && self.ior > 0.0
             && self.reflect <= 1.0
             && self.transmit <= 1.0;
-        if ok {
-            Ok(())
-        } else {
-            Err(Error::Scene(format!("material '{}' has out-of-range values", self.name)))
+        if !ok {
+            return Err(Error::Scene(format!("material '{}' has out-of-range values", self.name)));
         }
+        // Total internal reflection hands the transmitted share to the mirror ray, so a sum
+        // above one would make a surface brighter than what it reflects.
+        if self.reflect + self.transmit > 1.0 {
+            return Err(Error::Scene(format!(
+                "material '{}': reflect {} + transmit {} exceeds 1 (the surface would create light)",
+                self.name, self.reflect, self.transmit
+            )));
+        }
+        Ok(())
     }
 }
 
@@ -328,9 +335,19 @@ impl Scene {
             )));
         }
         self.camera.validate()?;
-        for l in &self.lights {
+        for (i, l) in self.lights.iter().enumerate() {
             if !l.center().is_finite() || !l.intensity().is_finite() {
-                return Err(Error::Scene("a light has non-finite values".into()));
+                return Err(Error::Scene(format!("light {i} has non-finite values")));
+            }
+            if let Light::Ellipse { axis_a, axis_b, .. } = l {
+                // Shadow cones aim at the ellipse's Gaussian (§4.2): zero or parallel axes
+                // give it no area, and the distributed sampler a zero-area light.
+                let area = axis_a.cross(*axis_b).length();
+                if !axis_a.is_finite() || !axis_b.is_finite() || !(area > 1e-6 * axis_a.length() * axis_b.length()) {
+                    return Err(Error::Scene(format!(
+                        "light {i}: an elliptical light needs two non-zero, non-parallel axes (a point light has none)"
+                    )));
+                }
             }
         }
         Ok(())
