@@ -295,9 +295,18 @@ fn foliage_scene(light: Vec3) -> Scene {
 
 /// Foliage shadows itself (`aggregate_shadow`, a deviation from the paper): a fragment of a
 /// leaf cloud starts its shadow cones past its own thickness, not past its footprint (the
-/// surface rule, which skips the leaves within the footprint that shadow it). Seen from
-/// the side and lit from above, the cloud comes closer to the reference with either
-/// triangle weight. A smooth surface is not touched.
+/// surface rule, which skips the leaves within the footprint that shadow it), with the
+/// cone's own cross-section. Seen from the side and lit from above, the cloud gets darker
+/// (its self-shadowing) and stays as close to the reference as the surface rule, with either
+/// triangle weight; with the exact mass its brightness is near the reference's. A smooth
+/// surface is not touched.
+///
+/// Until stop 31 the rule also had to be *closer* than the surface rule here (coverage
+/// RMSE 0.0194 against 0.0205, mass 0.0158 against 0.0166). Then the surface rule's shadow
+/// footprint was corrected to the paper's (the incoming footprint on the tangent plane, not
+/// a projection along the light), which brought the surface rule itself to 0.0192 and
+/// 0.0158 on this cloud: the rule's gain now shows on `complex` (320×240 mean FLIP 0.1255
+/// against 0.1380 without it, README stop 31), not on this isolated cloud.
 #[test]
 fn foliage_shadows_itself() {
     let scene = foliage_scene(Vec3::new(0.0, 1000.0, 300.0));
@@ -311,7 +320,7 @@ fn foliage_shadows_itself() {
             (mean(&f), rmse(&f, &reference))
         });
         let msg = format!("{tw:?}: mean {m_on} / RMSE {e_on} with, {m_off} / {e_off} without; reference mean {want}");
-        assert!(m_on < m_off && e_on < e_off, "{msg}");
+        assert!(m_on < m_off && e_on < 1.02 * e_off, "{msg}");
         // With the exact triangle mass the cloud's coverage is near right, and the
         // brightness lands near the reference's (measured: 12 % darker with, 10 % brighter
         // without, since the mass is normalised and cut as the point weights are; 5 % and 15 %

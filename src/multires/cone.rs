@@ -281,14 +281,21 @@ pub fn secondary(p: Vec3, dir: Vec3, n: Vec3, w: &Mat3, fs: [Vec3; 4], out: Outg
 }
 
 /// The shadow cone from surface point `p` towards a light at `light_pos` (distance `dist`):
-/// the surface footprint `(f0, f1)` shrinking to zero at the light, plus the light ellipse
+/// the surface footprint `(g0, g1)` shrinking to zero at the light, plus the light ellipse
 /// `(axis_a, axis_b)` (zero for a point light) growing from zero at the surface.
-pub fn shadow(p: Vec3, n: Vec3, f0: Vec3, f1: Vec3, light_pos: Vec3, axis_a: Vec3, axis_b: Vec3) -> (Cone, f32) {
+///
+/// `(g0, g1)` is the footprint *on the surface* (§4.2: "projecting the incoming ray footprint
+/// onto the tangent plane", along the incoming ray: [`project_on_plane`] with the incoming
+/// direction), which the shadow cone sees across its own direction ("transformed into ray
+/// coordinates", [`Cone::fp_of`]). Until stop 31 the caller passed the incoming cone's axes
+/// and this function projected them along the *light* direction, which shrank a grazing
+/// view's footprint on the floor instead of stretching it (review finding; README stop 31).
+pub fn shadow(p: Vec3, g0: Vec3, g1: Vec3, light_pos: Vec3, axis_a: Vec3, axis_b: Vec3) -> (Cone, f32) {
     let to = light_pos - p;
     let dist = to.length();
     let dir = to / dist;
     let mut c = Cone::new(p, dir, &[]);
-    let s = c.fp_of(project_on_plane(f0, dir, n), project_on_plane(f1, dir, n));
+    let s = c.fp_of(g0, g1);
     c.add_pair(s, s.scale(-1.0 / dist));
     if axis_a != Vec3::ZERO || axis_b != Vec3::ZERO {
         let l = c.fp_of(axis_a - dir * dir.dot(axis_a), axis_b - dir * dir.dot(axis_b));
@@ -389,11 +396,34 @@ mod tests {
 
     #[test]
     fn shadow_cone_ends_at_the_light_ellipse() {
-        let (c, d) = shadow(Vec3::ZERO, Vec3::Y, Vec3::X * 0.05, Vec3::Z * 0.05, Vec3::new(0.0, 4.0, 0.0), Vec3::X, Vec3::Z * 0.5);
+        let (c, d) = shadow(Vec3::ZERO, Vec3::X * 0.05, Vec3::Z * 0.05, Vec3::new(0.0, 4.0, 0.0), Vec3::X, Vec3::Z * 0.5);
         assert!((d - 4.0).abs() < 1e-6);
         let e = eigen_1(c.sigma(4.0), 1e-9, 1e-30);
         assert!((e.s1 - 1.0).abs() < 1e-4 && (e.s2 - 0.5).abs() < 1e-4);
         let e0 = eigen_1(c.sigma(0.0), 1e-9, 1e-30);
         assert!((e0.s1 - 0.05).abs() < 1e-4);
+    }
+
+    /// §4.2: a shadow cone starts with the incoming footprint projected onto the tangent
+    /// plane along the *incoming* ray, seen across the light direction. A grazing view of a
+    /// floor stretches the footprint along the view (here 10×), and a light straight above
+    /// sees all of that stretch; a light low along the view sees it foreshortened.
+    #[test]
+    fn shadow_cone_starts_with_the_surface_footprint() {
+        let n = Vec3::Y;
+        let dir_in = Vec3::new(1.0, -0.1, 0.0).normalize();
+        let f0 = Vec3::new(0.1, 1.0, 0.0).normalize() * 0.01; // ⟂ dir_in, in the view's vertical
+        let f1 = Vec3::Z * 0.01;
+        let (g0, g1) = (project_on_plane(f0, dir_in, n), project_on_plane(f1, dir_in, n));
+        assert!(g0.dot(n).abs() < 1e-7 && (g0.length() - 0.1005).abs() < 1e-3, "{g0}");
+        let start = |light: Vec3| {
+            let (c, _) = shadow(Vec3::ZERO, g0, g1, light, Vec3::ZERO, Vec3::ZERO);
+            eigen_1(c.sigma(0.0), 1e-12, 1e-30)
+        };
+        let above = start(Vec3::new(0.0, 5.0, 0.0));
+        assert!((above.s1 - g0.length()).abs() < 1e-4 && (above.s2 - 0.01).abs() < 1e-5, "{above:?}");
+        let el: f32 = 0.5; // light 0.5 rad above the floor, in the view's plane
+        let low = start(Vec3::new(el.cos(), el.sin(), 0.0) * 5.0);
+        assert!((low.s1 - g0.length() * el.sin()).abs() < 1e-4, "{low:?}");
     }
 }
