@@ -140,13 +140,31 @@ impl Cone {
     /// its two axis ends, (d0, d1): the growth rate of each semi-axis, ds/dt = eᵀΣ'(t)e/(2s)
     /// (first-order eigenvalue perturbation), along that axis. For a one-pair cone without
     /// shear this is exactly incrDev applied to the axis.
+    ///
+    /// The footprint is the clamped one (the anisotropy clamp inflates the minor axis), the
+    /// growth rate that of the cone itself: s is the unclamped semi-axis √(eᵀΣe). (Until
+    /// stop 32 it was divided by the clamped s₂, which slowed a clamped minor axis's growth
+    /// by the clamp's inflation, up to 16×; review finding of stop 31.) eᵀΣ(t)e is a sum of
+    /// squares of linear functions of t, so |ds/dt| ≤ √(eᵀCe) exactly (C the t² term): the
+    /// rate is held to that bound, which keeps it finite where s vanishes.
     pub fn footprint_and_spread(&self, t: f32, clamp: f32, floor: f32) -> [Vec3; 4] {
         let (f0, f1, e) = self.footprint_vectors(t, clamp, floor);
+        let sig = self.sigma(t);
         let d = Sym2 { a: self.b.a + 2.0 * t * self.c.a, b: self.b.b + 2.0 * t * self.c.b, c: self.b.c + 2.0 * t * self.c.c };
-        let along = |c: f32, s: f32| d.a * c * c + 2.0 * d.b * c * s + d.c * s * s;
-        let ds1 = along(e.cos, e.sin) / (2.0 * e.s1);
-        let ds2 = along(-e.sin, e.cos) / (2.0 * e.s2);
-        [f0, f1, f0 * (ds1 / e.s1), f1 * (ds2 / e.s2)]
+        let quad = |m: &Sym2, c: f32, s: f32| m.a * c * c + 2.0 * m.b * c * s + m.c * s * s;
+        let rate = |c: f32, s: f32| {
+            let size = quad(&sig, c, s).max(0.0).sqrt().max(floor);
+            let bound = quad(&self.c, c, s).max(0.0).sqrt();
+            let r = quad(&d, c, s) / (2.0 * size);
+            if r.is_finite() {
+                r.clamp(-bound, bound)
+            } else {
+                0.0
+            }
+        };
+        let e1 = self.u * e.cos + self.v * e.sin;
+        let e2 = self.v * e.cos - self.u * e.sin;
+        [f0, f1, e1 * rate(e.cos, e.sin), e2 * rate(-e.sin, e.cos)]
     }
 
     /// The primary cone through pixel (i, j) (its centre, as the DESIGN.md camera).
@@ -370,6 +388,26 @@ mod tests {
         let rough = secondary(Vec3::ZERO, dir, n, &Mat3::ZERO, fs, Outgoing::Reflect, 0.1).unwrap();
         let want = (s(&flat, 5.0).powi(2) + (5.0 * 0.1f32.tan()).powi(2)).sqrt();
         assert!((s(&rough, 5.0) - want).abs() < 1e-3, "roughness adds in quadrature");
+    }
+
+    /// The minor axis of a clamped footprint grows at the cone's own rate, not at a rate
+    /// diluted by the clamp's inflation (stop 32), and never faster than the cone's t² term.
+    #[test]
+    fn clamped_minor_axis_keeps_its_growth_rate() {
+        let dir = Vec3::new(0.0, 0.0, -1.0);
+        let c = Cone::new(Vec3::new(0.0, 0.0, 10.0), dir, &[(Fp::ZERO, Fp { c0: Vec2::new(0.01, 0.0), c1: Vec2::new(0.0, 1e-4) })]);
+        for clamp in [1e-9, 1.0 / 16.0, 0.25] {
+            let [f0, f1, d0, d1] = c.footprint_and_spread(10.0, clamp, 1e-30);
+            assert!((f0.length() - 0.1).abs() < 1e-5, "{f0}");
+            assert!((f1.length() - (1e-3f32).max(clamp * 0.1)).abs() < 1e-6, "{f1}");
+            assert!((d0.length() - 0.01).abs() < 1e-6, "{d0}");
+            assert!((d1.length() - 1e-4).abs() < 1e-7, "clamp {clamp}: minor-axis rate {}", d1.length());
+        }
+        // A pair whose footprint passes through zero (a lens pair at its focus): the rate is
+        // the bound, finite, where s vanishes.
+        let lens = Cone::new(Vec3::ZERO, dir, &[(Fp::diag(0.1), Fp::diag(-0.02))]);
+        let [_, _, d0, d1] = lens.footprint_and_spread(5.0, 1.0 / 16.0, 1e-30);
+        assert!(d0.is_finite() && d1.is_finite() && d0.length() <= 0.02 + 1e-6 && d1.length() <= 0.02 + 1e-6, "{d0} {d1}");
     }
 
     #[test]
