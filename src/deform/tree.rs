@@ -407,11 +407,18 @@ pub fn leaf_sphere(s: &DeformedSurfel) -> (Vec3, f32) {
 // Ray–sphere kernels. Rays are (o, d) with d not necessarily unit; t in multiples of d.
 // The discriminant uses the cross-product form a·r² − ‖(c−o)×d‖² (no cancellation for far
 // spheres). A sphere counts as hit if [t0, t1] overlaps [tnear, tfar]; the returned entry is
-// max(t0, tnear). The tests are conservative: the discriminant is widened by
-// CONS_TOL·a·‖c−o‖² and [t0, t1] by CONS_TOL·(|b| + √disc)/a, bounds on their rounding, so a
-// ray that truly meets a sphere is never reported as a miss (tiny leaf spheres far from the
-// origin would otherwise flicker, and the ancestors of a hit leaf must all report a hit for
-// the modes to agree). The x8 kernels perform the same operations in the same order, so they
+// max(t0, tnear). The tests are conservative, so a ray that truly meets a sphere is never
+// reported as a miss (tiny leaf spheres far from the origin would otherwise flicker, and the
+// ancestors of a hit leaf must all report a hit for the modes to agree): the radius is
+// widened by η = CONS_TOL·‖c−o‖ and the discriminant's a·r'² by the factor 1 + CONS_TOL,
+// [t0, t1] by CONS_TOL·(|b| + √disc)/a. η bounds the rounding of the perpendicular distance
+// ‖(c−o)×d‖/‖d‖: c − o is rounded by ≤ u‖c−o‖ (u = ε/2), each cross-product component by
+// ≤ 2u(|x·y| + |z·w|), together ≤ 6u‖c−o‖, and CONS_TOL = 32u is five times that.
+// (Until stop 32 the discriminant was widened by CONS_TOL·a·‖c−o‖², a perpendicular slack of
+// √CONS_TOL·‖c−o‖ ≈ 1.4e-3·‖c−o‖ instead of 1.9e-6·‖c−o‖: a 4 mm surfel 10 units away was
+// tested as a 14 mm one, and a shadow ray from the floor near the horizon, 9,700 units
+// away, met every sphere of `bend`'s character from 11 units above it — 100 k leaf tests for
+// that one ray.) The x8 kernels perform the same operations in the same order, so they
 // return bit-identical results to the scalar reference.
 // ---------------------------------------------------------------------------------------
 
@@ -428,7 +435,8 @@ pub fn sphere_test_1(o: Vec3, d: Vec3, c: Vec3, r: f32, tnear: f32, tfar: f32) -
     let cy = oc.z * d.x - oc.x * d.z;
     let cz = oc.x * d.y - oc.y * d.x;
     let oo = oc.x * oc.x + oc.y * oc.y + oc.z * oc.z;
-    let disc = a * (r * r) - (cx * cx + cy * cy + cz * cz) + CONS_TOL * (a * oo);
+    let re = r + CONS_TOL * oo.sqrt();
+    let disc = (a * (re * re)) * (1.0 + CONS_TOL) - (cx * cx + cy * cy + cz * cz);
     let sq = disc.max(0.0).sqrt();
     let inv = 1.0 / a;
     let slack = CONS_TOL * (b.abs() + sq);
@@ -537,7 +545,8 @@ fn kernel_pre(o: [f32x8; 3], d: [f32x8; 3], a: f32x8, inv: f32x8, c: [f32x8; 3],
     let cz = ocx * d[1] - ocy * d[0];
     let oo = ocx * ocx + ocy * ocy + ocz * ocz;
     let tol = f32x8::splat(CONS_TOL);
-    let disc = a * (r * r) - (cx * cx + cy * cy + cz * cz) + tol * (a * oo);
+    let re = r + tol * oo.sqrt();
+    let disc = (a * (re * re)) * f32x8::splat(1.0 + CONS_TOL) - (cx * cx + cy * cy + cz * cz);
     let zero = f32x8::splat(0.0);
     let sq = disc.max(zero).sqrt();
     let slack = tol * (b.abs() + sq);
@@ -588,7 +597,8 @@ pub fn entry_1(o: Vec3, d: Vec3, c: Vec3, r: f32, tnear: f32) -> f32 {
     let cy = oc.z * d.x - oc.x * d.z;
     let cz = oc.x * d.y - oc.y * d.x;
     let oo = oc.x * oc.x + oc.y * oc.y + oc.z * oc.z;
-    let disc = a * (r * r) - (cx * cx + cy * cy + cz * cz) + CONS_TOL * (a * oo);
+    let re = r + CONS_TOL * oo.sqrt();
+    let disc = (a * (re * re)) * (1.0 + CONS_TOL) - (cx * cx + cy * cy + cz * cz);
     let sq = disc.max(0.0).sqrt();
     let slack = CONS_TOL * (b.abs() + sq);
     ((b - sq - slack) * (1.0 / a)).max(tnear)
@@ -644,6 +654,52 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Conservative against the exact (f64) test on random rays and spheres at scales from
+    /// 1e-3 to 1e4, and tight: the slack grows like 1e-6 of the distance, not 1e-3 (stop 32:
+    /// the old widening made a 1 cm sphere 10⁴ units away count as hit from 13 units off).
+    #[test]
+    fn sphere_tests_are_conservative_and_tight() {
+        let mut s = Sampler::new(9, 8, 7);
+        let mut missed_by_exact = 0;
+        for i in 0..200_000 {
+            let x: [f32; 14] = std::array::from_fn(|_| s.next());
+            let v = |k: usize| Vec3::new(x[k] * 2.0 - 1.0, x[k + 1] * 2.0 - 1.0, x[k + 2] * 2.0 - 1.0);
+            let scale = 10f32.powf(-3.0 + 7.0 * x[9]);
+            let o = v(0) * scale * 2.0;
+            let c = v(3) * scale * 2.0 + o * (i % 2) as f32;
+            let r = scale * 10f32.powf(-4.0 * x[10]);
+            // Aim near the sphere's rim: through a point at 0.5–1.5 r from the centre.
+            let aim = c + v(6).normalize_or_zero() * r * (0.5 + x[11]);
+            let d = (aim - o) * (0.5 + x[12]);
+            if d == Vec3::ZERO {
+                continue;
+            }
+            let (o64, d64, c64) = (o.as_dvec3(), d.as_dvec3(), c.as_dvec3());
+            let oc = c64 - o64;
+            let perp2 = oc.cross(d64).length_squared() / d64.length_squared();
+            let t_mid = oc.dot(d64) / d64.length_squared();
+            let r2 = (r as f64) * (r as f64);
+            let exact_hit = perp2 <= r2 && t_mid + (r2 - perp2).sqrt() / d64.length() >= 0.0;
+            let got = sphere_test_1(o, d, c, r, 0.0, f32::INFINITY);
+            if exact_hit {
+                assert!(got.is_some(), "missed a sphere the ray meets: o {o} d {d} c {c} r {r}");
+            } else {
+                missed_by_exact += 1;
+            }
+        }
+        assert!(missed_by_exact > 10_000, "the rays must also pass outside the rims: {missed_by_exact}");
+        // Tight far away: a ray from 10⁴ units passing 0.05 above a 0.01 sphere misses, and
+        // one from 10 units passing at twice the radius of a 4 mm sphere misses.
+        let c = Vec3::new(0.0, 1.0, 0.0);
+        let o = Vec3::new(-9_700.0, 8.0, 5_000.0);
+        let d = (c + Vec3::new(0.0, 0.06, 0.0) - o).normalize();
+        assert!(sphere_test_1(o, d, c, 0.01, 0.0, f32::INFINITY).is_none());
+        let o = Vec3::new(4.5, 2.0, 0.0);
+        let d = (c + Vec3::new(0.0, 0.0, 0.008) - o).normalize();
+        assert!(sphere_test_1(o, d, c, 0.004, 0.0, f32::INFINITY).is_none());
+        assert!(sphere_test_1(o, d, c, 0.0081, 0.0, f32::INFINITY).is_some());
     }
 
     #[test]
