@@ -132,9 +132,13 @@ impl Cone {
     /// The footprint ellipse at t as two world-space semi-axis vectors (major, minor).
     pub fn footprint_vectors(&self, t: f32, clamp: f32, floor: f32) -> (Vec3, Vec3, Eigen2) {
         let e = eigen_1(self.sigma(t), clamp, floor);
-        let e1 = self.u * e.cos + self.v * e.sin;
-        let e2 = self.v * e.cos - self.u * e.sin;
+        let (e1, e2) = self.axis_dirs(&e);
         (e1 * e.s1, e2 * e.s2, e)
+    }
+    /// World-space unit directions of an eigen-decomposition's major and minor axes.
+    #[inline]
+    fn axis_dirs(&self, e: &Eigen2) -> (Vec3, Vec3) {
+        (self.u * e.cos + self.v * e.sin, self.v * e.cos - self.u * e.sin)
     }
     /// The footprint at t, (f0, f1), and the direction differentials of the rays through
     /// its two axis ends, (d0, d1): the growth rate of each semi-axis, ds/dt = eᵀΣ'(t)e/(2s)
@@ -162,8 +166,7 @@ impl Cone {
                 0.0
             }
         };
-        let e1 = self.u * e.cos + self.v * e.sin;
-        let e2 = self.v * e.cos - self.u * e.sin;
+        let (e1, e2) = self.axis_dirs(&e);
         [f0, f1, e1 * rate(e.cos, e.sin), e2 * rate(-e.sin, e.cos)]
     }
 
