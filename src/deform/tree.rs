@@ -425,9 +425,10 @@ pub fn leaf_sphere(s: &DeformedSurfel) -> (Vec3, f32) {
 /// Relative tolerance of the conservative sphere tests (16 ulp).
 pub const CONS_TOL: f32 = 16.0 * f32::EPSILON;
 
-/// Scalar reference: entry distance into the sphere, or None.
-#[inline]
-pub fn sphere_test_1(o: Vec3, d: Vec3, c: Vec3, r: f32, tnear: f32, tfar: f32) -> Option<f32> {
+/// The scalar kernel's shared part: (a, b, disc, √disc, slack) of the widened test (module
+/// comment above), in the x8 kernel's order of operations.
+#[inline(always)]
+fn widened_1(o: Vec3, d: Vec3, c: Vec3, r: f32) -> (f32, f32, f32, f32, f32) {
     let oc = c - o;
     let a = d.x * d.x + d.y * d.y + d.z * d.z;
     let b = oc.x * d.x + oc.y * d.y + oc.z * d.z;
@@ -438,8 +439,15 @@ pub fn sphere_test_1(o: Vec3, d: Vec3, c: Vec3, r: f32, tnear: f32, tfar: f32) -
     let re = r + CONS_TOL * oo.sqrt();
     let disc = (a * (re * re)) * (1.0 + CONS_TOL) - (cx * cx + cy * cy + cz * cz);
     let sq = disc.max(0.0).sqrt();
-    let inv = 1.0 / a;
     let slack = CONS_TOL * (b.abs() + sq);
+    (a, b, disc, sq, slack)
+}
+
+/// Scalar reference: entry distance into the sphere, or None.
+#[inline]
+pub fn sphere_test_1(o: Vec3, d: Vec3, c: Vec3, r: f32, tnear: f32, tfar: f32) -> Option<f32> {
+    let (a, b, disc, sq, slack) = widened_1(o, d, c, r);
+    let inv = 1.0 / a;
     let t0 = (b - sq - slack) * inv;
     let t1 = (b + sq + slack) * inv;
     let hit = disc >= 0.0 && t1 >= tnear && t0 <= tfar;
@@ -590,17 +598,7 @@ pub fn sphere_test_spheres(
 /// max(t0, tnear) even for misses (for bit-exact comparisons with the x8 kernel).
 #[inline]
 pub fn entry_1(o: Vec3, d: Vec3, c: Vec3, r: f32, tnear: f32) -> f32 {
-    let oc = c - o;
-    let a = d.x * d.x + d.y * d.y + d.z * d.z;
-    let b = oc.x * d.x + oc.y * d.y + oc.z * d.z;
-    let cx = oc.y * d.z - oc.z * d.y;
-    let cy = oc.z * d.x - oc.x * d.z;
-    let cz = oc.x * d.y - oc.y * d.x;
-    let oo = oc.x * oc.x + oc.y * oc.y + oc.z * oc.z;
-    let re = r + CONS_TOL * oo.sqrt();
-    let disc = (a * (re * re)) * (1.0 + CONS_TOL) - (cx * cx + cy * cy + cz * cz);
-    let sq = disc.max(0.0).sqrt();
-    let slack = CONS_TOL * (b.abs() + sq);
+    let (a, b, _, sq, slack) = widened_1(o, d, c, r);
     ((b - sq - slack) * (1.0 / a)).max(tnear)
 }
 
