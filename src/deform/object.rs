@@ -6,8 +6,8 @@
 
 use super::displace::{NodeWeights, SimNodes};
 use super::knn::KdTree;
-use super::surfel::SurfelModel;
-use super::tree::SphereTree;
+use super::surfel::{SurfelModel, SurfelSoa};
+use super::tree::{SphereTree, Topology};
 use super::DeformError;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -61,6 +61,7 @@ impl SurfelObject {
     /// masses).
     pub fn build(mut model: SurfelModel, node_rest: Vec<Vec3>, node_mass: Vec<f32>, p: &ObjectParams) -> Result<Arc<Self>, DeformError> {
         model.validate()?;
+        spatial_order(&mut model);
         if p.nodes_per_surfel == 0 || p.mls_neighbours < 3 || p.mls_neighbours > 32 || !(p.mls_support >= 1.0 && p.mls_support.is_finite())
         {
             return Err(DeformError::Invalid(format!("bad object parameters {p:?}")));
@@ -149,4 +150,24 @@ impl SurfelObject {
             + self.tree.list_node.len() * 16
             + self.clip_nb.len() * 8
     }
+}
+
+/// Reorders the surfels of each collection into the leaf order of a sphere tree over them
+/// (median split on the longest axis, [`Topology::build`]), so that surfels close on the
+/// surface are close in memory. Layout only (not in the paper): the lazy update deforms
+/// surfels in the order the rays reach the leaves, and a leaf test reads its 16 MLS
+/// neighbours; in input order (a mesh's triangle order, or a Fibonacci lattice's spiral)
+/// both gather from all over the arrays. Collections keep their ranges, so clipping
+/// relations are unchanged; validation errors (before this) name input indices.
+fn spatial_order(model: &mut SurfelModel) {
+    let s = &model.surfels;
+    let mut order: Vec<u32> = Vec::with_capacity(s.len());
+    for c in &model.collections {
+        let (a, b) = (c.start as usize, c.end as usize);
+        let pts: Vec<Vec3> = (a..b).map(|i| s.pos(i)).collect();
+        let topo = Topology::build(&pts, &s.r[a..b]);
+        order.extend(topo.perm.iter().map(|&i| i + c.start));
+    }
+    let g = |v: &[f32]| order.iter().map(|&i| v[i as usize]).collect::<Vec<f32>>();
+    model.surfels = SurfelSoa { px: g(&s.px), py: g(&s.py), pz: g(&s.pz), nx: g(&s.nx), ny: g(&s.ny), nz: g(&s.nz), r: g(&s.r) };
 }
