@@ -248,8 +248,8 @@ pub struct LevelRatio {
 }
 
 /// One surfel's lazily deformed state in one 64-byte line: the frame stamp, then p, u, v,
-/// stretch and the unit normal u×v (stored at deformation time so that the 16-surfel MLS
-/// neighbourhoods do not recompute it). A leaf test reads 17 surfels at random places: one
+/// stretch, the unit normal u×v and the leaf-ball radius (stored at deformation time so that
+/// the 16-surfel MLS neighbourhoods and the small-node spheres do not recompute them). A leaf test reads 17 surfels at random places: one
 /// line each, where separate stamp and data arrays (40 bytes, straddling lines) cost two or
 /// three (measured: `armadillo-ball` −8 % per frame).
 #[repr(C, align(64))]
@@ -258,7 +258,7 @@ struct SurfSlot {
     d: [AtomicU32; SURF_F],
 }
 
-const SURF_F: usize = 13;
+const SURF_F: usize = 14;
 const _: () = assert!(std::mem::size_of::<SurfSlot>() == 64);
 
 struct SurfelState {
@@ -525,6 +525,18 @@ impl DeformTracer {
         }
     }
 
+    /// The leaf ball of surfel `s` in this frame ([`leaf_sphere`], stored with the surfel).
+    #[inline]
+    fn surfel_ball(&self, ii: &Instance, s: usize) -> (Vec3, f32) {
+        if ii.surf.slot[s].stamp.load(Acquire) == self.frame {
+            load_surfel_ball(&ii.surf, s)
+        } else {
+            let d = deform_surfel(&ii.obj, &ii.field, s);
+            store_surfel(&ii.surf, s, &d, self.frame);
+            leaf_sphere(&d)
+        }
+    }
+
     /// Position and unit normal of surfel `s` in this frame (deforming it lazily).
     #[inline]
     fn surfel_pn(&self, ii: &Instance, s: usize) -> (Vec3, Vec3) {
@@ -549,7 +561,7 @@ impl DeformTracer {
 
     /// The sphere of node n in this frame (updating it lazily: Eq. 3–4, 9 for inner nodes,
     /// the deformed surfel (Eq. 1) for leaves).
-    #[inline]
+    #[inline(always)]
     fn sphere(&self, ii: &Instance, n: usize) -> (Vec3, f32) {
         if let Some(t) = &ii.naive {
             return (t.center(n), t.r[n]);
@@ -558,15 +570,23 @@ impl DeformTracer {
         if st.slot[n].stamp.load(Acquire) == self.frame {
             return st.load(n);
         }
+        self.update_sphere(ii, n)
+    }
+
+    /// The first computation of node n's sphere in this frame (out of line: the common path
+    /// of [`Self::sphere`] is a stamp check and a load, and inlining this body's large stack
+    /// frame into every caller costs more than the call).
+    #[inline(never)]
+    fn update_sphere(&self, ii: &Instance, n: usize) -> (Vec3, f32) {
         let tree = &ii.obj.tree;
         let (c, r) = if tree.topo.right[n] == LEAF {
-            leaf_sphere(&self.surfel(ii, tree.topo.surfel[n] as usize))
+            self.surfel_ball(ii, tree.topo.surfel[n] as usize)
         } else if tree.topo.count[n] <= self.params.exact_below.min(MAX_EXACT_BELOW) {
             self.small_sphere(ii, n)
         } else {
             tree.update_eq9(n, &ii.field, &ii.obj.nodes.rest, self.params.recentred_bound, self.params.node_rotation)
         };
-        st.store(n, c, r, self.frame);
+        ii.nodes.store(n, c, r, self.frame);
         (c, r)
     }
 
@@ -584,7 +604,7 @@ impl DeformTracer {
         let mut balls = [(Vec3::ZERO, 0.0f32); MAX_EXACT_BELOW as usize];
         let mut c = Vec3::ZERO;
         for (b, &s) in balls.iter_mut().zip(&topo.perm[s0..s0 + cnt]) {
-            *b = leaf_sphere(&self.surfel(ii, s as usize));
+            *b = self.surfel_ball(ii, s as usize);
             c += b.0;
         }
         c /= cnt as f32;
@@ -1466,7 +1486,8 @@ fn deform_surfel(obj: &SurfelObject, f: &DeformField, s: usize) -> DeformedSurfe
 #[inline]
 fn store_surfel(st: &SurfelState, s: usize, d: &DeformedSurfel, frame: u32) {
     let n = d.normal();
-    let v = [d.p.x, d.p.y, d.p.z, d.u.x, d.u.y, d.u.z, d.v.x, d.v.y, d.v.z, d.stretch, n.x, n.y, n.z];
+    let r = leaf_sphere(d).1;
+    let v = [d.p.x, d.p.y, d.p.z, d.u.x, d.u.y, d.u.z, d.v.x, d.v.y, d.v.z, d.stretch, n.x, n.y, n.z, r];
     let slot = &st.slot[s];
     for (a, x) in slot.d.iter().zip(v) {
         a.store(x.to_bits(), Relaxed);
@@ -1479,6 +1500,14 @@ fn load_surfel(st: &SurfelState, s: usize) -> DeformedSurfel {
     let d = &st.slot[s].d;
     let g = |k: usize| f32::from_bits(d[k].load(Relaxed));
     DeformedSurfel { p: Vec3::new(g(0), g(1), g(2)), u: Vec3::new(g(3), g(4), g(5)), v: Vec3::new(g(6), g(7), g(8)), stretch: g(9) }
+}
+
+/// Leaf ball (centre, padded extent) of a stored surfel.
+#[inline]
+fn load_surfel_ball(st: &SurfelState, s: usize) -> (Vec3, f32) {
+    let d = &st.slot[s].d;
+    let g = |k: usize| f32::from_bits(d[k].load(Relaxed));
+    (Vec3::new(g(0), g(1), g(2)), g(13))
 }
 
 /// Position and unit normal of a stored surfel.
