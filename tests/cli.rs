@@ -523,6 +523,22 @@ fn animate_writes_frames_and_per_frame_stats() {
     let total: f64 = v["per_frame"].as_array().unwrap().iter().map(|r| r["seconds"].as_f64().unwrap()).sum();
     assert!((total - v["render_seconds"].as_f64().unwrap()).abs() < 1e-9);
     assert!(v["per_frame"][0]["sphere_tests"].as_u64().unwrap() > 0);
+    assert!(v["per_frame"][0].get("warm_seconds").is_none(), "warm_seconds only with --warm-pass");
+}
+
+/// `--warm-pass` times a second render of every frame (hierarchy already updated) apart
+/// from the frame's own time, which `render_seconds` still sums.
+#[test]
+fn animate_warm_pass_reports_each_frame() {
+    let d = tmp("animatewarm");
+    let v = small_animate(&d, "bend", &["--frames", "2", "--detail", "0.05", "--update", "lazy", "--warm-pass"]);
+    let rows = v["per_frame"].as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    for r in rows {
+        assert!(r["warm_seconds"].as_f64().unwrap() > 0.0, "{r}");
+    }
+    let total: f64 = rows.iter().map(|r| r["seconds"].as_f64().unwrap()).sum();
+    assert!((total - v["render_seconds"].as_f64().unwrap()).abs() < 1e-9);
 }
 
 /// A PLY point file of `rows` (x y z nx ny nz).

@@ -613,7 +613,7 @@ fn measure() {
             recentred_bound: flag("DEFORM_RECENTRED"),
             node_rotation: flag("DEFORM_NODE_ROTATION"),
             recentre_eq11: flag("DEFORM_RECENTRE_EQ11"),
-            exact_below: env("DEFORM_EXACT_BELOW", "16").parse().unwrap(),
+            exact_below: env("DEFORM_EXACT_BELOW", "64").parse().unwrap(),
             ..TraceParams::default()
         };
         let mut tr = DeformTracer::new(&seq.scene, mode, params).unwrap();

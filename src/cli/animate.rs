@@ -16,6 +16,7 @@ use crate::core::stats::Counters;
 use crate::deform::{Collider, DeformCounters, DeformError, DeformTracer, Sequence, SequenceOptions, TraceParams, UpdateMode};
 use crate::error::{Error, Result};
 use crate::film::{io, Film};
+use crate::scene::camera::CameraFrame;
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
@@ -56,8 +57,14 @@ pub struct AnimateArgs {
     pub packet: u32,
     /// Inner nodes over at most this many surfels are bounded exactly from their deformed
     /// surfels instead of by Eq. 9 (lazy modes; 0 = Eq. 9 everywhere, the paper; at most 64).
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = 64)]
     pub exact_below: u32,
+    /// Profiling: render every frame a second time, untimed in `seconds`, and report that
+    /// pass as `warm_seconds` (per frame, in `--stats`) — the rays alone with every sphere
+    /// the first pass reached already current (and tightened by Eq. 11), so `seconds −
+    /// warm_seconds` is a lazy frame's update cost and, for `naive`, about its rebuild.
+    #[arg(long)]
+    pub warm_pass: bool,
     #[arg(long)]
     pub quiet: bool,
 }
@@ -76,6 +83,9 @@ pub struct FrameRow {
     pub cache_lookups: u64,
     pub cache_hits: u64,
     pub clipped: u64,
+    /// `--warm-pass`: the same frame's rays again, with its hierarchy already updated.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub warm_seconds: Option<f64>,
 }
 
 #[derive(Serialize, Debug, Clone)]
@@ -117,6 +127,15 @@ pub fn parse_mode(s: &str) -> Result<UpdateMode> {
 
 pub fn run(a: &AnimateArgs) -> Result<()> {
     let stats = animate(a)?;
+    if a.warm_pass {
+        let warm: f64 = stats.per_frame.iter().filter_map(|r| r.warm_seconds).sum();
+        let n = stats.frames.max(1) as f64;
+        eprintln!(
+            "warm pass (same rays, hierarchy already updated): {:.1} ms/frame; update cost {:.1} ms/frame",
+            1e3 * warm / n,
+            1e3 * (stats.render_seconds - warm) / n
+        );
+    }
     eprintln!(
         "{}: {} frames {}x{} --update {}: {:.3} s in all, {:.1} ms/frame ({} surfels)",
         stats.scene,
@@ -224,67 +243,21 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     let mut rows = Vec::new();
     let mut total = Counters::default();
     let mut render_seconds = 0.0;
-    let (w, h) = (a.width as usize, a.height as usize);
     let mut last_frame = Film::new(a.width, a.height);
     for (f, nodes) in rec.frames.iter().enumerate() {
         let t = Instant::now();
         tracer.begin_frame(nodes).map_err(derr)?;
-        let mut film = Film::new(a.width, a.height);
-        let tr = &tracer;
         let sc = ShadeCtx { colliders: &colliders, colors: &colors, inst_obj: &inst_obj, light, shadows: !a.no_shadows };
-        // Packets: two rows per task, 4×2 pixel tiles.
-        let rows_per_task = if a.packet == 8 { 2 } else { 1 };
-        let (c, dc) = film
-            .color
-            .par_chunks_mut(w * rows_per_task)
-            .enumerate()
-            .map(|(jb, block)| {
-                let mut c = Counters::default();
-                let mut dc = DeformCounters::default();
-                let j0 = jb * rows_per_task;
-                if a.packet == 1 {
-                    for (i, px) in block.iter_mut().enumerate() {
-                        let ray = Ray::new(cam.eye, cam.pixel_center_dir(i as u32, j0 as u32));
-                        let slot = Some((j0 * w + i) as u32);
-                        *px = shade(tr, &ray, slot, &sc, &mut c, &mut dc);
-                    }
-                    return (c, dc);
-                }
-                let nrows = block.len() / w;
-                let mut rays = Vec::with_capacity(8);
-                let mut slots = Vec::with_capacity(8);
-                let mut idx = Vec::with_capacity(8);
-                for x0 in (0..w).step_by(4) {
-                    rays.clear();
-                    slots.clear();
-                    idx.clear();
-                    for dy in 0..nrows {
-                        for x in x0..(x0 + 4).min(w) {
-                            let j = j0 + dy;
-                            rays.push(Ray::new(cam.eye, cam.pixel_center_dir(x as u32, j as u32)));
-                            slots.push(Some((j * w + x) as u32));
-                            idx.push(dy * w + x);
-                        }
-                    }
-                    let col = shade_x8(tr, &rays, &slots, &sc, &mut c, &mut dc);
-                    for (k, &p) in idx.iter().enumerate() {
-                        block[p] = col[k];
-                    }
-                }
-                (c, dc)
-            })
-            .reduce(
-                || (Counters::default(), DeformCounters::default()),
-                |mut x, y| {
-                    x.0.merge(&y.0);
-                    x.1.merge(&y.1);
-                    x
-                },
-            );
+        let (film, c, dc) = render_frame(&tracer, &cam, &sc, a.width, a.height, a.packet);
         let secs = t.elapsed().as_secs_f64();
         render_seconds += secs;
         total.merge(&c);
         let fs = tracer.frame_stats();
+        let warm_seconds = a.warm_pass.then(|| {
+            let t = Instant::now();
+            let _ = render_frame(&tracer, &cam, &sc, a.width, a.height, a.packet);
+            t.elapsed().as_secs_f64()
+        });
         rows.push(FrameRow {
             frame: f as u32,
             seconds: secs,
@@ -297,6 +270,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
             cache_lookups: dc.cache_lookups,
             cache_hits: dc.cache_hits,
             clipped: dc.clipped,
+            warm_seconds,
         });
         if let Some(d) = &a.out {
             io::write_png(&d.join(format!("frame_{f:04}.png")), &film)?;
@@ -305,7 +279,6 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         bar.inc(1);
     }
     bar.finish_and_clear();
-    let _ = h;
     let stats = AnimateStats {
         scene: seq.name.clone(),
         method: "surfel".into(),
@@ -330,6 +303,69 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         io::write_atomic(p, |tmp| std::fs::write(tmp, json.as_bytes()).map_err(|e| Error::io(p, e)))?;
     }
     Ok(stats)
+}
+
+/// One frame's primary and shadow rays into a new film (the tracer's frame must be begun).
+fn render_frame(
+    tr: &DeformTracer,
+    cam: &CameraFrame,
+    sc: &ShadeCtx,
+    width: u32,
+    height: u32,
+    packet: u32,
+) -> (Film, Counters, DeformCounters) {
+    let w = width as usize;
+    let mut film = Film::new(width, height);
+    // Packets: two rows per task, 4×2 pixel tiles.
+    let rows_per_task = if packet == 8 { 2 } else { 1 };
+    let (c, dc) = film
+        .color
+        .par_chunks_mut(w * rows_per_task)
+        .enumerate()
+        .map(|(jb, block)| {
+            let mut c = Counters::default();
+            let mut dc = DeformCounters::default();
+            let j0 = jb * rows_per_task;
+            if packet == 1 {
+                for (i, px) in block.iter_mut().enumerate() {
+                    let ray = Ray::new(cam.eye, cam.pixel_center_dir(i as u32, j0 as u32));
+                    let slot = Some((j0 * w + i) as u32);
+                    *px = shade(tr, &ray, slot, &sc, &mut c, &mut dc);
+                }
+                return (c, dc);
+            }
+            let nrows = block.len() / w;
+            let mut rays = Vec::with_capacity(8);
+            let mut slots = Vec::with_capacity(8);
+            let mut idx = Vec::with_capacity(8);
+            for x0 in (0..w).step_by(4) {
+                rays.clear();
+                slots.clear();
+                idx.clear();
+                for dy in 0..nrows {
+                    for x in x0..(x0 + 4).min(w) {
+                        let j = j0 + dy;
+                        rays.push(Ray::new(cam.eye, cam.pixel_center_dir(x as u32, j as u32)));
+                        slots.push(Some((j * w + x) as u32));
+                        idx.push(dy * w + x);
+                    }
+                }
+                let col = shade_x8(tr, &rays, &slots, &sc, &mut c, &mut dc);
+                for (k, &p) in idx.iter().enumerate() {
+                    block[p] = col[k];
+                }
+            }
+            (c, dc)
+        })
+        .reduce(
+            || (Counters::default(), DeformCounters::default()),
+            |mut x, y| {
+                x.0.merge(&y.0);
+                x.1.merge(&y.1);
+                x
+            },
+        );
+    (film, c, dc)
 }
 
 /// A light above and a little behind the camera's right shoulder.

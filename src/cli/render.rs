@@ -233,7 +233,8 @@ fn render_surfel(a: &RenderArgs, out: &Path) -> Result<()> {
         no_shadows: false,
         threads: a.threads,
         packet: a.packet,
-        exact_below: 16,
+        exact_below: 64,
+        warm_pass: false,
         quiet: a.quiet,
     };
     let st = super::animate::animate(&args)?;

@@ -171,3 +171,45 @@ fn spatial_order(model: &mut SurfelModel) {
     let g = |v: &[f32]| order.iter().map(|&i| v[i as usize]).collect::<Vec<f32>>();
     model.surfels = SurfelSoa { px: g(&s.px), py: g(&s.py), pz: g(&s.pz), nx: g(&s.nx), ny: g(&s.ny), nz: g(&s.nz), r: g(&s.r) };
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::deform::surfel::{sphere_surfels, SurfelModel};
+
+    /// The reorder keeps every surfel (a permutation within each collection) and makes
+    /// neighbours in memory neighbours on the surface: a Fibonacci lattice's consecutive
+    /// points lie a golden angle apart; in tree order they are about one spacing apart.
+    #[test]
+    fn surfels_are_stored_in_spatial_order() {
+        let a = sphere_surfels(Vec3::ZERO, 1.0, 4000);
+        let b = sphere_surfels(Vec3::new(3.0, 0.0, 0.0), 0.5, 1000);
+        let mut model = SurfelModel::single("a", a.clone(), [1.0; 3]);
+        model.add_collection("b", &b, [1.0; 3]);
+        let mut input = model.clone();
+        input.validate().unwrap(); // renormalises the normals, as the build does
+        let nodes: Vec<Vec3> = (0..40).map(|i| a.pos(i * 100)).chain((0..10).map(|i| b.pos(i * 100))).collect();
+        let obj = SurfelObject::build(model, nodes, vec![1.0; 50], &ObjectParams::default()).unwrap();
+        assert_eq!(obj.model.collections, input.collections);
+        let key = |m: &SurfelModel, i: usize| {
+            let s = &m.surfels;
+            [s.px[i], s.py[i], s.pz[i], s.nx[i], s.ny[i], s.nz[i], s.r[i]].map(f32::to_bits)
+        };
+        let mean_step = |m: &SurfelModel, r: std::ops::Range<usize>| {
+            let s = &m.surfels;
+            let n = r.len() - 1;
+            r.clone().skip(1).map(|i| (s.pos(i) - s.pos(i - 1)).length()).sum::<f32>() / n as f32
+        };
+        for c in &input.collections {
+            let r = c.start as usize..c.end as usize;
+            let mut x: Vec<_> = r.clone().map(|i| key(&input, i)).collect();
+            let mut y: Vec<_> = r.clone().map(|i| key(&obj.model, i)).collect();
+            x.sort_unstable();
+            y.sort_unstable();
+            assert!(x == y, "collection {} is not a permutation of its input", c.name);
+            let (before, after) = (mean_step(&input, r.clone()), mean_step(&obj.model, r.clone()));
+            assert!(after < 0.25 * before, "collection {}: mean step {before} -> {after}", c.name);
+        }
+        assert_eq!(obj.pos, obj.model.surfels.positions());
+    }
+}

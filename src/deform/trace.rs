@@ -151,7 +151,7 @@ impl Default for TraceParams {
             ordered: true,
             recentred_bound: true,
             node_rotation: true,
-            exact_below: 16,
+            exact_below: 64,
             recentre_eq11: true,
         }
     }

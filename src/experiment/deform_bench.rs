@@ -33,7 +33,7 @@ pub struct SurfelSpec {
 
 impl Default for SurfelSpec {
     fn default() -> Self {
-        SurfelSpec { update: "lazy-cache".into(), frames: None, detail: 1.0, shadows: true, exact_below: 16 }
+        SurfelSpec { update: "lazy-cache".into(), frames: None, detail: 1.0, shadows: true, exact_below: 64 }
     }
 }
 
@@ -102,6 +102,7 @@ pub fn run(
                 threads: spec.threads.unwrap_or(threads),
                 packet: spec.packet,
                 exact_below: s.exact_below,
+                warm_pass: false,
                 quiet,
             };
             let mut best: Option<crate::cli::animate::AnimateStats> = None;
