@@ -84,12 +84,16 @@
 //! # Measured
 //! Current figures and the commands that produce them are in the README ("Adams et al."):
 //! `lodtrace bench SEQ --methods surfel:update=naive,...,surfel:update=refit`. In short, at
-//! 384×288, detail 0.4, 16 frames: lazy runs at 0.70–1.01× the speed of a naive rebuild and
-//! lazy-cache at 0.59–0.89×, while the refitted BVH2 runs at 1.45–1.94×. Our rebuild costs only
-//! 20–45 % of a naive frame (the paper's ≈55 %), and the first-order Eq. 9 bound, mostly its
-//! gradient term, costs 1.1–2.4× the bounding-volume tests of the rebuilt tree (with the lazy
-//! centres and exact radii it would be 1.36×). The radius-ratio (mean 1.16–1.47, root
-//! 1.22–2.42) and MLS (1.8–2.8 iterations) targets hold.
+//! the paper's size (512×384, detail 1, 16 frames, stop 33), lazy-cache runs at 1.30–1.65×
+//! the speed of a naive rebuild, and the refitted BVH2 at 1.19–2.20×. `animate --warm-pass`
+//! splits a frame: the lazy update costs 33–41 % of the rebuild, but the rays cost 1.10–1.27×
+//! as much in the lazy tree, which keeps the rest pose's topology (the paper's choice): on
+//! `armadillo-ball` its sphere tests grow from 1.01× the rebuilt tree's in frame 0 to 2.38×
+//! in frame 15 as the model collapses, while its spheres stay within 1.0–1.3× of the tightest
+//! per node. The radius-ratio and MLS (1.8–2.8 iterations) targets hold.
+//!
+//! Layout: each collection's surfels are stored in the leaf order of a sphere tree over them
+//! (`object`), so the lazy Eq. 1 work and the MLS neighbourhoods read nearby memory.
 
 // `!(x > 0.0)` is used on purpose: it also rejects NaN. SoA loops index several arrays.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop, clippy::too_many_arguments)]
