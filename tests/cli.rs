@@ -638,7 +638,7 @@ fn bad_animate_input_is_one_line_exit_2() {
 fn bench_deforming_sequences() {
     let d = tmp("deformbench");
     // The last row traces ray by ray (packet=1): the same image as the packets of the others.
-    let m = ["naive", "lazy-cache", "refit", "lazy:packet=1"].map(|u| format!("surfel:update={u}:detail=0.03:frames=4")).join(",");
+    let m = ["naive", "lazy-cache:warm=1", "refit", "lazy:packet=1"].map(|u| format!("surfel:update={u}:detail=0.03:frames=4")).join(",");
     let (code, out, err) =
         lodtrace(&["bench", "elastic-balls", "--methods", &m, "--width", "40", "--height", "30", "--quiet", "--out", d.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
@@ -652,6 +652,9 @@ fn bench_deforming_sequences() {
         assert!(r["sphere_tests_per_frame"].as_f64().unwrap() > 0.0);
     }
     assert!(rows[1]["cache_lookups"].as_u64().unwrap() > 0);
+    // warm=1: the rays alone, timed in a second pass over each frame.
+    assert!(rows[1]["rays_ms_per_frame"].as_f64().unwrap() > 0.0, "{}", rows[1]);
+    assert!(rows[0]["rays_ms_per_frame"].is_null());
     for f in ["elastic-balls-frame-times.png", "elastic-balls-sphere-tests.png", "radius-ratio.png", "bench.md"] {
         assert!(d.join(f).is_file(), "{f}");
     }

@@ -62,7 +62,8 @@ pub struct AnimateArgs {
     /// Profiling: render every frame a second time, untimed in `seconds`, and report that
     /// pass as `warm_seconds` (per frame, in `--stats`) — the rays alone with every sphere
     /// the first pass reached already current (and tightened by Eq. 11), so `seconds −
-    /// warm_seconds` is a lazy frame's update cost and, for `naive`, about its rebuild.
+    /// warm_seconds` is a lazy frame's update cost and, for `naive`, about its rebuild. The
+    /// extra pass disturbs the caches: the timed frames of such a run are slower (≈ 5–15 %).
     #[arg(long)]
     pub warm_pass: bool,
     #[arg(long)]

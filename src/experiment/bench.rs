@@ -203,13 +203,14 @@ impl MethodSpec {
                     "detail" => spec.surfel.detail = num(v)? as f32,
                     "shadows" => spec.surfel.shadows = num(v)? != 0.0,
                     "exact" => spec.surfel.exact_below = int(v)?,
+                    "warm" => spec.surfel.warm = num(v)? != 0.0,
                     "eigen" => {
                         spec.multires.eigen = crate::multires::trace::EigenMode::from_str(v, true)
                             .map_err(|_| bad(format!("eigen={v}: per-box or exact")))?
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, mip, primary, budget, eigen, tri, term, pw, spread, groups, agg, tight, mask; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, mip, primary, budget, eigen, tri, term, pw, spread, groups, agg, tight, mask; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, warm)"
                         )))
                     }
                 }

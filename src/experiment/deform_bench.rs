@@ -19,8 +19,8 @@ use crate::error::{Error, Result};
 use serde::Serialize;
 use std::path::Path;
 
-/// `surfel` spec options (keys `update=`, `frames=`, `detail=`, `shadows=`, `exact=`; the
-/// spec's `packet=` chooses packets of 8 or single rays).
+/// `surfel` spec options (keys `update=`, `frames=`, `detail=`, `shadows=`, `exact=`,
+/// `warm=`; the spec's `packet=` chooses packets of 8 or single rays).
 #[derive(Clone, Debug, Serialize)]
 pub struct SurfelSpec {
     pub update: String,
@@ -29,11 +29,14 @@ pub struct SurfelSpec {
     pub shadows: bool,
     /// `--exact-below` of `animate`.
     pub exact_below: u32,
+    /// `--warm-pass` of `animate` (`warm=1`): also time each frame's rays with the hierarchy
+    /// already updated, for the table's "rays ms/frame" column.
+    pub warm: bool,
 }
 
 impl Default for SurfelSpec {
     fn default() -> Self {
-        SurfelSpec { update: "lazy-cache".into(), frames: None, detail: 1.0, shadows: true, exact_below: 64 }
+        SurfelSpec { update: "lazy-cache".into(), frames: None, detail: 1.0, shadows: true, exact_below: 64, warm: false }
     }
 }
 
@@ -53,6 +56,10 @@ pub struct DeformRow {
     /// ms/frame of the first spec ÷ this one's (> 1 = faster).
     pub speedup_vs_first: f64,
     pub update_ms_per_frame: f64,
+    /// `warm=1`: ms/frame of the second, untimed-in-`ms_per_frame` pass over each frame's
+    /// rays, once its hierarchy is updated (`animate --warm-pass`); `ms_per_frame` minus this
+    /// is the update's cost within a frame.
+    pub rays_ms_per_frame: Option<f64>,
     pub sphere_tests_per_frame: f64,
     pub leaf_tests_per_frame: f64,
     pub mls_iterations_mean: f64,
@@ -102,7 +109,7 @@ pub fn run(
                 threads: spec.threads.unwrap_or(threads),
                 packet: spec.packet,
                 exact_below: s.exact_below,
-                warm_pass: false,
+                warm_pass: s.warm,
                 quiet,
             };
             let mut best: Option<crate::cli::animate::AnimateStats> = None;
@@ -145,6 +152,7 @@ pub fn run(
                 ms_per_frame: ms,
                 speedup_vs_first: ms0 / ms.max(1e-12),
                 update_ms_per_frame: 1e3 * st.per_frame.iter().map(|r| r.update_seconds).sum::<f64>() / n,
+                rays_ms_per_frame: s.warm.then(|| 1e3 * st.per_frame.iter().filter_map(|r| r.warm_seconds).sum::<f64>() / n),
                 sphere_tests_per_frame: st.per_frame.iter().map(|r| r.sphere_tests).sum::<u64>() as f64 / n,
                 leaf_tests_per_frame: st.per_frame.iter().map(|r| r.leaf_tests).sum::<u64>() as f64 / n,
                 mls_iterations_mean: st.per_frame.iter().map(|r| r.mls_iterations_mean).sum::<f64>() / n,
@@ -230,12 +238,12 @@ fn plots(out: &Path, rows: &[DeformRow]) -> Result<()> {
 /// The rows as a Markdown table.
 pub fn table(rows: &[DeformRow]) -> String {
     let mut s = String::from("\nDeforming sequences (Adams et al.):\n\n");
-    s.push_str("| sequence | method | surfels | frames | thr | ms/frame | speed-up vs first | update ms/frame | BV tests/frame | leaf tests/frame | MLS it. | cache hits | inner nodes updated/frame | root ratio | mean ratio | same image |\n");
-    s.push_str("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
+    s.push_str("| sequence | method | surfels | frames | thr | ms/frame | speed-up vs first | update ms/frame | rays ms/frame (warm) | BV tests/frame | leaf tests/frame | MLS it. | cache hits | inner nodes updated/frame | root ratio | mean ratio | same image |\n");
+    s.push_str("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
     for r in rows {
         let f = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
         s.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {:.1} | {:.2}x | {:.1} | {:.0} | {:.0} | {:.2} | {} | {:.0} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {} | {:.1} | {:.2}x | {:.1} | {} | {:.0} | {:.0} | {:.2} | {} | {:.0} | {} | {} | {} |\n",
             r.scene,
             r.spec,
             r.surfels,
@@ -244,6 +252,7 @@ pub fn table(rows: &[DeformRow]) -> String {
             r.ms_per_frame,
             r.speedup_vs_first,
             r.update_ms_per_frame,
+            r.rays_ms_per_frame.map(|v| format!("{v:.1}")).unwrap_or_else(|| "-".into()),
             r.sphere_tests_per_frame,
             r.leaf_tests_per_frame,
             r.mls_iterations_mean,
