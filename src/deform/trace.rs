@@ -514,39 +514,34 @@ impl DeformTracer {
 
     // -- lazy state ------------------------------------------------------------------------
 
-    #[inline]
-    fn surfel(&self, ii: &Instance, s: usize) -> DeformedSurfel {
+    /// Surfel `s` in this frame, read with `load` if another ray already deformed it in this
+    /// frame, else deformed (Eq. 1), stored, and passed to `fresh`.
+    #[inline(always)]
+    fn surfel_as<T>(&self, ii: &Instance, s: usize, load: fn(&SurfelState, usize) -> T, fresh: fn(&DeformedSurfel) -> T) -> T {
         if ii.surf.slot[s].stamp.load(Acquire) == self.frame {
-            load_surfel(&ii.surf, s)
+            load(&ii.surf, s)
         } else {
             let d = deform_surfel(&ii.obj, &ii.field, s);
             store_surfel(&ii.surf, s, &d, self.frame);
-            d
+            fresh(&d)
         }
+    }
+
+    #[inline]
+    fn surfel(&self, ii: &Instance, s: usize) -> DeformedSurfel {
+        self.surfel_as(ii, s, load_surfel, |d| *d)
     }
 
     /// The leaf ball of surfel `s` in this frame ([`leaf_sphere`], stored with the surfel).
     #[inline]
     fn surfel_ball(&self, ii: &Instance, s: usize) -> (Vec3, f32) {
-        if ii.surf.slot[s].stamp.load(Acquire) == self.frame {
-            load_surfel_ball(&ii.surf, s)
-        } else {
-            let d = deform_surfel(&ii.obj, &ii.field, s);
-            store_surfel(&ii.surf, s, &d, self.frame);
-            leaf_sphere(&d)
-        }
+        self.surfel_as(ii, s, load_surfel_ball, leaf_sphere)
     }
 
     /// Position and unit normal of surfel `s` in this frame (deforming it lazily).
     #[inline]
     fn surfel_pn(&self, ii: &Instance, s: usize) -> (Vec3, Vec3) {
-        if ii.surf.slot[s].stamp.load(Acquire) == self.frame {
-            load_surfel_pn(&ii.surf, s)
-        } else {
-            let d = deform_surfel(&ii.obj, &ii.field, s);
-            store_surfel(&ii.surf, s, &d, self.frame);
-            (d.p, d.normal())
-        }
+        self.surfel_as(ii, s, load_surfel_pn, |d| (d.p, d.normal()))
     }
 
     #[inline]
