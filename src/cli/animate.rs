@@ -331,7 +331,7 @@ fn render_frame(
                 for (i, px) in block.iter_mut().enumerate() {
                     let ray = Ray::new(cam.eye, cam.pixel_center_dir(i as u32, j0 as u32));
                     let slot = Some((j0 * w + i) as u32);
-                    *px = shade(tr, &ray, slot, &sc, &mut c, &mut dc);
+                    *px = shade(tr, &ray, slot, sc, &mut c, &mut dc);
                 }
                 return (c, dc);
             }
@@ -351,7 +351,7 @@ fn render_frame(
                         idx.push(dy * w + x);
                     }
                 }
-                let col = shade_x8(tr, &rays, &slots, &sc, &mut c, &mut dc);
+                let col = shade_x8(tr, &rays, &slots, sc, &mut c, &mut dc);
                 for (k, &p) in idx.iter().enumerate() {
                     block[p] = col[k];
                 }

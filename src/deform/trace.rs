@@ -249,9 +249,10 @@ pub struct LevelRatio {
 
 /// One surfel's lazily deformed state in one 64-byte line: the frame stamp, then p, u, v,
 /// stretch, the unit normal u×v and the leaf-ball radius (stored at deformation time so that
-/// the 16-surfel MLS neighbourhoods and the small-node spheres do not recompute them). A leaf test reads 17 surfels at random places: one
-/// line each, where separate stamp and data arrays (40 bytes, straddling lines) cost two or
-/// three (measured: `armadillo-ball` −8 % per frame).
+/// the 16-surfel MLS neighbourhoods and the small-node spheres do not recompute them). A leaf
+/// test reads 17 surfels at random places: one line each, where separate stamp and data
+/// arrays (40 bytes, straddling lines) cost two or three (measured: `armadillo-ball` −8 % per
+/// frame).
 #[repr(C, align(64))]
 struct SurfSlot {
     stamp: AtomicU32,
