@@ -541,6 +541,46 @@ fn animate_warm_pass_reports_each_frame() {
     assert!((total - v["render_seconds"].as_f64().unwrap()).abs() < 1e-9);
 }
 
+/// `--cache-up` and `--unordered` (the §4.2.2 ablation switches) change the work, never the
+/// frames: every frame is byte-identical to a naive rebuild's, an ancestor cache hits more
+/// often than the paper's leaf cache, and the stats record the parameters.
+#[test]
+fn animate_cache_ablation_keeps_the_frames() {
+    let args = ["--frames", "4", "--detail", "0.05"];
+    let run = |name: &str, extra: &[&str]| {
+        let d = tmp(name);
+        let mut a = args.to_vec();
+        a.extend_from_slice(extra);
+        (small_animate(&d, "bend", &a), d)
+    };
+    let (_, dn) = run("cacheabl_naive", &["--update", "naive"]);
+    let (leaf, _) = run("cacheabl_leaf", &["--update", "lazy-cache", "--unordered"]);
+    let (up, du) = run("cacheabl_up", &["--update", "lazy-cache", "--unordered", "--cache-up", "8"]);
+    for f in 0..4 {
+        let name = format!("frame_{f:04}.png");
+        assert_eq!(std::fs::read(dn.join(&name)).unwrap(), std::fs::read(du.join(&name)).unwrap(), "{name} differs");
+    }
+    let sum = |v: &serde_json::Value, k: &str| v["per_frame"].as_array().unwrap().iter().map(|r| r[k].as_u64().unwrap()).sum::<u64>();
+    assert!(sum(&up, "cache_lookups") > 0);
+    assert!(
+        sum(&up, "cache_hits") > sum(&leaf, "cache_hits"),
+        "ancestor {} vs leaf {} hits",
+        sum(&up, "cache_hits"),
+        sum(&leaf, "cache_hits")
+    );
+    assert_eq!(up["trace_params"]["cache_up"], 8);
+    assert_eq!(up["trace_params"]["ordered"], false);
+    assert_eq!(leaf["trace_params"]["cache_up"], 0);
+    // The switch only exists for the cache, and within bounds.
+    for bad in [&["--update", "lazy", "--cache-up", "2"][..], &["--cache-up", "65"][..]] {
+        let mut a = vec!["animate", "bend", "--frames", "1", "--width", "8", "--height", "8"];
+        a.extend_from_slice(bad);
+        let (code, _, err) = lodtrace(&a);
+        assert_eq!(code, 2, "{bad:?}: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    }
+}
+
 /// A PLY point file of `rows` (x y z nx ny nz).
 fn ply_text(rows: &[[f32; 6]]) -> String {
     let mut t = format!("ply\nformat ascii 1.0\nelement vertex {}\n", rows.len());
@@ -637,8 +677,11 @@ fn bad_animate_input_is_one_line_exit_2() {
 #[test]
 fn bench_deforming_sequences() {
     let d = tmp("deformbench");
-    // The last row traces ray by ray (packet=1): the same image as the packets of the others.
-    let m = ["naive", "lazy-cache:warm=1", "refit", "lazy:packet=1"].map(|u| format!("surfel:update={u}:detail=0.03:frames=4")).join(",");
+    // The last row traces ray by ray (packet=1): the same image as the packets of the others;
+    // the second caches ancestors with the paper's unordered traversal (same image too).
+    let m = ["naive", "lazy-cache:warm=1:cache_up=6:ordered=0", "refit", "lazy:packet=1"]
+        .map(|u| format!("surfel:update={u}:detail=0.03:frames=4"))
+        .join(",");
     let (code, out, err) =
         lodtrace(&["bench", "elastic-balls", "--methods", &m, "--width", "40", "--height", "30", "--quiet", "--out", d.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
@@ -658,9 +701,11 @@ fn bench_deforming_sequences() {
     for f in ["elastic-balls-frame-times.png", "elastic-balls-sphere-tests.png", "radius-ratio.png", "bench.md"] {
         assert!(d.join(f).is_file(), "{f}");
     }
-    let (code, _, err) = lodtrace(&["bench", "heads", "--methods", "surfel:update=lazy,whitted:bvh", "--width", "8", "--height", "8"]);
-    assert_eq!(code, 2, "{err}");
-    one_error_line(&err);
+    for bad in ["surfel:update=lazy,whitted:bvh", "whitted:bvh:warm=1", "surfel:update=lazy:cache_up=2", "surfel:cache_up=65"] {
+        let (code, _, err) = lodtrace(&["bench", "heads", "--methods", bad, "--width", "8", "--height", "8"]);
+        assert_eq!(code, 2, "{bad}: {err}");
+        one_error_line(&err);
+    }
 }
 
 /// `render SEQ --method surfel`: the first frame of a deforming sequence, PNG and stats.

@@ -59,6 +59,17 @@ pub struct AnimateArgs {
     /// surfels instead of by Eq. 9 (lazy modes; 0 = Eq. 9 everywhere, the paper; at most 64).
     #[arg(long, default_value_t = 64)]
     pub exact_below: u32,
+    /// Per-ray cache (`--update lazy-cache`, §4.2.2): cache the ancestor this many levels
+    /// above the leaf of each ray's closest hit instead of the leaf itself (0, the paper's
+    /// choice; at most 64). Under motion a surfel leaves the ray within a frame or two, a
+    /// larger node does not.
+    #[arg(long, default_value_t = 0)]
+    pub cache_up: u32,
+    /// Visit a node's children left first instead of nearer first (closest-hit rays). This
+    /// is the order in which the per-ray cache pays off (§4.2.2: the cached hit bounds the
+    /// traversal); front to back (the default) finds that bound by itself. Same images.
+    #[arg(long)]
+    pub unordered: bool,
     /// Profiling: render every frame a second time, untimed in `seconds`, and report that
     /// pass as `warm_seconds` (per frame, in `--stats`) — the rays alone with every sphere
     /// the first pass reached already current (and tightened by Eq. 11), so `seconds −
@@ -96,6 +107,8 @@ pub struct AnimateStats {
     /// The bounding structure: `sphere-tree` (naive, lazy, lazy-cache) or `bvh2` (refit).
     pub accel: String,
     pub update: String,
+    /// The tracer's parameters (paper defaults unless an option changed them).
+    pub trace_params: TraceParams,
     pub width: u32,
     pub height: u32,
     pub spp: u32,
@@ -171,6 +184,12 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
     if a.exact_below > crate::deform::trace::MAX_EXACT_BELOW {
         return Err(Error::Usage(format!("--exact-below {}: at most {}", a.exact_below, crate::deform::trace::MAX_EXACT_BELOW)));
     }
+    if a.cache_up > crate::deform::trace::MAX_CACHE_UP {
+        return Err(Error::Usage(format!("--cache-up {}: at most {}", a.cache_up, crate::deform::trace::MAX_CACHE_UP)));
+    }
+    if a.cache_up > 0 && mode != UpdateMode::LazyCache {
+        return Err(Error::Usage(format!("--cache-up is an option of --update lazy-cache; --update {} would ignore it", mode.name())));
+    }
     if a.packet != 1 && a.packet != 8 {
         return Err(Error::Usage(format!("--packet {}: 1 or 8", a.packet)));
     }
@@ -222,8 +241,12 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     let rec = seq.record(frames).map_err(derr)?;
     let simulate_seconds = t0.elapsed().as_secs_f64();
     let t0 = Instant::now();
-    let mut tracer =
-        DeformTracer::new(&seq.scene, mode, TraceParams { exact_below: a.exact_below, ..TraceParams::default() }).map_err(derr)?;
+    let mut tracer = DeformTracer::new(
+        &seq.scene,
+        mode,
+        TraceParams { exact_below: a.exact_below, cache_up: a.cache_up, ordered: !a.unordered, ..TraceParams::default() },
+    )
+    .map_err(derr)?;
     tracer.set_cache_slots((a.width * a.height) as usize);
     let build_seconds = t0.elapsed().as_secs_f64();
     let surfels: u64 = tracer.frame_stats().surfels_total;
@@ -285,6 +308,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         method: "surfel".into(),
         accel: if mode == UpdateMode::Refit { "bvh2" } else { "sphere-tree" }.into(),
         update: a.update.clone(),
+        trace_params: tracer.params().clone(),
         width: a.width,
         height: a.height,
         spp: 1,

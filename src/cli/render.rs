@@ -234,6 +234,8 @@ fn render_surfel(a: &RenderArgs, out: &Path) -> Result<()> {
         threads: a.threads,
         packet: a.packet,
         exact_below: 64,
+        cache_up: 0,
+        unordered: false,
         warm_pass: false,
         quiet: a.quiet,
     };

@@ -80,6 +80,9 @@
 //!   unchanged frame (test `cache_hits_on_repeated_frames`), the paper's 27%. Under fast
 //!   motion the cached leaf is often missed (surfels move more than their radius per
 //!   frame); `TraceParams::cache_up` caches an ancestor instead (default 0 = the paper's leaf).
+//!   With unordered traversal and an ancestor 8–12 levels up, the cache cuts the primary
+//!   rays' ray–surfel tests by 12–33 % in the four sequences (paper 27 %), while front-to-back
+//!   traversal alone cuts 38–59 % (README, "Caching"). CLI: `animate --cache-up N --unordered`.
 //!
 //! # Measured
 //! Current figures and the commands that produce them are in the README ("Adams et al."):

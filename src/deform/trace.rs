@@ -139,6 +139,9 @@ pub struct TraceParams {
 /// Upper limit of [`TraceParams::exact_below`].
 pub const MAX_EXACT_BELOW: u32 = 64;
 
+/// Upper limit of [`TraceParams::cache_up`] (deeper than any tree: the root is cached).
+pub const MAX_CACHE_UP: u32 = 64;
+
 impl Default for TraceParams {
     fn default() -> Self {
         TraceParams {

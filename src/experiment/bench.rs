@@ -204,13 +204,15 @@ impl MethodSpec {
                     "shadows" => spec.surfel.shadows = num(v)? != 0.0,
                     "exact" => spec.surfel.exact_below = int(v)?,
                     "warm" => spec.surfel.warm = num(v)? != 0.0,
+                    "cache_up" => spec.surfel.cache_up = int(v)?,
+                    "ordered" => spec.surfel.ordered = num(v)? != 0.0,
                     "eigen" => {
                         spec.multires.eigen = crate::multires::trace::EigenMode::from_str(v, true)
                             .map_err(|_| bad(format!("eigen={v}: per-box or exact")))?
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, mip, primary, budget, eigen, tri, term, pw, spread, groups, agg, tight, mask; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, warm)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, mip, primary, budget, eigen, tri, term, pw, spread, groups, agg, tight, mask; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, warm, cache_up, ordered)"
                         )))
                     }
                 }
@@ -231,7 +233,9 @@ impl MethodSpec {
                     "multires and cone"
                 }
                 "f" | "a" | "thres" | "sel" | "levels" | "dist" | "force" | "net" | "select" if method != Method::Lod => "lod",
-                "update" | "frames" | "detail" | "shadows" | "exact" if method != Method::Surfel => "surfel",
+                "update" | "frames" | "detail" | "shadows" | "exact" | "warm" | "cache_up" | "ordered" if method != Method::Surfel => {
+                    "surfel"
+                }
                 "fps" | "vt" if method != Method::Distributed => "distributed",
                 "spp" | "depth" | "accel" if method == Method::Surfel => "the scene-file methods",
                 _ => continue,

@@ -20,7 +20,7 @@ use serde::Serialize;
 use std::path::Path;
 
 /// `surfel` spec options (keys `update=`, `frames=`, `detail=`, `shadows=`, `exact=`,
-/// `warm=`; the spec's `packet=` chooses packets of 8 or single rays).
+/// `warm=`, `cache_up=`, `ordered=`; the spec's `packet=` chooses packets of 8 or single rays).
 #[derive(Clone, Debug, Serialize)]
 pub struct SurfelSpec {
     pub update: String,
@@ -32,11 +32,24 @@ pub struct SurfelSpec {
     /// `--warm-pass` of `animate` (`warm=1`): also time each frame's rays with the hierarchy
     /// already updated, for the table's "rays ms/frame" column.
     pub warm: bool,
+    /// `--cache-up` of `animate` (`cache_up=N`, lazy-cache only).
+    pub cache_up: u32,
+    /// `ordered=0`: `--unordered` of `animate`.
+    pub ordered: bool,
 }
 
 impl Default for SurfelSpec {
     fn default() -> Self {
-        SurfelSpec { update: "lazy-cache".into(), frames: None, detail: 1.0, shadows: true, exact_below: 64, warm: false }
+        SurfelSpec {
+            update: "lazy-cache".into(),
+            frames: None,
+            detail: 1.0,
+            shadows: true,
+            exact_below: 64,
+            warm: false,
+            cache_up: 0,
+            ordered: true,
+        }
     }
 }
 
@@ -109,6 +122,8 @@ pub fn run(
                 threads: spec.threads.unwrap_or(threads),
                 packet: spec.packet,
                 exact_below: s.exact_below,
+                cache_up: s.cache_up,
+                unordered: !s.ordered,
                 warm_pass: s.warm,
                 quiet,
             };
@@ -280,6 +295,17 @@ pub fn validate(spec: &MethodSpec) -> Result<()> {
             s.exact_below,
             crate::deform::trace::MAX_EXACT_BELOW
         )));
+    }
+    if s.cache_up > crate::deform::trace::MAX_CACHE_UP {
+        return Err(Error::Usage(format!(
+            "method spec '{}': cache_up={} above {}",
+            spec.text,
+            s.cache_up,
+            crate::deform::trace::MAX_CACHE_UP
+        )));
+    }
+    if s.cache_up > 0 && crate::cli::animate::parse_mode(&s.update)? != crate::deform::UpdateMode::LazyCache {
+        return Err(Error::Usage(format!("method spec '{}': cache_up is a key of update=lazy-cache", spec.text)));
     }
     if s.frames == Some(0) || s.frames.is_some_and(|f| f > 100_000) {
         return Err(Error::Usage(format!("method spec '{}': frames out of range", spec.text)));
