@@ -142,10 +142,14 @@ fn run_in(a: &DemoArgs) -> Result<()> {
 /// (Fig. 3), test counts with and without the per-ray cache.
 fn deform_section(a: &DemoArgs) -> Result<String> {
     let (w, h, frames, detail) = if a.quick { (192, 144, 8, 0.15) } else { (384, 288, 16, 0.4) };
-    let specs: Vec<super::bench::MethodSpec> = ["naive", "lazy", "lazy-cache", "refit"]
-        .iter()
-        .map(|m| super::bench::MethodSpec::parse(&format!("surfel:update={m}:frames={frames}:detail={detail}")))
-        .collect::<Result<_>>()?;
+    // The last two: the paper's unordered descent without and with the per-ray cache (of an
+    // ancestor 8 levels above the hit leaf; the leaf itself misses under this motion), where
+    // the cache cuts the tests as in §4.2.2 (README, "Caching (stop 34)").
+    let specs: Vec<super::bench::MethodSpec> =
+        ["naive", "lazy", "lazy-cache", "refit", "lazy:ordered=0", "lazy-cache:ordered=0:cache_up=8"]
+            .iter()
+            .map(|m| super::bench::MethodSpec::parse(&format!("surfel:update={m}:frames={frames}:detail={detail}")))
+            .collect::<Result<_>>()?;
     let dir = a.out.join("deform");
     std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
     let mut rows = Vec::new();
@@ -158,7 +162,7 @@ fn deform_section(a: &DemoArgs) -> Result<String> {
     // Each sequence ran on its own (so that one failing is skipped): the Fig. 3 plot of all.
     super::deform_bench::radius_plot(&dir, &rows)?;
     let mut h_out = format!(
-        "<h2>Adams et al.: deforming point-sampled surfaces</h2><p>Each sequence ({frames} frames, {w}×{h}, detail {detail}) rendered with the hierarchy rebuilt every frame (naive), updated lazily (§4.1), lazily with per-ray caching (§4.2.2), and — not in the paper — an obvhs BVH2 refitted every frame; the same recorded motion, so the images must be identical (last column). Per-frame time curves like the paper's Fig. 5. Same as <code>lodtrace bench SEQ --methods surfel:update=naive,surfel:update=lazy,...</code>.</p><table><tr><th>sequence</th><th>update</th><th>surfels</th><th>ms/frame</th><th>vs naive</th><th>BV tests/frame</th><th>leaf tests/frame</th><th>cache hits</th><th>MLS iterations</th><th>root radius ratio</th><th>mean radius ratio</th><th>same image</th></tr>"
+        "<h2>Adams et al.: deforming point-sampled surfaces</h2><p>Each sequence ({frames} frames, {w}×{h}, detail {detail}) rendered with the hierarchy rebuilt every frame (naive), updated lazily (§4.1), lazily with per-ray caching (§4.2.2), and — not in the paper — an obvhs BVH2 refitted every frame; the same recorded motion, so the images must be identical (last column). The last two rows per sequence descend the tree unordered, as the paper does, without and with the cache (of the ancestor 8 levels above each ray's hit leaf, a deviation: the leaf itself moves away within a frame): there the cache cuts the leaf tests, as in the paper; front-to-back traversal (the other rows) cuts more by itself. Per-frame time curves like the paper's Fig. 5. Same as <code>lodtrace bench SEQ --methods surfel:update=naive,surfel:update=lazy,...</code>.</p><table><tr><th>sequence</th><th>update</th><th>surfels</th><th>ms/frame</th><th>vs naive</th><th>BV tests/frame</th><th>leaf tests/frame</th><th>cache hits</th><th>MLS iterations</th><th>root radius ratio</th><th>mean radius ratio</th><th>same image</th></tr>"
     );
     for r in &rows {
         let f = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
@@ -166,7 +170,7 @@ fn deform_section(a: &DemoArgs) -> Result<String> {
             h_out,
             "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.1}</td><td>{:.2}×</td><td>{:.0}</td><td>{:.0}</td><td>{}</td><td>{:.2}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             r.scene,
-            r.update,
+            update_label(&r.update, &r.spec),
             r.surfels,
             r.ms_per_frame,
             r.speedup_vs_first,
@@ -183,7 +187,7 @@ fn deform_section(a: &DemoArgs) -> Result<String> {
     if dir.join("radius-ratio.png").is_file() {
         h_out.push_str("<p><img src=\"deform/radius-ratio.png\" style=\"max-width:640px\"> (the paper's Fig. 3)</p>");
     }
-    for r in rows.iter().filter(|r| r.update == "lazy-cache") {
+    for r in rows.iter().filter(|r| r.update == "lazy-cache" && !r.spec.contains("ordered=0")) {
         let seq = &r.scene;
         let _ = write!(
             h_out,
@@ -192,6 +196,18 @@ fn deform_section(a: &DemoArgs) -> Result<String> {
         );
     }
     Ok(h_out)
+}
+
+/// The demo table's "update" cell: the mode, and the cache ablation switches of its spec.
+fn update_label(update: &str, spec: &str) -> String {
+    let mut l = update.to_string();
+    if spec.contains("ordered=0") {
+        l.push_str(", unordered");
+    }
+    if let Some(n) = spec.split(':').find_map(|k| k.strip_prefix("cache_up=")) {
+        let _ = write!(l, ", cache {n} up");
+    }
+    l
 }
 
 fn esc(s: &str) -> String {
@@ -365,4 +381,19 @@ fn index_html(sections: &[(Job, BenchReport)]) -> String {
     }
     h.push_str("</body></html>\n");
     h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::update_label;
+
+    #[test]
+    fn update_labels_name_the_cache_switches() {
+        assert_eq!(update_label("lazy", "surfel:update=lazy:frames=16:detail=0.4"), "lazy");
+        assert_eq!(update_label("lazy", "surfel:update=lazy:ordered=0:frames=16"), "lazy, unordered");
+        assert_eq!(
+            update_label("lazy-cache", "surfel:update=lazy-cache:ordered=0:cache_up=8:frames=16"),
+            "lazy-cache, unordered, cache 8 up"
+        );
+    }
 }
