@@ -284,31 +284,22 @@ pub fn table(rows: &[DeformRow]) -> String {
 /// Checks a `surfel` spec's options before any work.
 pub fn validate(spec: &MethodSpec) -> Result<()> {
     let s = &spec.surfel;
-    crate::cli::animate::parse_mode(&s.update)?;
+    let mode = crate::cli::animate::parse_mode(&s.update)?;
+    let bad = |msg: String| Err(Error::Usage(format!("method spec '{}': {msg}", spec.text)));
     if !(s.detail.is_finite() && s.detail > 0.0 && s.detail <= 10.0) {
-        return Err(Error::Usage(format!("method spec '{}': detail={} out of range (0, 10]", spec.text, s.detail)));
+        return bad(format!("detail={} out of range (0, 10]", s.detail));
     }
-    if s.exact_below > crate::deform::trace::MAX_EXACT_BELOW {
-        return Err(Error::Usage(format!(
-            "method spec '{}': exact={} above {}",
-            spec.text,
-            s.exact_below,
-            crate::deform::trace::MAX_EXACT_BELOW
-        )));
+    use crate::deform::trace::{MAX_CACHE_UP, MAX_EXACT_BELOW};
+    for (key, v, max) in [("exact", s.exact_below, MAX_EXACT_BELOW), ("cache_up", s.cache_up, MAX_CACHE_UP)] {
+        if v > max {
+            return bad(format!("{key}={v} above {max}"));
+        }
     }
-    if s.cache_up > crate::deform::trace::MAX_CACHE_UP {
-        return Err(Error::Usage(format!(
-            "method spec '{}': cache_up={} above {}",
-            spec.text,
-            s.cache_up,
-            crate::deform::trace::MAX_CACHE_UP
-        )));
-    }
-    if s.cache_up > 0 && crate::cli::animate::parse_mode(&s.update)? != crate::deform::UpdateMode::LazyCache {
-        return Err(Error::Usage(format!("method spec '{}': cache_up is a key of update=lazy-cache", spec.text)));
+    if s.cache_up > 0 && mode != crate::deform::UpdateMode::LazyCache {
+        return bad("cache_up is a key of update=lazy-cache".into());
     }
     if s.frames == Some(0) || s.frames.is_some_and(|f| f > 100_000) {
-        return Err(Error::Usage(format!("method spec '{}': frames out of range", spec.text)));
+        return bad("frames out of range".into());
     }
     Ok(())
 }
