@@ -127,8 +127,8 @@ fn bench_regions_split_each_rows_error() {
         let g = r["regions"].as_array().unwrap();
         assert_eq!(g.len(), 2, "{r}");
         // The methods' rows (not the sweep's) are compared with the sweep region by region.
-        if r["sweep"] != true {
-            let e = r["equal_time"]["regions"].as_array().unwrap();
+        if r["sweep"].is_null() {
+            let e = r["equal_time"][0]["regions"].as_array().unwrap();
             assert_eq!(e.len(), 2, "{r}");
             for (eg, gg) in e.iter().zip(g) {
                 assert_eq!(eg["name"], gg["name"]);
@@ -167,6 +167,8 @@ fn bench_regions_split_each_rows_error() {
 
 /// `--sweep`: distributed at 1, 2, 4, … spp until it is slower and better than every method;
 /// each method gets its equal-time row; the sweep's error falls with spp; the plot exists.
+/// Two sweeps (the fast back-end and the paper's same code basis) give each method two
+/// equal-time rows, in the order given, and two tables.
 #[test]
 fn bench_sweep_gives_equal_time_rows() {
     let (code, out, err, d, json) = small_bench(
@@ -179,27 +181,48 @@ fn bench_sweep_gives_equal_time_rows() {
             "distributed:bvh:spp=32:vt=0",
             "--sweep",
             "distributed:bvh:vt=0",
+            "--sweep",
+            "distributed:octree:vt=0",
             "--sweep-max-spp",
             "16",
         ],
     );
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("Equal time and equal error against distributed:bvh:vt=0"), "{out}");
+    assert!(out.contains("Equal time and equal error against distributed:octree:vt=0"), "{out}");
     let v = json.unwrap();
     let rows = v["rows"].as_array().unwrap();
-    let sweep: Vec<&serde_json::Value> = rows.iter().filter(|r| r["sweep"] == true).collect();
-    assert!(sweep.len() >= 2 && sweep.len() <= 5, "{}", sweep.len());
-    assert_eq!(sweep[0]["spec"], "distributed:bvh:vt=0:spp=1");
     let f = |r: &serde_json::Value| r["flip"].as_f64().unwrap();
-    assert!(f(sweep.last().unwrap()) < f(sweep[0]), "more samples, lower error");
-    let e = &rows[0]["equal_time"];
-    assert_eq!(e["sweep"], "distributed:bvh:vt=0");
-    assert!(e["sweep_max_seconds"].as_f64().unwrap() > 0.0);
+    for name in ["distributed:bvh:vt=0", "distributed:octree:vt=0"] {
+        let sweep: Vec<&serde_json::Value> = rows.iter().filter(|r| r["sweep"] == name).collect();
+        assert!(sweep.len() >= 2 && sweep.len() <= 5, "{name}: {}", sweep.len());
+        assert_eq!(sweep[0]["spec"], format!("{name}:spp=1"));
+        assert!(f(sweep.last().unwrap()) < f(sweep[0]), "{name}: more samples, lower error");
+    }
+    // Only the method's row meets the sweeps, once per sweep, in the order given.
+    assert_eq!(rows.iter().filter(|r| r["equal_time"].is_array()).count(), 1);
+    let e = rows[0]["equal_time"].as_array().unwrap();
+    assert_eq!(e.len(), 2);
+    assert_eq!(e[0]["sweep"], "distributed:bvh:vt=0");
+    assert_eq!(e[1]["sweep"], "distributed:octree:vt=0");
+    assert!(e.iter().all(|e| e["sweep_max_seconds"].as_f64().unwrap() > 0.0));
     image::open(d.join("spheres-equal-time.png")).unwrap();
     for bad in [
         &["bench", "spheres", "--methods", "whitted:bvh", "--sweep", "distributed:bvh"][..],
         &["bench", "spheres", "--methods", "whitted:bvh", "--reference", "distributed:bvh:spp=4", "--sweep", "multires"],
         &["bench", "spheres", "--methods", "whitted:bvh", "--reference", "distributed:bvh:spp=4", "--sweep", "distributed:bvh:spp=4"],
+        &[
+            "bench",
+            "spheres",
+            "--methods",
+            "whitted:bvh",
+            "--reference",
+            "distributed:bvh:spp=4",
+            "--sweep",
+            "distributed:bvh",
+            "--sweep",
+            "distributed:bvh",
+        ],
         &[
             "bench",
             "spheres",

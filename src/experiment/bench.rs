@@ -67,8 +67,11 @@ pub struct BenchArgs {
     /// method (or reaches `--sweep-max-spp`), then report for each method the sweep's error
     /// at the same time and the time the sweep needs to reach the method's error (mean
     /// FLIP against `--reference`, interpolated in log time). Needs `--reference`.
+    /// Repeatable: `--sweep distributed:embree --sweep distributed:octree` compares each
+    /// method with the fast back-end and with the paper's distributed tracer on the same
+    /// code basis (§6) in one run.
     #[arg(long)]
-    pub sweep: Option<String>,
+    pub sweep: Vec<String>,
     /// Largest spp of the sweep.
     #[arg(long, default_value_t = 256)]
     pub sweep_max_spp: u32,
@@ -292,12 +295,12 @@ pub struct BenchRow {
     pub image: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub lod_vs_full: Option<LodComparison>,
-    /// This row against the `--sweep` curve of its scene.
+    /// This row against each `--sweep` curve of its scene, in the order of the sweeps.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub equal_time: Vec<EqualTime>,
+    /// For the rows a sweep rendered: that sweep's spec (without `spp=`).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub equal_time: Option<EqualTime>,
-    /// True for the rows the sweep rendered.
-    #[serde(skip_serializing_if = "std::ops::Not::not")]
-    pub sweep: bool,
+    pub sweep: Option<String>,
 }
 
 /// One `--region` of a row: where in the image its error sits.
@@ -565,12 +568,15 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
     if let Some(r) = &mut reference {
         r.seed = REFERENCE_SEED;
     }
-    let sweep = a.sweep.as_deref().map(MethodSpec::parse).transpose()?;
+    let sweeps: Vec<MethodSpec> = a.sweep.iter().map(|s| MethodSpec::parse(s)).collect::<Result<_>>()?;
     let regions = parse_regions(&a.regions, a.width, a.height)?;
     if !regions.is_empty() && reference.is_none() {
         return Err(Error::Usage("--region splits the error against the reference: it needs --reference".into()));
     }
-    if let Some(sw) = &sweep {
+    for (i, sw) in sweeps.iter().enumerate() {
+        if sweeps[..i].iter().any(|o| o.text == sw.text) {
+            return Err(Error::Usage(format!("--sweep '{}' given twice", sw.text)));
+        }
         if reference.is_none() {
             return Err(Error::Usage("--sweep compares errors: it needs --reference".into()));
         }
@@ -612,7 +618,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
         return Ok(report);
     }
     // Validate everything before the first (possibly long) render.
-    for s in specs.iter().chain(reference.iter()).chain(sweep.iter()) {
+    for s in specs.iter().chain(reference.iter()).chain(sweeps.iter()) {
         s.opts(a.width, a.height, a.threads, true).validate()?;
     }
     let scenes: Vec<Scene> = a.scenes.iter().map(|s| crate::scene::load::load_scene(s)).collect::<Result<_>>()?;
@@ -708,10 +714,12 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                 full.push((spec.clone(), film, rows.last().expect("row").stats.clone()));
             }
         }
-        if let (Some(sw), Some(rf)) = (&sweep, &ref_film) {
-            let first = rows.len() - specs.len();
+        let first = rows.len() - specs.len();
+        for (sw, rf) in sweeps.iter().filter_map(|sw| ref_film.as_ref().map(|rf| (sw, rf))) {
             let t0 = first_time.unwrap_or(1.0);
-            let others: Vec<(f64, f64)> = rows[first..].iter().filter_map(|r| r.flip.map(|f| (r.stats.render_seconds, f))).collect();
+            // The methods' rows only, not an earlier sweep's.
+            let others: Vec<(f64, f64)> =
+                rows[first..first + specs.len()].iter().filter_map(|r| r.flip.map(|f| (r.stats.render_seconds, f))).collect();
             let t_slowest = others.iter().map(|o| o.0).fold(0.0, f64::max);
             let f_best = others.iter().map(|o| o.1).fold(f64::INFINITY, f64::min);
             let mut curve = Vec::new();
@@ -725,7 +733,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                 let (film, stats, ..) = run_spec(scene, &spec, a.width, a.height, a.threads, a.repeat, a.quiet)?;
                 let mut row = finish_row(scene, &spec, &film, stats, Some((rf, &regions[..])), a.out.as_deref(), a.quiet)?;
                 row.speedup_vs_first = t0 / row.stats.render_seconds.max(1e-12);
-                row.sweep = true;
+                row.sweep = Some(sw.text.clone());
                 let (t, f) = (row.stats.render_seconds, row.flip.unwrap_or(0.0));
                 curve.push((t, spp as f64, f));
                 region_curves.resize(row.regions.len(), Vec::new());
@@ -751,7 +759,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                             time_ratio_at_equal_error: ge.time_ratio_at_equal_error,
                         });
                     }
-                    r.equal_time = Some(e);
+                    r.equal_time.push(e);
                 }
             }
         }
@@ -822,8 +830,8 @@ fn finish_row(
         regions: region_rows,
         image,
         lod_vs_full: None,
-        equal_time: None,
-        sweep: false,
+        equal_time: Vec::new(),
+        sweep: None,
     })
 }
 
@@ -849,19 +857,25 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
     let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     for sc in &scenes {
         let rows = report.rows.iter().filter(|r| r.scene == *sc && r.flip.is_some());
-        if report.rows.iter().any(|r| r.scene == *sc && r.sweep) {
+        if report.rows.iter().any(|r| r.scene == *sc && r.sweep.is_some()) {
+            // Each sweep a curve (first in the legend), each method a point.
+            let mut curves: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
             let mut per: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
-            let mut curve = Vec::new();
             for r in rows {
                 let p = (r.stats.render_seconds, r.flip.unwrap_or(0.0));
-                if r.sweep {
-                    curve.push(p);
-                } else {
-                    per.push((r.spec.clone(), vec![p]));
+                match &r.sweep {
+                    Some(name) => {
+                        let name = format!("{name}, spp 1, 2, 4, ...");
+                        match curves.iter_mut().find(|c| c.0 == name) {
+                            Some(c) => c.1.push(p),
+                            None => curves.push((name, vec![p])),
+                        }
+                    }
+                    None => per.push((r.spec.clone(), vec![p])),
                 }
             }
-            let name = report.rows.iter().find_map(|r| r.equal_time.as_ref().map(|e| e.sweep.clone())).unwrap_or("sweep".into());
-            per.insert(0, (format!("{name}, spp 1, 2, 4, ..."), curve));
+            curves.append(&mut per);
+            let per = curves;
             // Fast, noisy renders sit top left and the converged sweep bottom right.
             super::plot::line_chart_legend(
                 &out.join(format!("{sc}-equal-time.png")),
@@ -959,16 +973,20 @@ pub fn table_string(report: &BenchReport) -> String {
             s.push('\n');
         }
     }
-    let eq: Vec<&BenchRow> = report.rows.iter().filter(|r| r.equal_time.is_some()).collect();
-    if !eq.is_empty() {
-        s.push_str(&format!(
-            "\nEqual time and equal error against {} (mean FLIP against the reference):\n\n",
-            eq[0].equal_time.as_ref().map(|e| e.sweep.as_str()).unwrap_or("the sweep")
-        ));
+    // One pair of tables per sweep, in the order of the sweeps.
+    let mut sweeps: Vec<&str> = Vec::new();
+    for e in report.rows.iter().flat_map(|r| &r.equal_time) {
+        if !sweeps.contains(&e.sweep.as_str()) {
+            sweeps.push(&e.sweep);
+        }
+    }
+    for name in sweeps {
+        let eq: Vec<(&BenchRow, &EqualTime)> =
+            report.rows.iter().filter_map(|r| r.equal_time.iter().find(|e| e.sweep == name).map(|e| (r, e))).collect();
+        s.push_str(&format!("\nEqual time and equal error against {name} (mean FLIP against the reference):\n\n"));
         s.push_str("| scene | method | render s | FLIP | sweep FLIP at equal time (spp) | sweep time to match FLIP | time ratio at equal error |\n");
         s.push_str("|---|---|---:|---:|---:|---:|---:|\n");
-        for r in eq {
-            let e = r.equal_time.as_ref().expect("filtered");
+        for &(r, e) in &eq {
             let at = match (e.sweep_flip_at_equal_time, e.sweep_spp_at_equal_time) {
                 (Some(f), Some(n)) => format!("{f:.4} ({n:.1})"),
                 _ => "faster than 1 spp".into(),
@@ -991,23 +1009,23 @@ pub fn table_string(report: &BenchReport) -> String {
                 q
             ));
         }
-    }
-    let eqr: Vec<&BenchRow> = report.rows.iter().filter(|r| r.equal_time.as_ref().is_some_and(|e| !e.regions.is_empty())).collect();
-    if let Some(first) = eqr.first() {
-        s.push_str("\nEqual time by region (the row's mean FLIP in the region / the sweep's there at the row's time; in brackets the time ratio at equal error, > 1: the method is faster):\n\n");
-        let cols: Vec<String> = first.equal_time.as_ref().expect("filtered").regions.iter().map(|g| g.name.clone()).collect();
-        s.push_str(&table_header(&["scene", "method", "render s"], &cols));
-        for r in eqr {
-            let e = r.equal_time.as_ref().expect("filtered");
-            s.push_str(&format!("| {} | {} | {:.3} |", r.scene, r.spec, r.stats.render_seconds));
-            for g in &e.regions {
-                let at = g.sweep_flip_at_equal_time.map_or("-".into(), |f| format!("{f:.4}"));
-                let q = g
-                    .time_ratio_at_equal_error
-                    .map_or_else(|| format!("> {:.2}x", e.sweep_max_seconds / r.stats.render_seconds.max(1e-12)), |q| format!("{q:.2}x"));
-                s.push_str(&format!(" {:.4} / {at} ({q}) |", g.flip));
+        let eqr: Vec<&(&BenchRow, &EqualTime)> = eq.iter().filter(|(_, e)| !e.regions.is_empty()).collect();
+        if let Some((_, first)) = eqr.first() {
+            s.push_str(&format!("\nEqual time by region against {name} (the row's mean FLIP in the region / the sweep's there at the row's time; in brackets the time ratio at equal error, > 1: the method is faster):\n\n"));
+            let cols: Vec<String> = first.regions.iter().map(|g| g.name.clone()).collect();
+            s.push_str(&table_header(&["scene", "method", "render s"], &cols));
+            for &&(r, e) in &eqr {
+                s.push_str(&format!("| {} | {} | {:.3} |", r.scene, r.spec, r.stats.render_seconds));
+                for g in &e.regions {
+                    let at = g.sweep_flip_at_equal_time.map_or("-".into(), |f| format!("{f:.4}"));
+                    let q = g.time_ratio_at_equal_error.map_or_else(
+                        || format!("> {:.2}x", e.sweep_max_seconds / r.stats.render_seconds.max(1e-12)),
+                        |q| format!("{q:.2}x"),
+                    );
+                    s.push_str(&format!(" {:.4} / {at} ({q}) |", g.flip));
+                }
+                s.push('\n');
             }
-            s.push('\n');
         }
     }
     let cones: Vec<&BenchRow> = report.rows.iter().filter(|r| r.stats.cone_profile.is_some()).collect();

@@ -24,8 +24,8 @@ struct Job {
     height: u32,
     methods: String,
     reference: Option<String>,
-    /// Stochastic spec swept over spp for the equal-time comparison (`bench --sweep`).
-    sweep: Option<String>,
+    /// Stochastic specs swept over spp for the equal-time comparison (`bench --sweep`).
+    sweep: Vec<String>,
     /// `bench --region` rectangles: where in the image the error sits.
     regions: Vec<String>,
 }
@@ -60,8 +60,11 @@ fn jobs(quick: bool) -> Vec<Job> {
     m.push("multires:clamp2=1:lod=4".into());
     let methods = m.join(",");
     let fx = format!("whitted:{a0},multires");
-    // Distributed ray tracing at 1, 2, 4, … spp: the equal-time and equal-error comparison.
-    let sw = Some(format!("distributed:{a0}"));
+    // Distributed ray tracing at 1, 2, 4, … spp: the equal-time and equal-error comparison,
+    // on the fast back-end and, as in the paper's §6 ("a distributed raytracer based on the
+    // same code basis"), on the octree the multi-resolution tracer and its Whitted baseline
+    // use.
+    let sw = vec![format!("distributed:{a0}"), "distributed:octree".to_string()];
     let (swd, sh, cw, ch, sref, cref) = if quick { (256, 256, 320, 240, 66, 27) } else { (512, 512, 640, 480, 258, 102) };
     let r = |spp: u32| Some(format!("distributed:{a0}:spp={spp}:vt=0"));
     // Papaioannou et al.: per-ray LOD against the full-detail tracer, 2×2 supersampling as
@@ -79,10 +82,10 @@ fn jobs(quick: bool) -> Vec<Job> {
         Job { scene: "spheres", width: swd, height: sh, methods: methods.clone(), reference: r(sref), sweep: sw.clone(), regions: vec![] },
         Job { scene: "complex", width: cw, height: ch, methods, reference: r(cref), sweep: sw.clone(), regions: complex_regions(cw, ch) },
         // Fig. 8: soft shadows, depth of field, blurry reflections at three roughnesses.
-        Job { scene: "effects", width: swd, height: sh, methods: fx, reference: r(sref), sweep: sw, regions: vec![] },
-        Job { scene: "chessboard", width: lw, height: lh, methods: lod_cb, reference: None, sweep: None, regions: vec![] },
-        Job { scene: "cabinet", width: lw, height: lh, methods: lod.clone(), reference: None, sweep: None, regions: vec![] },
-        Job { scene: "reflector", width: lw, height: lh, methods: lod, reference: None, sweep: None, regions: vec![] },
+        Job { scene: "effects", width: swd, height: sh, methods: fx, reference: r(sref), sweep: sw[..1].to_vec(), regions: vec![] },
+        Job { scene: "chessboard", width: lw, height: lh, methods: lod_cb, reference: None, sweep: vec![], regions: vec![] },
+        Job { scene: "cabinet", width: lw, height: lh, methods: lod.clone(), reference: None, sweep: vec![], regions: vec![] },
+        Job { scene: "reflector", width: lw, height: lh, methods: lod, reference: None, sweep: vec![], regions: vec![] },
     ]
 }
 
@@ -253,7 +256,7 @@ fn index_html(sections: &[(Job, BenchReport)]) -> String {
             );
         }
         // The sweep's images are in the folder; the page shows the curve instead.
-        for row in r.rows.iter().filter(|row| !row.sweep) {
+        for row in r.rows.iter().filter(|row| row.sweep.is_none()) {
             if let Some(img) = &row.image {
                 let _ = write!(
                     h,
@@ -294,12 +297,17 @@ fn index_html(sections: &[(Job, BenchReport)]) -> String {
             }
             h.push_str("</table>");
         }
-        let eq: Vec<_> = r.rows.iter().filter_map(|row| row.equal_time.as_ref().map(|e| (row, e))).collect();
-        if let Some((_, e0)) = eq.first() {
+        for name in &job.sweep {
+            let name = bench::MethodSpec::parse(name).map(|s| s.text).unwrap_or_else(|_| name.clone());
+            let eq: Vec<_> = r.rows.iter().filter_map(|row| row.equal_time.iter().find(|e| e.sweep == name).map(|e| (row, e))).collect();
+            if eq.is_empty() {
+                continue;
+            }
             let _ = write!(
                 h,
-                "<h3>Equal time and equal error against {}</h3><p>The sweep renders it at 1, 2, 4, … samples per pixel; its error at each method's time and the time it needs to reach each method's error are interpolated in log time (time ratio &gt; 1: the method reaches that error faster).</p><table><tr><th>method</th><th>render s</th><th>mean FLIP</th><th>sweep FLIP at equal time</th><th>sweep spp at equal time</th><th>sweep time to match</th><th>time ratio at equal error</th></tr>",
-                esc(&e0.sweep)
+                "<h3>Equal time and equal error against {}</h3><p>The sweep renders it at 1, 2, 4, … samples per pixel; its error at each method's time and the time it needs to reach each method's error are interpolated in log time (time ratio &gt; 1: the method reaches that error faster).{}</p><table><tr><th>method</th><th>render s</th><th>mean FLIP</th><th>sweep FLIP at equal time</th><th>sweep spp at equal time</th><th>sweep time to match</th><th>time ratio at equal error</th></tr>",
+                esc(&name),
+                if name.contains(":octree") { " This is the paper's comparison (§6): the distributed tracer on the same code basis as the multi-resolution tracer." } else { "" }
             );
             for (row, e) in &eq {
                 let o = |x: Option<f64>, p: usize| x.map(|v| format!("{v:.p$}")).unwrap_or_else(|| "-".into());
@@ -315,11 +323,11 @@ fn index_html(sections: &[(Job, BenchReport)]) -> String {
                     o(e.time_ratio_at_equal_error, 2)
                 );
             }
-            let _ = write!(
-                h,
-                "</table><p><img src=\"{}\" style=\"max-width:800px\"></p>",
-                dir.join(format!("{}-equal-time.png", job.scene)).display()
-            );
+            h.push_str("</table>");
+        }
+        if r.rows.iter().any(|row| row.sweep.is_some()) {
+            let _ =
+                write!(h, "<p><img src=\"{}\" style=\"max-width:800px\"></p>", dir.join(format!("{}-equal-time.png", job.scene)).display());
         }
         let lod: Vec<_> = r.rows.iter().filter_map(|row| row.lod_vs_full.as_ref().map(|c| (row, c))).collect();
         if !lod.is_empty() {
