@@ -55,7 +55,7 @@ fn jobs(quick: bool) -> Vec<Job> {
     // the multi-resolution cone tracer.
     m.push("whitted:octree".into());
     m.push("multires".into());
-    // The paper's clamp and level rule turned past their defaults for speed (README, stop
+    // The paper's clamp and level rule turned past their defaults for speed (BENCHMARKS.md, stop
     // 28: `complex` at 1.8× the octree Whitted frame instead of 3.0×).
     m.push("multires:clamp2=1:lod=4".into());
     let methods = m.join(",");

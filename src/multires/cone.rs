@@ -310,7 +310,7 @@ pub fn secondary(p: Vec3, dir: Vec3, n: Vec3, w: &Mat3, fs: [Vec3; 4], out: Outg
 /// direction), which the shadow cone sees across its own direction ("transformed into ray
 /// coordinates", [`Cone::fp_of`]). Until stop 31 the caller passed the incoming cone's axes
 /// and this function projected them along the *light* direction, which shrank a grazing
-/// view's footprint on the floor instead of stretching it (review finding; README stop 31).
+/// view's footprint on the floor instead of stretching it (review finding; BENCHMARKS.md, stop 31).
 pub fn shadow(p: Vec3, g0: Vec3, g1: Vec3, light_pos: Vec3, axis_a: Vec3, axis_b: Vec3) -> (Cone, f32) {
     let to = light_pos - p;
     let dist = to.length();

@@ -5,7 +5,7 @@
 //! right when the pieces in successive fragments sit at independent places in the footprint.
 //! Foliage breaks that: leaves growing from one stem cover the *same* part of the footprint
 //! (their coverage is correlated), so alpha compositing counts the overlap twice and a plant
-//! comes out 1.2–1.5× too opaque at a distance (README, stops 19–20).
+//! comes out 1.2–1.5× too opaque at a distance (BENCHMARKS.md, the README record, stops 19–20).
 //!
 //! A mask has one bit per *sub-ray* of the cone: 64 fixed offsets in whitened footprint
 //! coordinates (the Gaussian's own units, weight e^{−|m|²}), spread with the truncated

@@ -51,7 +51,7 @@ pub struct MultiresArgs {
     /// Anisotropy limit of reflected and refracted cones and of their hits' shadow cones
     /// (default: `--anisotropy-clamp`, as the paper). Larger values trade blur in the
     /// reflections' narrow direction for speed: on `complex` 640×480, 1 takes the frame from
-    /// 3.0× to 2.3× the octree Whitted frame, and with `--lod-scale 4` to 1.8× (README,
+    /// 3.0× to 2.3× the octree Whitted frame, and with `--lod-scale 4` to 1.8× (BENCHMARKS.md,
     /// stop 28).
     #[arg(long)]
     pub secondary_clamp: Option<f32>,

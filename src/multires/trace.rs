@@ -2250,7 +2250,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         // cross-section, `f` (*deviation*, with the skip above). Measured at stop 31, when the
         // surface rule was corrected from a projection along the light: `complex` 320×240
         // with `g` for aggregates too, mean FLIP 0.1199 → 0.1257 and `--tri-weight mass`
-        // 0.0893 → 0.0961 at 1.4× the time (README, stop 31).
+        // 0.0893 → 0.0961 at 1.4× the time (BENCHMARKS.md, the README record, stop 31).
         let (s0, s1) = if aggregate { (f0, f1) } else { (g0, g1) };
         let t_shadow = |d: Vec3| -> f32 {
             let sin_el = d.dot(n).abs().min(1.0);
