@@ -388,6 +388,95 @@ fn shadow_cones_give_a_dark_umbra_and_a_lit_floor() {
     assert!(m.iter().all(|v| v.is_finite()));
 }
 
+/// Shadow cones leaving a flat floor skip every instance on its plane (`multires::plane`):
+/// the tiles of a floor share one plane, an occluder above it has its own, and the skip
+/// leaves the image (umbra included) as the start distance made it while the primary hits'
+/// shadow cones do fewer node tests. A light below the floor's lit side is never skipped.
+#[test]
+fn flat_floors_skip_their_own_shadow_cones_and_keep_the_image() {
+    use lodtrace::multires::plane::NONE;
+    use lodtrace::multires::trace::ConeKind;
+    let mut s = Scene::empty("tiled umbra");
+    s.materials[0] = Material::diffuse("white", Vec3::splat(0.8));
+    let tile = s.add_mesh(builtin::checkerboard(8, 2.0, 0, 0));
+    for i in -4..4 {
+        for j in -4..4 {
+            s.instance(Target::Mesh(tile), Affine3A::from_translation(Vec3::new(2.0 * i as f32 + 1.0, 0.0, 2.0 * j as f32 + 1.0)), None);
+        }
+    }
+    let occ = s.add_mesh(builtin::checkerboard(16, 1.0, 0, 0));
+    s.instance(Target::Mesh(occ), Affine3A::from_translation(Vec3::new(0.0, 0.8, 0.0)), None);
+    let ball = s.add_mesh(builtin::uv_sphere(8, 12, 0));
+    s.instance(
+        Target::Mesh(ball),
+        Affine3A::from_scale_rotation_translation(Vec3::splat(0.3), glam::Quat::IDENTITY, Vec3::new(1.5, 0.3, 0.5)),
+        None,
+    );
+    s.lights.push(Light::Ellipse {
+        center: Vec3::new(0.0, 3.0, 0.0),
+        axis_a: Vec3::X * 0.4,
+        axis_b: Vec3::Z * 0.4,
+        intensity: Vec3::splat(9.0),
+    });
+    // Below the occluder, looking at the floor under it.
+    s.camera = Camera { eye: Vec3::new(0.0, 0.5, 3.0), look: Vec3::ZERO, up: Vec3::Y, fovy: 50.0, aperture: 0.0, focal_dist: 3.0 };
+    s.ambient = Vec3::ZERO;
+    s.background = Vec3::ZERO;
+    s.validate().unwrap();
+    let ms = MultiresScene::build(&s, &BuildParams::default()).unwrap();
+    let floor = ms.flat.leaf[0];
+    assert_ne!(floor, NONE);
+    assert!(ms.flat.leaf[..64].iter().all(|&k| k == floor), "the tiles share a plane");
+    assert!(ms.flat.leaf[64] != NONE && ms.flat.leaf[64] != floor, "the occluder has its own");
+    assert_eq!(ms.flat.leaf[65], NONE, "a sphere is not flat");
+    assert_eq!(ms.flat.slot[0], NONE, "the root holds several planes");
+    assert!(ms.flat.slot.iter().filter(|&&k| k == floor).count() > 64, "inner slots of tiles only carry the plane");
+    let (w, h) = (48, 48);
+    let opts = RenderOpts { width: w, height: h, ..Default::default() };
+    let cam = s.camera.frame(w, h);
+    let run = |plane_skip: bool| {
+        let tp = TraceParams { plane_skip, ..Default::default() };
+        let r = cone_render(&ms, &tp, &cam, &opts).unwrap();
+        let k = ConeKind::PrimaryShadow as usize;
+        (r.out.film, r.profile.work[k].iter().sum::<u64>(), r.profile.cones[k])
+    };
+    let (on, tests_on, cones_on) = run(true);
+    let (off, tests_off, cones_off) = run(false);
+    assert_eq!(cones_on, cones_off);
+    assert!(cones_on > 1000, "{cones_on} shadow cones");
+    assert!((tests_on as f64) < 0.8 * tests_off as f64, "primary shadow cones' work with / without the skip: {tests_on} / {tests_off}");
+    let e = rmse(&on, &off);
+    assert!(e < 1e-3, "RMSE {e} between the skip and the paper's start distance");
+    // The umbra stays: the occluder is on another plane.
+    let mut open = s.clone();
+    open.shadows = false;
+    let lit = cone_render(&MultiresScene::build(&open, &BuildParams::default()).unwrap(), &TraceParams::default(), &cam, &opts).unwrap();
+    let top = lit.out.film.color.iter().map(|c| c.x).fold(0.0f32, f32::max);
+    let umbra = on.color.iter().zip(&lit.out.film.color).filter(|(c, o)| o.x > 0.2 * top && c.x < 0.05 * o.x).count();
+    assert!(umbra > 50, "{umbra} umbra pixels");
+    assert!(on.color.iter().all(|c| c.is_finite()));
+    // A light that reaches below the floor's plane: the floor must not skip itself (the
+    // occluder, the other flat instance, is left out here).
+    let mut under = s.clone();
+    let root = under.root as usize;
+    under.groups[root].children.retain(|i| i.target != Target::Mesh(occ));
+    under.lights = vec![Light::Ellipse {
+        center: Vec3::new(0.0, 0.3, -1.0),
+        axis_a: Vec3::Y * 0.5,
+        axis_b: Vec3::X * 0.5,
+        intensity: Vec3::splat(9.0),
+    }];
+    under.validate().unwrap();
+    let msu = MultiresScene::build(&under, &BuildParams::default()).unwrap();
+    let tp = TraceParams::default();
+    let r = cone_render(&msu, &tp, &cam, &opts).unwrap();
+    assert!(r.out.film.color.iter().all(|c| c.is_finite()));
+    let tpo = TraceParams { plane_skip: false, ..Default::default() };
+    let ro = cone_render(&msu, &tpo, &cam, &opts).unwrap();
+    assert!(r.profile.cones[ConeKind::PrimaryShadow as usize] > 1000);
+    assert_eq!(r.profile.work, ro.profile.work, "no skip for a light that reaches below the plane");
+}
+
 /// A black-and-white checkerboard seen at a grazing angle: high-contrast edges everywhere.
 fn edge_scene() -> Scene {
     let mut s = Scene::empty("edges");

@@ -21,6 +21,7 @@ pub mod group;
 pub mod mask;
 pub mod mass;
 pub mod octree_accel;
+pub mod plane;
 pub mod quant;
 pub mod render;
 pub mod trace;
@@ -116,6 +117,12 @@ pub struct MultiresArgs {
     /// deviation from the paper (Carpenter's A-buffer remedy); see `multires::mask`.
     #[arg(long)]
     pub coverage_masks: bool,
+    /// Trace the shadow cones of a flat surface (a board) through the surface's own plane
+    /// too, rejecting its pieces near the start one by one as the paper does; default: skip
+    /// every instance on that plane when the light lies wholly on the lit side (a plane
+    /// cannot shadow itself; a deviation, see `multires::plane`).
+    #[arg(long)]
+    pub no_plane_skip: bool,
     /// Stop rendering after this many seconds (the frame is reported as unfinished).
     #[arg(long)]
     pub time_budget: Option<f64>,
@@ -145,6 +152,7 @@ impl Default for MultiresArgs {
             no_aggregate_shadow: !t.aggregate_shadow,
             tight_depth: t.tight_depth,
             coverage_masks: t.coverage_masks,
+            no_plane_skip: !t.plane_skip,
         }
     }
 }
@@ -169,7 +177,7 @@ impl MultiresArgs {
             no_mipmap => "--no-mipmap", primary_only => "--primary-only", termination => "--termination",
             no_normal_spread => "--no-normal-spread", no_group_points => "--no-group-points",
             no_aggregate_shadow => "--no-aggregate-shadow", tight_depth => "--tight-depth", coverage_masks => "--coverage-masks",
-            time_budget => "--time-budget",
+            no_plane_skip => "--no-plane-skip", time_budget => "--time-budget",
         );
         (build, trace)
     }
@@ -193,6 +201,7 @@ impl MultiresArgs {
             aggregate_shadow: !self.no_aggregate_shadow,
             tight_depth: self.tight_depth,
             coverage_masks: self.coverage_masks,
+            plane_skip: !self.no_plane_skip,
             points,
             ..Default::default()
         };

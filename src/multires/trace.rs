@@ -208,6 +208,9 @@ pub struct TraceParams {
     /// Triangle fragments carry coverage masks that correct the compositing of correlated
     /// pieces ([`super::mask`]); off (default): the paper's alpha compositing.
     pub coverage_masks: bool,
+    /// Shadow cones leaving a flat instance skip every instance on its plane when the light
+    /// is wholly on the lit side ([`super::plane`]); off: the paper's start distance alone.
+    pub plane_skip: bool,
 }
 
 impl Default for TraceParams {
@@ -232,6 +235,7 @@ impl Default for TraceParams {
             aggregate_shadow: true,
             tight_depth: false,
             coverage_masks: false,
+            plane_skip: true,
         }
     }
 }
@@ -444,6 +448,8 @@ pub struct MultiresScene<'a> {
     pub tlas: Tlas,
     /// Points over the instance tree's slots ([`super::group`]).
     pub groups: GroupPoints,
+    /// The planes of the flat instances, per leaf and per slot ([`super::plane`]).
+    pub flat: super::plane::FlatPlanes,
     /// Wall time of [`MultiresScene::build`]: building the trees, or reading them from the
     /// cache, and the instance-level points.
     pub build_seconds: f64,
@@ -526,8 +532,9 @@ impl<'a> MultiresScene<'a> {
             })
             .collect();
         let groups = super::group::build(&scene.materials, &tree_meshes, &mleaves, &tlas, bp);
+        let flat = super::plane::FlatPlanes::build(scene, &mleaves, &tlas);
         let group_seconds = t1.elapsed().as_secs_f64();
-        Ok(MultiresScene { scene, trees, leaves: mleaves, tlas, groups, build_seconds: t0.elapsed().as_secs_f64(), group_seconds })
+        Ok(MultiresScene { scene, trees, leaves: mleaves, tlas, groups, flat, build_seconds: t0.elapsed().as_secs_f64(), group_seconds })
     }
 
     pub fn memory_bytes(&self) -> usize {
@@ -1457,10 +1464,13 @@ pub struct Own {
     pub tree: u32,
     /// Where the other hierarchies' instances begin.
     pub tmin: f32,
+    /// A plane ([`super::plane`]) whose instances the cone skips altogether (a shadow cone
+    /// leaving a flat surface; [`super::plane::NONE`]: none).
+    pub plane: u32,
 }
 
 impl Own {
-    pub const NONE: Own = Own { tree: u32::MAX, tmin: 0.0 };
+    pub const NONE: Own = Own { tree: u32::MAX, tmin: 0.0, plane: super::plane::NONE };
 }
 
 /// What the traversal collects.
@@ -1516,6 +1526,12 @@ impl<'s, 'a> Tracer<'s, 'a> {
         if tl.r.is_empty() {
             return;
         }
+        // Instance-tree slots on the skipped plane (all of the scene, or one bit per slot).
+        let flat = &self.ms.flat;
+        let skip_plane = own.plane != super::plane::NONE;
+        if skip_plane && flat.slot[0] == own.plane {
+            return;
+        }
         sc.heap.clear();
         sc.entries.clear();
         sc.locals.clear();
@@ -1544,6 +1560,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 let ch = tl.child[e.node as usize];
                 if ch & LEAF != 0 {
                     let li = ch & !LEAF;
+                    if skip_plane && flat.leaf[li as usize] == own.plane {
+                        continue;
+                    }
                     let leaf = &self.ms.leaves[li as usize];
                     let (mut lc, s) = cone.to_object(&leaf.inv);
                     if leaf.tree == own.tree {
@@ -1593,6 +1612,13 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 }
                 let f = ch as usize;
                 let (mut m, mut t_near) = tlas_box_test_x8(&reach, tl, f);
+                if skip_plane {
+                    for l in 0..8 {
+                        if flat.slot[f + l] == own.plane {
+                            m &= !(1 << l);
+                        }
+                    }
+                }
                 c.add(Counter::instance_tests, 8);
                 let mut eig = [u32::MAX; 8];
                 if m != 0 {
@@ -2258,8 +2284,20 @@ impl<'s, 'a> Tracer<'s, 'a> {
             skip + thick / sin_el.max(0.2) + eps
         };
         let own = match f.best {
-            Elem::Point { leaf, .. } | Elem::Tri { leaf, .. } => Own { tree: self.ms.leaves[leaf as usize].tree, tmin: eps },
+            Elem::Point { leaf, .. } | Elem::Tri { leaf, .. } => {
+                Own { tree: self.ms.leaves[leaf as usize].tree, tmin: eps, plane: super::plane::NONE }
+            }
             Elem::None | Elem::Group { .. } => Own::NONE,
+        };
+        // The flat instance this fragment is on, if any, for the shadow cones' plane skip.
+        let plane = if self.p.plane_skip && !aggregate {
+            match f.best {
+                Elem::Point { leaf, .. } | Elem::Tri { leaf, .. } => self.ms.flat.leaf[leaf as usize],
+                Elem::Group { slot, .. } => self.ms.flat.slot[slot as usize],
+                Elem::None => super::plane::NONE,
+            }
+        } else {
+            super::plane::NONE
         };
         let v = -cone.dir;
         // Normal spread (`m_len` above). *Deviation from the paper* (which shades a prefiltered point by its
@@ -2302,7 +2340,12 @@ impl<'s, 'a> Tracer<'s, 'a> {
                         ab.clear();
                         ab.cap = self.p.max_fragments;
                         let (before, since) = (ConeProfile::snapshot(c), Instant::now());
-                        self.traverse_own(&sh, Own::NONE, &mut ab, Collect::Alpha, &mut ss.trav, c);
+                        let own = if plane != super::plane::NONE && self.ms.flat.light_clear(plane, n, lp, ax_a, ax_b) {
+                            Own { plane, ..Own::NONE }
+                        } else {
+                            Own::NONE
+                        };
+                        self.traverse_own(&sh, own, &mut ab, Collect::Alpha, &mut ss.trav, c);
                         c.add(Counter::fragments_merged, ab.merges);
                         let kind = if depth == 0 { ConeKind::PrimaryShadow } else { ConeKind::SecondaryShadow };
                         ss.profile.record(kind, &before, c, since);
