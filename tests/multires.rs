@@ -345,6 +345,21 @@ fn foliage_shadows_itself() {
 /// little past the exact one). A coarser level for the shadow cones (λ = 4 instead of 2,
 /// tried at stop 23) let 6 % of the light into the umbra and took 7 % more from the lit
 /// floor; this test fails for it.
+/// An elliptical light 3 units above the origin, the camera `eye_y` high and 3 units back
+/// looking at the origin, no ambient light or background: the set-up of the umbra tests.
+fn light_above_camera_below(s: &mut Scene, eye_y: f32) {
+    s.lights.push(Light::Ellipse {
+        center: Vec3::new(0.0, 3.0, 0.0),
+        axis_a: Vec3::X * 0.4,
+        axis_b: Vec3::Z * 0.4,
+        intensity: Vec3::splat(9.0),
+    });
+    s.camera = Camera { eye: Vec3::new(0.0, eye_y, 3.0), look: Vec3::ZERO, up: Vec3::Y, fovy: 50.0, aperture: 0.0, focal_dist: 3.0 };
+    s.ambient = Vec3::ZERO;
+    s.background = Vec3::ZERO;
+    s.validate().unwrap();
+}
+
 #[test]
 fn shadow_cones_give_a_dark_umbra_and_a_lit_floor() {
     let mut s = Scene::empty("umbra");
@@ -353,17 +368,8 @@ fn shadow_cones_give_a_dark_umbra_and_a_lit_floor() {
     s.instance(Target::Mesh(floor), Affine3A::IDENTITY, None);
     let occ = s.add_mesh(builtin::checkerboard(64, 2.0, 0, 0));
     s.instance(Target::Mesh(occ), Affine3A::from_translation(Vec3::new(0.0, 1.0, 0.0)), None);
-    s.lights.push(Light::Ellipse {
-        center: Vec3::new(0.0, 3.0, 0.0),
-        axis_a: Vec3::X * 0.4,
-        axis_b: Vec3::Z * 0.4,
-        intensity: Vec3::splat(9.0),
-    });
     // Low, looking at the floor under the occluder.
-    s.camera = Camera { eye: Vec3::new(0.0, 0.9, 3.0), look: Vec3::ZERO, up: Vec3::Y, fovy: 50.0, aperture: 0.0, focal_dist: 3.0 };
-    s.ambient = Vec3::ZERO;
-    s.background = Vec3::ZERO;
-    s.validate().unwrap();
+    light_above_camera_below(&mut s, 0.9);
     let mut open = s.clone();
     open.shadows = false;
     let (w, h) = (48, 48);
@@ -412,17 +418,8 @@ fn flat_floors_skip_their_own_shadow_cones_and_keep_the_image() {
         Affine3A::from_scale_rotation_translation(Vec3::splat(0.3), glam::Quat::IDENTITY, Vec3::new(1.5, 0.3, 0.5)),
         None,
     );
-    s.lights.push(Light::Ellipse {
-        center: Vec3::new(0.0, 3.0, 0.0),
-        axis_a: Vec3::X * 0.4,
-        axis_b: Vec3::Z * 0.4,
-        intensity: Vec3::splat(9.0),
-    });
     // Below the occluder, looking at the floor under it.
-    s.camera = Camera { eye: Vec3::new(0.0, 0.5, 3.0), look: Vec3::ZERO, up: Vec3::Y, fovy: 50.0, aperture: 0.0, focal_dist: 3.0 };
-    s.ambient = Vec3::ZERO;
-    s.background = Vec3::ZERO;
-    s.validate().unwrap();
+    light_above_camera_below(&mut s, 0.5);
     let ms = MultiresScene::build(&s, &BuildParams::default()).unwrap();
     let floor = ms.flat.leaf[0];
     assert_ne!(floor, NONE);
