@@ -1526,7 +1526,8 @@ impl<'s, 'a> Tracer<'s, 'a> {
         if tl.r.is_empty() {
             return;
         }
-        // Instance-tree slots on the skipped plane (all of the scene, or one bit per slot).
+        // Instance-tree slots on the skipped plane: the whole scene here, else each slot (a
+        // leaf instance's slot carries its plane) is dropped before its box test below.
         let flat = &self.ms.flat;
         let skip_plane = own.plane != super::plane::NONE;
         if skip_plane && flat.slot[0] == own.plane {
@@ -1560,9 +1561,6 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 let ch = tl.child[e.node as usize];
                 if ch & LEAF != 0 {
                     let li = ch & !LEAF;
-                    if skip_plane && flat.leaf[li as usize] == own.plane {
-                        continue;
-                    }
                     let leaf = &self.ms.leaves[li as usize];
                     let (mut lc, s) = cone.to_object(&leaf.inv);
                     if leaf.tree == own.tree {
