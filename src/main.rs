@@ -2,6 +2,13 @@ use clap::error::ErrorKind;
 use clap::Parser;
 
 fn main() {
+    // A file-size limit (`ulimit -f`) must fail the write (one error line, exit 2, temporary
+    // files removed), not kill the process with SIGXFSZ and leave a partial file behind.
+    #[cfg(unix)]
+    // SAFETY: setting a signal's disposition to SIG_IGN before any thread starts.
+    unsafe {
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+    }
     let cli = match lodtrace::cli::Cli::try_parse() {
         Ok(c) => c,
         Err(e) => match e.kind() {

@@ -900,6 +900,58 @@ fn inputs_that_would_hang_are_refused() {
     }
 }
 
+/// Cases found by a bad-input audit (stop 36): a needle triangle (1 : 1e5) through the
+/// octree build (panicked on a border cell holding only samples clamped from outside the
+/// grid); a mesh whose triangle area overflows f32 in `animate` (the sampler looped forever);
+/// a 32768² image (12.9 GB film, aborted); a file-size limit (SIGXFSZ killed the process and
+/// left a partial temporary file); `animate --stats` naming one of its own frames.
+#[test]
+fn audit_cases_end_cleanly() {
+    let d = tmp("audit");
+    let p = |name: &str| d.join(name).to_str().unwrap().to_string();
+    let small = ["--width", "24", "--height", "16", "--quiet"];
+    std::fs::write(d.join("needle.obj"), "v 0 0 0\nv 1 0 0\nv 0 1e-5 0\nf 1 2 3\n").unwrap();
+    let (needle, png) = (p("needle.obj"), p("x.png"));
+    for m in ["multires", "cone"] {
+        let mut args = vec!["render", &needle, "--method", m, "--out", &png];
+        args.extend_from_slice(&small);
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 0, "{m}: {err}");
+    }
+    std::fs::remove_file(&png).unwrap();
+    std::fs::write(
+        d.join("big.obj"),
+        "v 0 0 0\nv 5e9 0 0\nv 0 5e9 0\nv 0 0 1\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 2\n\
+         f 1 3 2\nf 5 7 6\nf 5 6 8\nf 5 8 7\nf 6 7 8\n",
+    )
+    .unwrap();
+    let (code, _, err) = lodtrace(&["animate", &p("big.obj"), "--frames", "1", "--width", "16", "--height", "12", "--quiet"]);
+    assert_eq!(code, 0, "{err}");
+    let (an, an_frame) = (p("an"), p("an/frame_0000.png"));
+    for args in [
+        vec!["render", "cube", "--width", "32768", "--height", "32768", "--out", &png],
+        vec!["animate", "heads", "--frames", "1", "--width", "16384", "--height", "16384"],
+        vec!["animate", "bend", "--frames", "2", "--detail", "0.1", "--width", "16", "--height", "12", "--out", &an, "--stats", &an_frame],
+    ] {
+        let (code, _, err) = lodtrace(&[&args[..], &["--quiet"]].concat());
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(!d.join("x.png").exists() && !d.join("an").exists(), "{args:?} left an output");
+    }
+    // A file-size limit of 1 KiB: the PNG write fails with an error line, not a signal.
+    let exe = env!("CARGO_BIN_EXE_lodtrace");
+    let o = Command::new("sh")
+        .arg("-c")
+        .arg(format!("ulimit -f 2; exec {exe} render spheres --width 128 --height 96 --quiet --out {}", p("fs.png")))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{o:?}");
+    one_error_line(&String::from_utf8_lossy(&o.stderr));
+    let left: Vec<_> =
+        std::fs::read_dir(&d).unwrap().filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().contains("fs.")).collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
+
 /// Values that would be silently ignored or make nonsense are refused with one line, exit 2
 /// and no output: another method's options (render flags and bench keys), elliptical lights
 /// without area, materials that create light, images with NaN pixels. The octree baseline

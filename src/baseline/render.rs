@@ -74,6 +74,17 @@ impl Default for RenderOpts {
     }
 }
 
+/// Upper limit of width × height (the film alone takes tens of bytes per pixel).
+pub const MAX_PIXELS: u64 = 1 << 27;
+
+/// Refuses images of more than [`MAX_PIXELS`] pixels, before any memory is allocated.
+pub fn check_pixels(width: u32, height: u32) -> Result<()> {
+    if width as u64 * height as u64 > MAX_PIXELS {
+        return Err(Error::Usage(format!("image size {width}x{height} is too large (at most {MAX_PIXELS} pixels in all)")));
+    }
+    Ok(())
+}
+
 impl RenderOpts {
     pub fn validate(&self) -> Result<()> {
         if self.width == 0 || self.height == 0 {
@@ -82,6 +93,7 @@ impl RenderOpts {
         if self.width > 32768 || self.height > 32768 {
             return Err(Error::Usage(format!("image size {}x{} is too large (max 32768 per side)", self.width, self.height)));
         }
+        check_pixels(self.width, self.height)?;
         if self.spp == 0 || self.spp > 65536 {
             return Err(Error::Usage(format!("--spp {} out of range (1..=65536)", self.spp)));
         }

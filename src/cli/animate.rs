@@ -178,6 +178,7 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
     if a.width == 0 || a.height == 0 || a.width > 16384 || a.height > 16384 {
         return Err(Error::Usage(format!("image size {}x{} out of range", a.width, a.height)));
     }
+    crate::baseline::render::check_pixels(a.width, a.height)?;
     if !(a.detail.is_finite() && a.detail > 0.0 && a.detail <= 10.0) {
         return Err(Error::Usage(format!("--detail {} out of range (0, 10]", a.detail)));
     }
@@ -205,6 +206,13 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
         if let Some(p) = &a.stats {
             super::render::check_out_path(p)?;
             io::check_outputs_apart_from_scene(&a.scene, &[p])?;
+            // Nor may it be one of the frames (`frame_NNNN.png` in `--out`).
+            if let (Some(d), Some(name)) = (&a.out, p.file_name().and_then(|f| f.to_str())) {
+                let digits = name.strip_prefix("frame_").and_then(|r| r.strip_suffix(".png"));
+                if digits.is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit())) {
+                    io::check_distinct(&[&d.join(name), p])?;
+                }
+            }
         }
         pool.install(|| animate_in_pool(a, mode, threads))
     })

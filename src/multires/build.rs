@@ -709,6 +709,11 @@ fn build_node(ctx: &Ctx, tris: Vec<u32>, cube_lo: Vec3, side: f32, depth: u32) -
                     }
                 }
             }
+            if nbr.is_empty() {
+                // Only samples clamped into this border cell from outside the grid (a needle
+                // triangle reaching far beyond the node's cube): they belong elsewhere.
+                continue;
+            }
             // Weighted averages of material and normal.
             let (mut wsum, mut col, mut props, mut nsum) = (0.0f32, Vec3::ZERO, [0.0f32; 7], Vec3::ZERO);
             for &(si, w) in &nbr {
