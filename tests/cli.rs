@@ -928,6 +928,16 @@ fn audit_cases_end_cleanly() {
     let (code, _, err) = lodtrace(&["animate", &p("big.obj"), "--frames", "1", "--width", "16", "--height", "12", "--quiet"]);
     assert_eq!(code, 0, "{err}");
     let (an, an_frame) = (p("an"), p("an/frame_0000.png"));
+    // `--out` of bench and animate names a folder: an existing file there is named as such
+    // (and kept).
+    std::fs::write(d.join("file"), "keep").unwrap();
+    for cmd in [&["bench", "plane", "--methods", "whitted"][..], &["animate", "bend", "--frames", "1", "--detail", "0.1"]] {
+        let (code, _, err) = lodtrace(&[cmd, &["--width", "16", "--height", "12", "--quiet", "--out", &p("file")]].concat());
+        assert_eq!(code, 2, "{cmd:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains("is not a folder"), "{err}");
+        assert_eq!(std::fs::read_to_string(d.join("file")).unwrap(), "keep");
+    }
     for args in [
         vec!["render", "cube", "--width", "32768", "--height", "32768", "--out", &png],
         vec!["animate", "heads", "--frames", "1", "--width", "16384", "--height", "16384"],

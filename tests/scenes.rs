@@ -488,3 +488,60 @@ fn a_mesh_with_some_nan_triangles_loads_with_a_warning() {
     assert!(!r.stderr.contains("error"), "{}", r.stderr);
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// OFF variants: prefixed headers (normals, colours, homogeneous positions), counts on the
+/// header line, face colours after the indices; errors name their line.
+#[test]
+fn off_variants_load_and_errors_name_the_line() {
+    let d = scratch("off-variants");
+    let tet = |verts: [&str; 4], faces_tail: &str| {
+        let mut s = String::new();
+        for v in verts {
+            s += v;
+            s += "\n";
+        }
+        for f in ["3 0 1 2", "3 0 1 3", "3 0 2 3", "3 1 2 3"] {
+            s += &format!("{f}{faces_tail}\n");
+        }
+        s
+    };
+    let plain = ["0 0 0", "1 0 0", "0 1 0", "0 0 1"];
+    let cases = [
+        ("plain.off", format!("OFF\n4 4 0\n{}", tet(plain, ""))),
+        ("inline.off", format!("OFF 4 4 0\n{}", tet(plain, ""))),
+        ("noff.off", format!("NOFF\n4 4 0\n{}", tet(["0 0 0 0 0 1", "1 0 0 0 0 1", "0 1 0 0 0 1", "0 0 1 0 0 1"], ""))),
+        (
+            "coff.off",
+            format!("COFF\n# colours\n4 4 0\n{}", tet(["0 0 0 1 0 0 1", "1 0 0 1 0 0 1", "0 1 0 1 0 0 1", "0 0 1 1 0 0 1"], " 255 0 0")),
+        ),
+        ("4off.off", format!("4OFF\n4 4 0\n{}", tet(["0 0 0 2", "2 0 0 2", "0 2 0 2", "0 0 2 2"], ""))),
+    ];
+    let want = load::load_off(
+        &{
+            let p = d.join(cases[0].0);
+            std::fs::write(&p, &cases[0].1).unwrap();
+            p
+        },
+        0,
+    )
+    .unwrap();
+    for (name, text) in &cases {
+        let p = d.join(name);
+        std::fs::write(&p, text).unwrap();
+        let m = load::load_off(&p, 0).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(m.tris, want.tris, "{name}");
+        assert_eq!((0..4).map(|i| m.pos(i)).collect::<Vec<_>>(), (0..4).map(|i| want.pos(i)).collect::<Vec<_>>(), "{name}");
+    }
+    for (text, line, what) in [
+        ("OFF\n4 4 0\n0 0 0\n1 0 0\n0 1\n0 0 1\n", 5, "vertex 2 has 2 values"),
+        ("OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1\n", 7, "lists 2 of its 3"),
+        ("nOFF\n3\n", 1, "unsupported OFF header"),
+        ("OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 9\n", 7, "out of range"),
+    ] {
+        let p = d.join("bad.off");
+        std::fs::write(&p, text).unwrap();
+        let e = load::load_off(&p, 0).unwrap_err().to_string();
+        assert!(e.contains(&format!("line {line}:")) && e.contains(what), "{text:?}: {e}");
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -199,7 +199,7 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
     // A failed run removes the output folder again if it created it.
     io::discard_dir_on_error(a.out.as_deref(), || {
         if let Some(d) = &a.out {
-            std::fs::create_dir_all(d).map_err(|e| Error::io(d, e))?;
+            crate::film::io::create_out_dir(d)?;
             io::check_writable_dir(d)?;
         }
         // After the folder exists: `--stats` may go inside it.

@@ -141,7 +141,11 @@ impl MethodSpec {
             // Each key (and the accelerator) once: `spp=2:spp=4` is a typo, not "the last wins".
             let key = p.split_once('=').map_or("accel", |(k, _)| k);
             if seen.contains(&key) {
-                return Err(bad(format!("{key} given twice")));
+                return Err(bad(if key == "accel" {
+                    format!("'{p}': a second accelerator (keys take a value: key=value)")
+                } else {
+                    format!("{key} given twice")
+                }));
             }
             seen.push(key);
             if let Some((k, v)) = p.split_once('=') {
@@ -149,7 +153,14 @@ impl MethodSpec {
                     v.parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0).ok_or_else(|| bad(format!("bad value '{v}' for {k}")))
                 };
                 // Counts are whole numbers: `k=2.5` is an error, not k = 2.
-                let int = |v: &str| v.parse::<u32>().map_err(|_| bad(format!("bad value '{v}' for {k}: a whole number")));
+                let int =
+                    |v: &str| v.parse::<u32>().map_err(|_| bad(format!("bad value '{v}' for {k}: a whole number in 0..={}", u32::MAX)));
+                // Switches are 0 or 1: `spread=2` is a typo, not "on".
+                let on = |v: &str| match v {
+                    "0" => Ok(false),
+                    "1" => Ok(true),
+                    _ => Err(bad(format!("bad value '{v}' for {k}: 0 or 1"))),
+                };
                 match k {
                     "spp" => spec.spp = int(v)?,
                     "threads" => spec.threads = Some(int(v)? as usize),
@@ -170,15 +181,15 @@ impl MethodSpec {
                     "lod" => spec.multires.lod_scale = num(v)? as f32,
                     "dtol" => spec.multires.depth_tolerance = num(v)? as f32,
                     "cs" => spec.multires.cone_scale = num(v)? as f32,
-                    "mip" => spec.multires.no_mipmap = num(v)? == 0.0,
-                    "primary" => spec.multires.primary_only = num(v)? != 0.0,
+                    "mip" => spec.multires.no_mipmap = !on(v)?,
+                    "primary" => spec.multires.primary_only = on(v)?,
                     "budget" => spec.multires.time_budget = Some(num(v)?),
-                    "spread" => spec.multires.no_normal_spread = num(v)? == 0.0,
-                    "groups" => spec.multires.no_group_points = num(v)? == 0.0,
-                    "agg" => spec.multires.no_aggregate_shadow = num(v)? == 0.0,
-                    "plane" => spec.multires.no_plane_skip = num(v)? == 0.0,
-                    "tight" => spec.multires.tight_depth = num(v)? != 0.0,
-                    "mask" => spec.multires.coverage_masks = num(v)? != 0.0,
+                    "spread" => spec.multires.no_normal_spread = !on(v)?,
+                    "groups" => spec.multires.no_group_points = !on(v)?,
+                    "agg" => spec.multires.no_aggregate_shadow = !on(v)?,
+                    "plane" => spec.multires.no_plane_skip = !on(v)?,
+                    "tight" => spec.multires.tight_depth = on(v)?,
+                    "mask" => spec.multires.coverage_masks = on(v)?,
                     "pw" => {
                         spec.multires.point_weights = crate::multires::build::PointWeights::from_str(v, true)
                             .map_err(|_| bad(format!("pw={v}: area or voxel")))?
@@ -194,22 +205,22 @@ impl MethodSpec {
                     "f" => spec.lod.lod_f = num(v)? as f32,
                     "a" => spec.lod.lod_a = num(v)? as f32,
                     "thres" => spec.lod.lod_threshold = num(v)? as f32,
-                    "sel" => spec.lod.no_selective = num(v)? == 0.0,
+                    "sel" => spec.lod.no_selective = !on(v)?,
                     "levels" => spec.lod.lod_levels = int(v)?,
                     "dist" => spec.lod.lod_distance = Some(num(v)? as f32),
                     "force" => spec.lod.lod_force = Some(num(v)? as f32),
-                    "net" => spec.lod.lod_net_disparity = num(v)? != 0.0,
+                    "net" => spec.lod.lod_net_disparity = on(v)?,
                     "select" => {
                         spec.lod.lod_selector = crate::lod::trace::Selector::from_str(v, true).map_err(|_| bad(format!("select={v}: disparity or cone")))?
                     }
                     "update" => spec.surfel.update = v.to_string(),
                     "frames" => spec.surfel.frames = Some(int(v)?),
                     "detail" => spec.surfel.detail = num(v)? as f32,
-                    "shadows" => spec.surfel.shadows = num(v)? != 0.0,
+                    "shadows" => spec.surfel.shadows = on(v)?,
                     "exact" => spec.surfel.exact_below = int(v)?,
-                    "warm" => spec.surfel.warm = num(v)? != 0.0,
+                    "warm" => spec.surfel.warm = on(v)?,
                     "cache_up" => spec.surfel.cache_up = int(v)?,
-                    "ordered" => spec.surfel.ordered = num(v)? != 0.0,
+                    "ordered" => spec.surfel.ordered = on(v)?,
                     "eigen" => {
                         spec.multires.eigen = crate::multires::trace::EigenMode::from_str(v, true)
                             .map_err(|_| bad(format!("eigen={v}: per-box or exact")))?
@@ -607,7 +618,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             return Err(Error::Usage(format!("image size {}x{} out of range", a.width, a.height)));
         }
         if let Some(out) = &a.out {
-            std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+            crate::film::io::create_out_dir(out)?;
             crate::film::io::check_writable_dir(out)?;
         }
         let deform = super::deform_bench::run(&a.scenes, &specs, a.width, a.height, a.threads, a.repeat, a.out.as_deref(), a.quiet)?;
@@ -624,7 +635,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
     }
     let scenes: Vec<Scene> = a.scenes.iter().map(|s| crate::scene::load::load_scene(s)).collect::<Result<_>>()?;
     if let Some(out) = &a.out {
-        std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+        crate::film::io::create_out_dir(out)?;
         crate::film::io::check_writable_dir(out)?;
     }
     let mut rows = Vec::new();
@@ -1093,6 +1104,12 @@ mod tests {
         assert!(parse_list("nope").is_err());
         assert!(parse_list("whitted:gpu").is_err());
         assert!(parse_list("whitted:spp=x").is_err());
+        // Switches take 0 or 1; a bare word after the accelerator is named as such.
+        assert!(parse_list("multires:spread=0").unwrap()[0].multires.no_normal_spread);
+        let e = |s: &str| parse_list(s).unwrap_err().to_string();
+        assert!(e("multires:spread=2").contains("0 or 1"), "{}", e("multires:spread=2"));
+        assert!(e("whitted:embree:foo").contains("a second accelerator"), "{}", e("whitted:embree:foo"));
+        assert!(e("whitted:spp=99999999999").contains("0..="), "{}", e("whitted:spp=99999999999"));
     }
 
     #[test]

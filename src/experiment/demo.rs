@@ -96,7 +96,7 @@ pub fn run(a: &DemoArgs) -> Result<()> {
 }
 
 fn run_in(a: &DemoArgs) -> Result<()> {
-    std::fs::create_dir_all(&a.out).map_err(|e| Error::io(&a.out, e))?;
+    crate::film::io::create_out_dir(&a.out)?;
     crate::film::io::check_writable_dir(&a.out)?;
     let mut sections = Vec::new();
     for job in jobs(a.quick) {

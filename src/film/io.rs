@@ -38,6 +38,14 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Res
 
 /// Fails early, before any work, when a file cannot be created in `dir` (a folder that is
 /// read-only or, like `/proc`, takes no new files): creates and removes a probe file there.
+/// Creates an output folder (and its parents); a path that exists as a file is named as such.
+pub fn create_out_dir(dir: &Path) -> Result<()> {
+    if dir.exists() && !dir.is_dir() {
+        return Err(Error::Usage(format!("{}: exists and is not a folder (--out names a folder here)", dir.display())));
+    }
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))
+}
+
 pub fn check_writable_dir(dir: &Path) -> Result<()> {
     let probe = dir.join(format!(".lodtrace-probe.{}", std::process::id()));
     match std::fs::File::create(&probe) {

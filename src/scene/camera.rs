@@ -41,30 +41,32 @@ pub struct CameraFrame {
 impl Camera {
     pub fn validate(&self) -> Result<()> {
         let f = self.look - self.eye;
-        let ok = self.eye.is_finite()
-            && self.look.is_finite()
-            && self.up.is_finite()
-            && f.length_squared() > 0.0
-            && f.cross(self.up).length_squared() > 1e-20
-            && self.fovy.is_finite()
-            && self.fovy > 0.0
-            && self.fovy < 180.0
-            && self.aperture.is_finite()
-            && self.aperture >= 0.0
-            && self.focal_dist.is_finite()
-            && self.focal_dist > 0.0;
-        if !ok {
-            return Err(Error::Usage(
-                "camera: eye and look must differ, up must not be parallel to the view, 0 < fovy < 180, aperture ≥ 0, focal distance > 0"
-                    .into(),
-            ));
+        if self.eye.is_finite() && self.look.is_finite() {
+            // The automatic framing of a scene at the ±MAX_COORD limit puts the eye a few
+            // extents away: the camera gets 100× the room (still far inside Embree's ±1.8e18).
+            let far = self.eye.abs().max(self.look.abs()).max_element();
+            let lim = 100.0 * super::MAX_COORD;
+            if far > lim {
+                return Err(Error::Usage(format!("camera: eye or look at coordinate {far:.3e}, beyond ±{lim:e}")));
+            }
         }
-        // The automatic framing of a scene at the ±MAX_COORD limit puts the eye a few
-        // extents away: the camera gets 100× the room (still far inside Embree's ±1.8e18).
-        let far = self.eye.abs().max(self.look.abs()).max_element();
-        let lim = 100.0 * super::MAX_COORD;
-        if far > lim {
-            return Err(Error::Usage(format!("camera: eye or look at coordinate {far:.3e}, beyond ±{lim:e}")));
+        let why = if !(self.eye.is_finite() && self.look.is_finite() && self.up.is_finite()) {
+            Some("eye, look and up must be finite")
+        } else if !(f.length_squared() > 0.0) {
+            Some("eye and look must differ")
+        } else if !(f.cross(self.up).length_squared() > 1e-20) {
+            Some("up must not be zero or parallel to the view")
+        } else if !(self.fovy.is_finite() && self.fovy > 0.0 && self.fovy < 180.0) {
+            Some("fovy must lie in (0, 180) degrees")
+        } else if !(self.aperture.is_finite() && self.aperture >= 0.0) {
+            Some("aperture must be finite and ≥ 0")
+        } else if !(self.focal_dist.is_finite() && self.focal_dist > 0.0) {
+            Some("focal distance must be finite and > 0")
+        } else {
+            None
+        };
+        if let Some(why) = why {
+            return Err(Error::Usage(format!("camera: {why}")));
         }
         Ok(())
     }
@@ -119,6 +121,19 @@ impl CameraFrame {
 #[cfg(test)]
 mod tests {
     use super::*;
+    #[test]
+    fn invalid_cameras_name_what_is_wrong() {
+        let d = Camera::default();
+        assert!(d.validate().is_ok());
+        let msg = |c: Camera| c.validate().unwrap_err().to_string();
+        assert!(msg(Camera { eye: Vec3::NAN, ..d }).contains("finite"));
+        assert!(msg(Camera { look: d.eye, ..d }).contains("eye and look must differ"));
+        assert!(msg(Camera { up: Vec3::Z, ..d }).contains("parallel"));
+        assert!(msg(Camera { fovy: 0.0, ..d }).contains("fovy"));
+        assert!(msg(Camera { aperture: -1.0, ..d }).contains("aperture"));
+        assert!(msg(Camera { focal_dist: 0.0, ..d }).contains("focal distance"));
+        assert!(msg(Camera { eye: Vec3::splat(1e30), ..d }).contains("beyond"));
+    }
     #[test]
     fn centre_pixel_looks_forward() {
         let c = Camera { eye: Vec3::ZERO, look: Vec3::new(0.0, 0.0, -1.0), up: Vec3::Y, fovy: 90.0, ..Default::default() };

@@ -16,6 +16,9 @@ pub fn load_scene(spec: &str) -> Result<Scene> {
             bare_mesh_scene(mesh)?
         }
         Some("toml") => super::tomlscene::load(p)?,
+        Some("ply") => {
+            return Err(Error::parse(p, "point files (.ply) are surfel models for `lodtrace animate`; render takes .obj, .off or .toml"))
+        }
         _ => super::builtin::get(spec)?,
     };
     scene.validate()?;
@@ -38,58 +41,75 @@ fn read_to_string(path: &Path) -> Result<String> {
     std::fs::read_to_string(path).map_err(|e| Error::io(path, e))
 }
 
-/// Object File Format: `OFF`, counts `nv nf ne`, vertices, then faces `n i0 i1 ...`
-/// (polygons are fan-triangulated). Comments (`#`) are ignored.
+/// Object File Format: a header `OFF` (or with the prefixes `C`, `N`, `ST`, `4`: colours,
+/// normals, texture coordinates, homogeneous positions), counts `nv nf ne`, one vertex per
+/// line, then one face per line `n i0 i1 ...` (polygons are fan-triangulated). Values after a
+/// vertex's position (normal, colour, texture) and after a face's indices (colour) are
+/// skipped. Comments (`#`) and blank lines are ignored; a missing header is accepted.
 pub fn load_off(path: &Path, mat: u32) -> Result<Mesh> {
     let text = read_to_string(path)?;
-    let mut tokens = text.lines().map(|l| l.split('#').next().unwrap_or("")).flat_map(|l| l.split_whitespace());
-    let head = tokens.next().ok_or_else(|| Error::parse(path, "empty file"))?;
-    let mut first_count = None;
-    if !head.ends_with("OFF") {
-        // Some files omit the header.
-        first_count = Some(head);
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.split('#').next().unwrap_or("").split_whitespace().collect::<Vec<_>>()))
+        .filter(|(_, t)| !t.is_empty());
+    let bad = |line: usize, m: String| Error::parse(path, format!("line {line}: {m}"));
+    let (mut line, mut toks) = lines.next().ok_or_else(|| Error::parse(path, "empty file"))?;
+    let mut homogeneous = false;
+    if let Some(kw) = toks.first().copied().filter(|t| t.ends_with("OFF")) {
+        let prefix = kw.trim_end_matches("OFF");
+        let flags = prefix.strip_prefix("ST").unwrap_or(prefix);
+        if !flags.chars().all(|c| matches!(c, 'C' | 'N' | '4')) {
+            return Err(bad(line, format!("unsupported OFF header '{kw}' (OFF with the prefixes ST, C, N, 4)")));
+        }
+        homogeneous = flags.contains('4');
+        toks.remove(0);
+        if toks.is_empty() {
+            (line, toks) = lines.next().ok_or_else(|| Error::parse(path, "truncated: expected the vertex and face counts"))?;
+        }
     }
-    let mut next_num =
-        |what: &str| -> Result<&str> { tokens.next().ok_or_else(|| Error::parse(path, format!("truncated: expected {what}"))) };
-    let parse_usize =
-        |s: &str, what: &str| -> Result<usize> { s.parse::<usize>().map_err(|_| Error::parse(path, format!("bad {what} '{s}'"))) };
-    let nv = match first_count {
-        Some(s) => parse_usize(s, "vertex count")?,
-        None => parse_usize(next_num("vertex count")?, "vertex count")?,
+    let count = |s: Option<&&str>, what: &str| -> Result<usize> {
+        let s = s.ok_or_else(|| bad(line, format!("missing {what}")))?;
+        s.parse::<usize>().map_err(|_| bad(line, format!("bad {what} '{s}'")))
     };
-    let nf = parse_usize(next_num("face count")?, "face count")?;
-    let _ne = next_num("edge count")?;
+    let (nv, nf) = (count(toks.first(), "vertex count")?, count(toks.get(1), "face count")?);
     if nv > 100_000_000 || nf > 200_000_000 {
         return Err(Error::parse(path, "absurd vertex or face count"));
     }
     let mut mesh = Mesh::new(path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default());
-    for _ in 0..nv {
-        let mut v = [0f32; 3];
-        for c in &mut v {
-            let s = next_num("vertex coordinate")?;
-            *c = s.parse::<f32>().map_err(|_| Error::parse(path, format!("bad coordinate '{s}'")))?;
+    let dims = if homogeneous { 4 } else { 3 };
+    for k in 0..nv {
+        let (line, t) = lines.next().ok_or_else(|| Error::parse(path, format!("truncated: {k} of {nv} vertices")))?;
+        if t.len() < dims {
+            return Err(bad(line, format!("vertex {k} has {} values, expected {dims}", t.len())));
         }
-        mesh.push_vertex(Vec3::from(v));
+        let mut v = [0f32; 4];
+        for (c, s) in v.iter_mut().zip(&t[..dims]) {
+            *c = s.parse::<f32>().map_err(|_| bad(line, format!("bad coordinate '{s}'")))?;
+        }
+        let p = Vec3::new(v[0], v[1], v[2]);
+        mesh.push_vertex(if homogeneous { p / v[3] } else { p });
     }
     for f in 0..nf {
-        let n = parse_usize(next_num("face size")?, "face size")?;
+        let (line, t) = lines.next().ok_or_else(|| Error::parse(path, format!("truncated: {f} of {nf} faces")))?;
+        let n = t[0].parse::<usize>().map_err(|_| bad(line, format!("bad face size '{}'", t[0])))?;
         if !(3..=1000).contains(&n) {
-            return Err(Error::parse(path, format!("face {f} has {n} vertices")));
+            return Err(bad(line, format!("face {f} has {n} vertices (3 to 1000)")));
+        }
+        if t.len() < n + 1 {
+            return Err(bad(line, format!("face {f} lists {} of its {n} vertices", t.len() - 1)));
         }
         let mut idx = Vec::with_capacity(n);
-        for _ in 0..n {
-            let i = parse_usize(next_num("face index")?, "face index")?;
+        for s in &t[1..=n] {
+            let i = s.parse::<usize>().map_err(|_| bad(line, format!("bad face index '{s}'")))?;
             if i >= nv {
-                return Err(Error::parse(path, format!("face {f} index {i} out of range (vertices: {nv})")));
+                return Err(bad(line, format!("face {f} index {i} out of range (vertices: {nv})")));
             }
             idx.push(i as u32);
         }
         for k in 1..n - 1 {
             mesh.push_tri(idx[0], idx[k], idx[k + 1], mat);
         }
-        // Optional per-face colour values follow on the same line in some files; they were
-        // consumed as tokens only if present, so skip to the next face by count: OFF colours are
-        // rare in our assets, and a mis-parse is caught by the index range checks above.
     }
     finish_mesh(path, mesh)
 }
