@@ -262,7 +262,10 @@ impl Scene {
                     }
                     let det = x.matrix3.determinant();
                     if !det.is_finite() || det.abs() < 1e-30 {
-                        return Err(Error::Scene(format!("instance of '{}' has a singular transform", mesh.name)));
+                        return Err(Error::Scene(format!(
+                            "instance of '{}' has a singular or overflowing transform (determinant {det:e})",
+                            mesh.name
+                        )));
                     }
                     out.push(LeafInstance {
                         mesh: id,
@@ -342,8 +345,12 @@ impl Scene {
             if let Light::Ellipse { axis_a, axis_b, .. } = l {
                 // Shadow cones aim at the ellipse's Gaussian (§4.2): zero or parallel axes
                 // give it no area, and the distributed sampler a zero-area light.
-                let area = axis_a.cross(*axis_b).length();
-                if !axis_a.is_finite() || !axis_b.is_finite() || !(area > 1e-6 * axis_a.length() * axis_b.length()) {
+                if !axis_a.is_finite() || !axis_b.is_finite() {
+                    return Err(Error::Scene(format!("light {i} has non-finite axes")));
+                }
+                // In f64: the f32 cross product of axes ~1e20 long overflows.
+                let (a, b) = (axis_a.as_dvec3(), axis_b.as_dvec3());
+                if !(a.cross(b).length() > 1e-6 * a.length() * b.length()) {
                     return Err(Error::Scene(format!(
                         "light {i}: an elliptical light needs two non-zero, non-parallel axes (a point light has none)"
                     )));

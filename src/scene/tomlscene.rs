@@ -428,6 +428,9 @@ impl Builder<'_> {
             }
             Ok(v)
         };
+        if d.ior.is_some_and(|v| !(v > 0.0)) {
+            return Err(self.err(format!("{} must be positive", whose("ior"))));
+        }
         let m = Material {
             name: name.to_string(),
             color: d.color.map(|c| self.colour(c, &whose("color"))).transpose()?.unwrap_or(base.color),
@@ -439,9 +442,6 @@ impl Builder<'_> {
             ior: unit(d.ior, base.ior, "ior", f32::INFINITY)?,
             roughness: unit(d.roughness, base.roughness, "roughness", f32::INFINITY)?,
         };
-        if m.ior <= 0.0 {
-            return Err(self.err(format!("{} must be positive", whose("ior"))));
-        }
         Ok(m)
     }
 
@@ -558,7 +558,7 @@ impl Builder<'_> {
         };
         let sc = d.scale.map(|v| self.vec3d(v, &format!("{whose}: scale"))).transpose()?.unwrap_or(Vec3::ONE);
         if sc.abs().min_element() < 1e-12 {
-            return Err(self.err(format!("{whose}: scale must be non-zero in every axis, not {sc}")));
+            return Err(self.err(format!("{whose}: scale must be at least 1e-12 in every axis, not [{:e}, {:e}, {:e}]", sc.x, sc.y, sc.z)));
         }
         Ok(Affine3A::from_scale_rotation_translation(sc, r, t))
     }
@@ -677,6 +677,9 @@ rotate = [90, 0, 0]
             ("[meshes.a]\ngenerator = \"cube\"\n[[instances]]\ntarget = \"a\"\n[camera]\neye = [0, 0, 0]\nlook = [0, 0, 0]\n", "camera"),
             ("[meshes.a]\ngenerator = \"cube\"\n[[instances]]\ntarget = \"a\"\nrotate = [1, 2]\n", "rotate"),
             ("max_depth = 1000\n", "max_depth"),
+            ("[materials.m]\nior = 0\n", "ior must be positive"),
+            ("[materials.m]\nior = -1.5\n", "ior must be positive"),
+            ("[meshes.a]\ngenerator = \"cube\"\n[[instances]]\ntarget = \"a\"\nscale = [1e-30, 1, 1]\n", "[1e-30, 1e0, 1e0]"),
             ("[meshes.a\n", "line 1"),
         ];
         for (text, needle) in cases {
