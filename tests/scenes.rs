@@ -545,3 +545,20 @@ fn off_variants_load_and_errors_name_the_line() {
     }
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// OBJ parse errors (tobj reports none) name the first bad line.
+#[test]
+fn obj_errors_name_the_line() {
+    let d = scratch("obj-lines");
+    for (text, line) in [
+        ("v 0 0 0\nv 1 0 0\nv 0 x 0\nf 1 2 3\n", 3),
+        ("# c\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 q\n", 5),
+        ("v 0 0 0\nv 1 0 0\nv 0 1\nf 1 2 3\n", 3),
+    ] {
+        let p = d.join("bad.obj");
+        std::fs::write(&p, text).unwrap();
+        let e = load::load_mesh(&p, 0).unwrap_err().to_string();
+        assert!(e.contains(&format!("line {line}:")), "{text:?}: {e}");
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}

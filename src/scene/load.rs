@@ -114,6 +114,34 @@ pub fn load_off(path: &Path, mat: u32) -> Result<Mesh> {
     finish_mesh(path, mesh)
 }
 
+/// After tobj refused an OBJ file (its errors carry no position): the first line whose
+/// numbers do not parse — a `v`/`vn`/`vt` line with fewer than 3/3/1 numbers or a bad one, or
+/// an `f`/`l`/`p` line with an index that is not a non-zero whole number.
+fn obj_bad_line(path: &Path) -> Option<usize> {
+    let text = std::fs::read_to_string(path).ok()?;
+    for (i, l) in text.lines().enumerate() {
+        let mut t = l.split('#').next().unwrap_or("").split_whitespace();
+        let ok = match t.next() {
+            Some(k @ ("v" | "vn" | "vt")) => {
+                let nums: Vec<&str> = t.collect();
+                nums.len() >= if k == "vt" { 1 } else { 3 } && nums.iter().all(|x| x.parse::<f32>().is_ok())
+            }
+            Some("f" | "l" | "p") => {
+                let idx: Vec<&str> = t.collect();
+                !idx.is_empty()
+                    && idx
+                        .iter()
+                        .all(|v| v.split('/').enumerate().all(|(k, x)| (k > 0 && x.is_empty()) || x.parse::<i64>().is_ok_and(|n| n != 0)))
+            }
+            _ => true,
+        };
+        if !ok {
+            return Some(i + 1);
+        }
+    }
+    None
+}
+
 fn finish_mesh(path: &Path, mut mesh: Mesh) -> Result<Mesh> {
     if mesh.tris.is_empty() {
         return Err(Error::parse(path, "no faces"));
@@ -136,7 +164,10 @@ fn finish_mesh(path: &Path, mut mesh: Mesh) -> Result<Mesh> {
 pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
     crate::error::check_input_file(path)?;
     let opts = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
-    let (models, mtls) = tobj::load_obj(path, &opts).map_err(|e| Error::parse(path, e.to_string()))?;
+    let (models, mtls) = tobj::load_obj(path, &opts).map_err(|e| match obj_bad_line(path) {
+        Some(line) => Error::parse(path, format!("line {line}: {e}")),
+        None => Error::parse(path, e.to_string()),
+    })?;
     let mtls = mtls.unwrap_or_else(|e| {
         // The geometry is still usable: grey diffuse, as for a file without materials.
         eprintln!("lodtrace: warning: {}: materials not loaded ({e}); using the default material", path.display());
