@@ -902,7 +902,8 @@ fn inputs_that_would_hang_are_refused() {
 
 /// Cases found by a bad-input audit (stop 36): a needle triangle (1 : 1e5) through the
 /// octree build (panicked on a border cell holding only samples clamped from outside the
-/// grid); a mesh whose triangle area overflows f32 in `animate` (the sampler looped forever);
+/// grid); a mesh whose triangle area overflows f32 in `animate` (the sampler looped forever)
+/// or whose f32 vertex normals came out zero;
 /// a 32768² image (12.9 GB film, aborted); a file-size limit (SIGXFSZ killed the process and
 /// left a partial temporary file); `animate --stats` naming one of its own frames.
 #[test]
@@ -925,8 +926,12 @@ fn audit_cases_end_cleanly() {
          f 1 3 2\nf 5 7 6\nf 5 6 8\nf 5 8 7\nf 6 7 8\n",
     )
     .unwrap();
-    let (code, _, err) = lodtrace(&["animate", &p("big.obj"), "--frames", "1", "--width", "16", "--height", "12", "--quiet"]);
-    assert_eq!(code, 0, "{err}");
+    // A tetrahedron 1e10 wide: its f32 normals came out zero ("0 usable surfels").
+    std::fs::write(d.join("wide.obj"), "v 0 0 0\nv 1e10 0 0\nv 0 1e10 0\nv 0 0 1e10\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n").unwrap();
+    for mesh in ["big.obj", "wide.obj"] {
+        let (code, _, err) = lodtrace(&["animate", &p(mesh), "--frames", "1", "--width", "16", "--height", "12", "--quiet"]);
+        assert_eq!(code, 0, "{mesh}: {err}");
+    }
     let (an, an_frame) = (p("an"), p("an/frame_0000.png"));
     // `--out` of bench and animate names a folder: an existing file there is named as such
     // (and kept).

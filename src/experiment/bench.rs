@@ -162,10 +162,25 @@ impl MethodSpec {
                     _ => Err(bad(format!("bad value '{v}' for {k}: 0 or 1"))),
                 };
                 match k {
-                    "spp" => spec.spp = int(v)?,
+                    "spp" | "fps" => {
+                        // The ranges of `render --spp` / `--first-pass-spp`, named by key.
+                        let n = int(v)?;
+                        if !(1..=65536).contains(&n) {
+                            return Err(bad(format!("{k}={n} out of range (1..=65536)")));
+                        }
+                        if k == "spp" {
+                            spec.spp = n
+                        } else {
+                            spec.first_pass_spp = n
+                        }
+                    }
                     "threads" => spec.threads = Some(int(v)? as usize),
-                    "packet" => spec.packet = int(v)?,
-                    "fps" => spec.first_pass_spp = int(v)?,
+                    "packet" => {
+                        spec.packet = int(v)?;
+                        if spec.packet != 1 && spec.packet != 8 {
+                            return Err(bad(format!("packet={v}: 1 or 8")));
+                        }
+                    }
                     "vt" => spec.variance_threshold = num(v)? as f32,
                     "depth" => {
                         let d = int(v)?;
@@ -1110,6 +1125,8 @@ mod tests {
         assert!(e("multires:spread=2").contains("0 or 1"), "{}", e("multires:spread=2"));
         assert!(e("whitted:embree:foo").contains("a second accelerator"), "{}", e("whitted:embree:foo"));
         assert!(e("whitted:spp=99999999999").contains("0..="), "{}", e("whitted:spp=99999999999"));
+        assert!(e("distributed:fps=0").contains("fps=0 out of range"), "{}", e("distributed:fps=0"));
+        assert!(e("whitted:packet=4").contains("packet=4"), "{}", e("whitted:packet=4"));
     }
 
     #[test]

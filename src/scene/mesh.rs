@@ -60,11 +60,13 @@ impl Mesh {
     }
     /// Area-weighted vertex normals (for meshes without normals, e.g. OFF files).
     pub fn compute_normals(&mut self) {
+        // Summed in f64: for a mesh ~1e10 wide the f32 cross products (~1e20) are finite but
+        // their squared length is not, and an f32 normalisation would give zero normals.
         let n = self.vertex_count();
-        let mut acc = vec![Vec3::ZERO; n];
+        let mut acc = vec![glam::DVec3::ZERO; n];
         for t in 0..self.tris.len() {
             let [a, b, c] = self.tris[t];
-            let [p0, p1, p2] = self.tri_verts(t);
+            let [p0, p1, p2] = self.tri_verts(t).map(Vec3::as_dvec3);
             let fnrm = (p1 - p0).cross(p2 - p0); // length = 2·area
             if fnrm.is_finite() {
                 for i in [a, b, c] {
@@ -72,9 +74,10 @@ impl Mesh {
                 }
             }
         }
-        self.nx = acc.iter().map(|v| v.normalize_or_zero().x).collect();
-        self.ny = acc.iter().map(|v| v.normalize_or_zero().y).collect();
-        self.nz = acc.iter().map(|v| v.normalize_or_zero().z).collect();
+        let unit: Vec<Vec3> = acc.iter().map(|v| v.normalize_or_zero().as_vec3()).collect();
+        self.nx = unit.iter().map(|v| v.x).collect();
+        self.ny = unit.iter().map(|v| v.y).collect();
+        self.nz = unit.iter().map(|v| v.z).collect();
     }
     /// Removes triangles with non-finite vertices or zero area; returns how many were removed.
     pub fn remove_degenerate(&mut self) -> usize {
