@@ -946,12 +946,15 @@ fn audit_cases_end_cleanly() {
     for args in [
         vec!["render", "cube", "--width", "32768", "--height", "32768", "--out", &png],
         vec!["animate", "heads", "--frames", "1", "--width", "16384", "--height", "16384"],
+        // A negative number is a value with a range error, not clap's "unexpected argument".
+        vec!["render", "plane", "--fovy", "-1", "--out", &png],
         vec!["animate", "bend", "--frames", "2", "--detail", "0.1", "--width", "16", "--height", "12", "--out", &an, "--stats", &an_frame],
     ] {
         let (code, _, err) = lodtrace(&[&args[..], &["--quiet"]].concat());
         assert_eq!(code, 2, "{args:?}: {err}");
         one_error_line(&err);
         assert!(!d.join("x.png").exists() && !d.join("an").exists(), "{args:?} left an output");
+        assert!(!err.contains("unexpected argument"), "{args:?}: {err}");
     }
     // A file-size limit of 1 KiB: the PNG write fails with an error line, not a signal.
     let exe = env!("CARGO_BIN_EXE_lodtrace");

@@ -21,18 +21,25 @@ pub struct Cli {
 #[derive(Subcommand, Debug)]
 pub enum Command {
     /// Render a scene with one method.
+    // Negative numbers are values (`--fovy -1` gets its range error, not "unexpected argument").
+    #[command(allow_negative_numbers = true)]
     Render(RenderArgs),
     /// Cross-check an intersector against Embree on camera and random rays (exit 1 on disagreement).
+    #[command(allow_negative_numbers = true)]
     Verify(verify::VerifyArgs),
     /// Compare two images: RMSE, PSNR, mean FLIP, SSIM.
+    #[command(allow_negative_numbers = true)]
     Compare(compare::CompareArgs),
     /// Run several methods on the same scenes and print a side-by-side table.
+    #[command(allow_negative_numbers = true)]
     Bench(crate::experiment::bench::BenchArgs),
     /// Ray trace a deforming point-sampled scene frame by frame (Adams et al.): a built-in sequence or a mesh dropped onto a floor.
+    #[command(allow_negative_numbers = true)]
     Animate(animate::AnimateArgs),
     /// List the built-in scenes.
     Scenes,
     /// The main job: render the built-in scenes with every method, write images, tables, plots and an index page.
+    #[command(allow_negative_numbers = true)]
     Demo(crate::experiment::demo::DemoArgs),
 }
 
