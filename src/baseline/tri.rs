@@ -1,21 +1,23 @@
 //! Watertight ray–triangle intersection (Woop, Benthin & Wald, JCGT 2013), the scalar
 //! reference used by the obvhs back-end. Shearing the triangle into ray space makes the
 //! edge tests consistent between neighbouring triangles: a ray through a shared edge or
-//! vertex hits at least one of them, which the watertightness tests check.
+//! vertex hits at least one of them, which the watertightness tests check. The hit distance
+//! comes from the triangle's plane, as in Embree (see [`plane_t`]).
 
 use glam::Vec3;
 
-/// Per-ray precomputation: the dominant axis permutation and shear, stored as the three rows
-/// of the ray-space matrix (`x' = mx·p`, `y' = my·p`, `z' = mz·p` for `p` relative to the
-/// origin). Each row has one zero, so its dot product is bit-identical to the paper's
-/// `p[kx] − sx·p[kz]` (a sum with one exact zero term does not depend on its order), without
-/// indexing vectors by a run-time axis.
+/// Per-ray precomputation: the dominant axis permutation and shear, stored as the two rows
+/// of the ray-space matrix that the edge functions use (`x' = mx·p`, `y' = my·p` for `p`
+/// relative to the origin), and the direction for the hit distance ([`plane_t`]). Each row
+/// has one zero, so its dot product is bit-identical to the paper's `p[kx] − sx·p[kz]` (a
+/// sum with one exact zero term does not depend on its order), without indexing vectors by a
+/// run-time axis.
 #[derive(Clone, Copy, Debug)]
 pub struct RayShear {
     pub org: Vec3,
+    dir: Vec3,
     mx: Vec3,
     my: Vec3,
-    mz: Vec3,
 }
 
 /// The watertight test's axes: kz the dominant axis of `dir`, (kx, ky) the other two, swapped
@@ -46,16 +48,14 @@ impl RayShear {
     #[inline(always)]
     pub fn new(org: Vec3, dir: Vec3) -> Self {
         let (kx, ky, kz) = axis_permutation(dir);
-        let (sx, sy, sz) = (dir[kx] / dir[kz], dir[ky] / dir[kz], 1.0 / dir[kz]);
+        let (sx, sy) = (dir[kx] / dir[kz], dir[ky] / dir[kz]);
         let mut mx = Vec3::ZERO;
         mx[kx] = 1.0;
         mx[kz] = -sx;
         let mut my = Vec3::ZERO;
         my[ky] = 1.0;
         my[kz] = -sy;
-        let mut mz = Vec3::ZERO;
-        mz[kz] = sz;
-        RayShear { org, mx, my, mz }
+        RayShear { org, dir, mx, my }
     }
 }
 
@@ -69,15 +69,25 @@ pub fn intersect_watertight(s: &RayShear, v0: Vec3, v1: Vec3, v2: Vec3, tnear: f
     let (ax, ay) = (s.mx.dot(a), s.my.dot(a));
     let (bx, by) = (s.mx.dot(b), s.my.dot(b));
     let (cx, cy) = (s.mx.dot(c), s.my.dot(c));
-    let (u, v, w, det) = edge_functions([ax, ay, bx, by, cx, cy])?;
-    let (az, bz, cz) = (s.mz.dot(a), s.mz.dot(b), s.mz.dot(c));
-    let t_scaled = u * az + v * bz + w * cz;
-    let inv = 1.0 / det;
-    let t = t_scaled * inv;
+    let (_, v, w, det) = edge_functions([ax, ay, bx, by, cx, cy])?;
+    let t = plane_t(a, b, c, s.dir);
     if !(t >= tnear && t <= tfar) {
         return None;
     }
+    let inv = 1.0 / det;
     Some((t, v * inv, w * inv))
+}
+
+/// Distance along `dir` to the plane of the origin-relative vertices (a, b, c), from the
+/// geometric normal as Embree computes it (`T = dot(v0, Ng) / dot(Ng, dir)`), not from the
+/// barycentric-weighted vertex depths of Woop et al.: for a sliver (a triangle 1e-7 wide)
+/// the f32 edge functions carry errors as large as themselves, and the weighted depths put
+/// the hit anywhere between the vertices' depths (t 0.949 instead of 1.0 on a flat sliver,
+/// `lodtrace verify`). The hit/miss decision stays with the watertight edge functions.
+#[inline(always)]
+fn plane_t(a: Vec3, b: Vec3, c: Vec3, dir: Vec3) -> f32 {
+    let n = (b - a).cross(c - a);
+    n.dot(a) / n.dot(dir)
 }
 
 /// The 2-D part of the watertight test on the sheared vertices `[ax, ay, bx, by, cx, cy]`:
@@ -165,13 +175,13 @@ mod tests {
     /// reference for the matrix-row shear of [`RayShear`].
     fn watertight_indexed(org: Vec3, dir: Vec3, v: [Vec3; 3]) -> Option<(f32, f32, f32)> {
         let (kx, ky, kz) = axis_permutation(dir);
-        let (sx, sy, sz) = (dir[kx] / dir[kz], dir[ky] / dir[kz], 1.0 / dir[kz]);
+        let (sx, sy) = (dir[kx] / dir[kz], dir[ky] / dir[kz]);
         let [a, b, c] = v.map(|p| p - org);
         // The shear indexed by axis; the shared 2-D part is not what this test is about.
         let sheared =
             [a[kx] - sx * a[kz], a[ky] - sy * a[kz], b[kx] - sx * b[kz], b[ky] - sy * b[kz], c[kx] - sx * c[kz], c[ky] - sy * c[kz]];
-        let (u, v, w, det) = edge_functions(sheared)?;
-        let t = (u * (sz * a[kz]) + v * (sz * b[kz]) + w * (sz * c[kz])) * (1.0 / det);
+        let (_, v, w, det) = edge_functions(sheared)?;
+        let t = plane_t(a, b, c, dir);
         (t >= 0.0).then(|| (t, v * (1.0 / det), w * (1.0 / det)))
     }
 
@@ -197,6 +207,29 @@ mod tests {
             hits += ours.is_some() as u32;
         }
         assert!(hits > 10000, "too few hits to mean anything: {hits}");
+    }
+
+    /// Hits on slivers (flat triangles 1e-7 to 1e-5 wide in the plane z = 0) lie on their
+    /// plane: the distance comes from the plane, not from the slivers' f32 barycentrics
+    /// (which put the hit up to 5 % of the way off along the ray).
+    #[test]
+    fn sliver_hits_lie_on_their_plane() {
+        let mut s = Sampler::new(5, 0, 0);
+        let mut r = || s.next();
+        let mut hits = 0;
+        for _ in 0..20000 {
+            let w = 10f32.powf(-7.0 + 2.0 * r());
+            let v = [Vec3::new(0.0, 1.0, 0.0), Vec3::ZERO, Vec3::new(w, w, 0.0)];
+            let aim = Vec3::new(w * r(), r(), 0.0);
+            let org = aim + Vec3::new(r() - 0.5, r() - 0.5, -0.1 - r());
+            let dir = aim - org;
+            if let Some((t, _, _)) = intersect_watertight(&RayShear::new(org, dir), v[0], v[1], v[2], 0.0, f32::INFINITY) {
+                let z = org.z + t * dir.z;
+                assert!(z.abs() < 1e-6, "hit {z} off the plane (t {t}, w {w})");
+                hits += 1;
+            }
+        }
+        assert!(hits > 1000, "too few hits to mean anything: {hits}");
     }
 
     #[test]
