@@ -18,9 +18,11 @@
 //! within `1e-5·s` world units of its triangle's border (s = the largest coordinate magnitude
 //! of origin, hit point and triangle, i.e. ~80 ulps) or 1e-4 in barycentrics, or at a grazing
 //! angle (|cos| < 1e-2). Two watertight tests may both be right about which side of an edge
-//! such a ray passes. The same triangle with hit points more than `10·1e-5·s/|cos|` apart is a
-//! mismatch, and so is any hit whose (instance, triangle, u, v) does not name the point at its
-//! distance t within that budget. Occlusion is checked on segments ending just before (`0.999·t`) and just after (`1.001·t`)
+//! such a ray passes. The same triangle with hit points more than `10·1e-5·s·κ/|cos|` apart is
+//! a mismatch, and so is any hit whose (instance, triangle, u, v) does not name the point at
+//! its distance t within that budget; κ = longest edge² / (2·area) ≥ 1 is how much f32
+//! barycentrics blow up a position error (≈ 1 to 10 for ordinary triangles, 1e7 for a sliver
+//! 1e-7 wide, whose (u, v) cannot be checked). Occlusion is checked on segments ending just before (`0.999·t`) and just after (`1.001·t`)
 //! Embree's closest hit. Packets (`intersect8`) are checked against each back-end's own
 //! single-ray path on the camera rays.
 
@@ -68,6 +70,10 @@ struct HitGeom {
     cos: f32,
     /// The precision budget in world units around this hit.
     tol: f32,
+    /// Conditioning of the barycentrics: longest edge² / (2·area), ≥ 1. A point named by f32
+    /// barycentrics is uncertain by about this many times the precision budget (a sliver 1e-7
+    /// wide: ~1e7, its (u, v) cannot name a point at all).
+    kappa: f32,
 }
 
 impl HitGeom {
@@ -89,7 +95,9 @@ impl HitGeom {
         let cos = n.normalize_or_zero().dot(ray.dir.normalize_or_zero()).abs();
         let p = ray.org + ray.dir * h.t;
         let scale = ray.org.abs().max_element().max(p.abs().max_element()).max(v.iter().map(|q| q.abs().max_element()).fold(0.0, f32::max));
-        HitGeom { v, cos, tol: WORLD_REL * scale.max(1e-3) }
+        let e2 = (0..3).map(|i| (v[(i + 1) % 3] - v[i]).length_squared()).fold(0.0, f32::max);
+        let kappa = (e2 / n.length()).max(1.0);
+        HitGeom { v, cos, tol: WORLD_REL * scale.max(1e-3), kappa: if kappa.is_finite() { kappa } else { f32::INFINITY } }
     }
     fn point(&self, u: f32, v: f32) -> Vec3 {
         self.v[0] + u * (self.v[1] - self.v[0]) + v * (self.v[2] - self.v[0])
@@ -121,7 +129,7 @@ fn compare_in(scene: &Scene, leaves: &[crate::scene::LeafInstance], ray: &Ray, r
         let Some(g) = HitGeom::get(scene, leaves, ray, &h) else {
             return Verdict::Mismatch;
         };
-        if g.cos >= GRAZING_COS && (g.point(h.u, h.v) - (ray.org + ray.dir * h.t)).length() > 10.0 * g.tol / g.cos {
+        if g.cos >= GRAZING_COS && (g.point(h.u, h.v) - (ray.org + ray.dir * h.t)).length() > 10.0 * g.kappa * g.tol / g.cos {
             return Verdict::Mismatch;
         }
     }
@@ -146,7 +154,7 @@ fn compare_in(scene: &Scene, leaves: &[crate::scene::LeafInstance], ray: &Ray, r
             if (a.inst, a.prim) == (b.inst, b.prim) {
                 let g = geom(&a);
                 let d = (g.point(a.u, a.v) - g.point(b.u, b.v)).length();
-                if d <= 10.0 * g.tol / g.cos.max(GRAZING_COS) {
+                if d <= 10.0 * g.kappa * g.tol / g.cos.max(GRAZING_COS) {
                     Verdict::Agree
                 } else {
                     Verdict::Mismatch
