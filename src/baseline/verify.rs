@@ -22,9 +22,9 @@
 //! a mismatch, and so is any hit whose (instance, triangle, u, v) does not name the point at
 //! its distance t within that budget; κ = longest edge² / (2·area) ≥ 1 is how much f32
 //! barycentrics blow up a position error (≈ 1 to 10 for ordinary triangles, 1e7 for a sliver
-//! 1e-7 wide, whose (u, v) cannot be checked). Occlusion is checked on segments ending just before (`0.999·t`) and just after (`1.001·t`)
-//! Embree's closest hit. Packets (`intersect8`) are checked against each back-end's own
-//! single-ray path on the camera rays.
+//! 1e-7 wide, whose (u, v) cannot be checked). Occlusion is checked on segments ending just
+//! before (`0.999·t`) and just after (`1.001·t`) Embree's closest hit. Packets (`intersect8`)
+//! are checked against each back-end's own single-ray path on the camera rays.
 
 use super::accel::{self, Accel, AccelKind, Hit, Ray, K};
 use super::embree::EmbreeAccel;
@@ -96,8 +96,8 @@ impl HitGeom {
         let p = ray.org + ray.dir * h.t;
         let scale = ray.org.abs().max_element().max(p.abs().max_element()).max(v.iter().map(|q| q.abs().max_element()).fold(0.0, f32::max));
         let e2 = (0..3).map(|i| (v[(i + 1) % 3] - v[i]).length_squared()).fold(0.0, f32::max);
-        let kappa = (e2 / n.length()).max(1.0);
-        HitGeom { v, cos, tol: WORLD_REL * scale.max(1e-3), kappa: if kappa.is_finite() { kappa } else { f32::INFINITY } }
+        // +inf for a zero-area triangle (no check of its (u, v) is meaningful).
+        HitGeom { v, cos, tol: WORLD_REL * scale.max(1e-3), kappa: (e2 / n.length()).max(1.0) }
     }
     fn point(&self, u: f32, v: f32) -> Vec3 {
         self.v[0] + u * (self.v[1] - self.v[0]) + v * (self.v[2] - self.v[0])
