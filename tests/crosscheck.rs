@@ -170,6 +170,36 @@ fn no_ray_escapes_a_closed_mesh() {
     }
 }
 
+/// Axis-aligned rays with every sign of zero in their other components, from inside closed
+/// meshes: all hit. A −0.0 component used to invert the BVH's slab test (obvhs inverts it by
+/// its sign bit but orders by `d < 0`), so such rays missed everything.
+#[test]
+fn signed_zero_directions_hit_from_inside() {
+    for name in ["cube", "ico"] {
+        let s = scene(name);
+        let (lo, hi) = s.meshes[0].bounds();
+        let c = (lo + hi) * 0.5;
+        for be in backends(&s) {
+            let mut cnt = Counters::default();
+            for o in [c, c + (hi - lo) * Vec3::new(0.1, -0.2, 0.15)] {
+                for axis in 0..3 {
+                    for bits in 0..8u32 {
+                        // The axis with sign bit 2; the other two components +0.0 or −0.0 by bits 0, 1.
+                        let (j, k) = ((axis + 1) % 3, (axis + 2) % 3);
+                        let mut v = [0.0f32; 3];
+                        v[axis] = if bits & 4 == 0 { 1.0 } else { -1.0 };
+                        v[j] = if bits & 1 == 0 { 0.0 } else { -0.0 };
+                        v[k] = if bits & 2 == 0 { 0.0 } else { -0.0 };
+                        let r = Ray::new(o, Vec3::from(v));
+                        assert!(be.intersect1(&r, &mut cnt).is_some(), "{name}/{}: ray {o:?} {v:?} missed", be.name());
+                        assert!(be.occluded1(&r, &mut cnt), "{name}/{}: occlusion ray {o:?} {v:?} missed", be.name());
+                    }
+                }
+            }
+        }
+    }
+}
+
 #[test]
 fn invalid_rays_miss_on_every_backend() {
     let s = builtin::get("spheres").unwrap();

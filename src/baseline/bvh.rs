@@ -126,6 +126,17 @@ pub unsafe fn intersect_node_avx2(node: &CwBvhNode, ray: &obvhs::ray::Ray, oct_i
     hit_bits(node, m, oct_inv4)
 }
 
+/// An obvhs ray with −0.0 direction components made +0.0. obvhs inverts a zero component
+/// to ±1/ε by its sign bit (−0.0 → negative) but picks the ray octant, and the node tests
+/// their near and far planes, by `d < 0` (−0.0 → positive): with −0.0 the two disagree, the
+/// slab comes out inverted, and every box is missed (`lodtrace verify cube --rays 100000000`
+/// found a ray along (0, −0, 1) through a face's interior that the BVH missed).
+#[inline(always)]
+fn ob_ray(o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> obvhs::ray::Ray {
+    // x + 0.0 is x except that −0.0 becomes +0.0 (IEEE 754, round to nearest).
+    obvhs::ray::Ray::new(Vec3A::from(o), Vec3A::from(d) + Vec3A::ZERO, tmin, tmax)
+}
+
 #[inline(always)]
 fn hit_bits(node: &CwBvhNode, mut m: u32, oct_inv4: u32) -> u32 {
     let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
@@ -297,7 +308,7 @@ impl BvhAccel {
         let mut tfar = ray.tfar;
         let mut best: Option<Hit> = None;
         let tnear = ray.tnear.max(0.0).min(tfar);
-        let world = obvhs::ray::Ray::new(Vec3A::from(ray.org), Vec3A::from(ray.dir), tnear, tfar);
+        let world = ob_ray(ray.org, ray.dir, tnear, tfar);
         let mut tl_ray = world;
         let mut state = self.tlas.new_traversal(world.direction);
         let mut node;
@@ -321,7 +332,7 @@ impl BvhAccel {
                     let blas = &self.blas[inst.blas as usize];
                     let lo = inst.inv.transform_point3(ray.org);
                     let ld = inst.inv.transform_vector3(ray.dir);
-                    let mut bl_ray = obvhs::ray::Ray::new(Vec3A::from(lo), Vec3A::from(ld), tnear, tfar);
+                    let mut bl_ray = ob_ray(lo, ld, tnear, tfar);
                     let shear = RayShear::new(lo, ld);
                     let mut bstate = blas.bvh.new_traversal(bl_ray.direction);
                     let mut bnode;
