@@ -74,6 +74,9 @@ impl Default for RenderOpts {
     }
 }
 
+/// Upper limit of `--spp`, `--first-pass-spp` and the bench keys `spp=`, `fps=`.
+pub const MAX_SPP: u32 = 65536;
+
 /// Upper limit of width × height (the film alone takes tens of bytes per pixel).
 pub const MAX_PIXELS: u64 = 1 << 27;
 
@@ -94,14 +97,14 @@ impl RenderOpts {
             return Err(Error::Usage(format!("image size {}x{} is too large (max 32768 per side)", self.width, self.height)));
         }
         check_pixels(self.width, self.height)?;
-        if self.spp == 0 || self.spp > 65536 {
-            return Err(Error::Usage(format!("--spp {} out of range (1..=65536)", self.spp)));
+        if !(1..=MAX_SPP).contains(&self.spp) {
+            return Err(Error::Usage(format!("--spp {} out of range (1..={MAX_SPP})", self.spp)));
         }
         if self.packet != 1 && self.packet != 8 {
             return Err(Error::Usage(format!("--packet {} must be 1 or 8", self.packet)));
         }
-        if self.first_pass_spp == 0 || self.first_pass_spp > 65536 {
-            return Err(Error::Usage(format!("--first-pass-spp {} out of range (1..=65536)", self.first_pass_spp)));
+        if !(1..=MAX_SPP).contains(&self.first_pass_spp) {
+            return Err(Error::Usage(format!("--first-pass-spp {} out of range (1..={MAX_SPP})", self.first_pass_spp)));
         }
         if !(self.variance_threshold >= 0.0) || !self.variance_threshold.is_finite() {
             return Err(Error::Usage("--variance-threshold must be a finite number >= 0".into()));

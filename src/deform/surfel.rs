@@ -190,12 +190,6 @@ impl SurfelModel {
     }
 }
 
-/// Area of triangle (a, b, c) in f64: the f32 cross product of a mesh ~1e10 wide overflows.
-fn tri_area(a: Vec3, b: Vec3, c: Vec3) -> f64 {
-    let (a, b, c) = (a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
-    0.5 * (b - a).cross(c - a).length()
-}
-
 fn mesh_check(mesh: &Mesh) -> Result<f64, DeformError> {
     if mesh.vertex_count() < 4 || mesh.tri_count() == 0 {
         return Err(DeformError::TooSmall(format!(
@@ -207,8 +201,7 @@ fn mesh_check(mesh: &Mesh) -> Result<f64, DeformError> {
     }
     let mut area = 0.0f64;
     for t in 0..mesh.tri_count() {
-        let [a, b, c] = mesh.tri_verts(t);
-        let ar = tri_area(a, b, c);
+        let ar = 0.5 * mesh.tri_cross(t).length();
         if ar.is_finite() {
             area += ar;
         }
@@ -273,9 +266,9 @@ pub fn sample_mesh(mesh: &Mesh, n: usize, seed: u32) -> Result<SurfelSoa, Deform
     let mut cand: Vec<(Vec3, Vec3)> = Vec::with_capacity(cand_n + 16);
     for t in 0..m.tri_count() {
         let [a, b, c] = m.tri_verts(t);
-        // Geometric normal in f64 (the f32 cross product of a huge triangle overflows).
-        let fn_ = (b.as_dvec3() - a.as_dvec3()).cross(c.as_dvec3() - a.as_dvec3()).normalize_or_zero().as_vec3();
-        let ar = tri_area(a, b, c);
+        // Area and geometric normal in f64 (`Mesh::tri_cross`).
+        let cr = m.tri_cross(t);
+        let (ar, fn_) = (0.5 * cr.length(), cr.normalize_or_zero().as_vec3());
         // In [0, cand_n] (f64 areas cannot overflow for finite f32 vertices).
         let expect = if ar.is_finite() { (ar / area * cand_n as f64).min(cand_n as f64) } else { 0.0 };
         let mut smp = Sampler::new(seed, pcg_hash(t as u32), 0);

@@ -165,8 +165,9 @@ impl MethodSpec {
                     "spp" | "fps" => {
                         // The ranges of `render --spp` / `--first-pass-spp`, named by key.
                         let n = int(v)?;
-                        if !(1..=65536).contains(&n) {
-                            return Err(bad(format!("{k}={n} out of range (1..=65536)")));
+                        use crate::baseline::render::MAX_SPP;
+                        if !(1..=MAX_SPP).contains(&n) {
+                            return Err(bad(format!("{k}={n} out of range (1..={MAX_SPP})")));
                         }
                         if k == "spp" {
                             spec.spp = n
@@ -616,8 +617,12 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
         if sw.text.split(':').any(|p| p.starts_with("spp=")) {
             return Err(Error::Usage(format!("--sweep '{}': the sweep sets spp itself; leave it out", sw.text)));
         }
-        if a.sweep_max_spp == 0 || a.sweep_max_spp > 65536 {
-            return Err(Error::Usage(format!("--sweep-max-spp {} out of range (1–65536)", a.sweep_max_spp)));
+        if !(1..=crate::baseline::render::MAX_SPP).contains(&a.sweep_max_spp) {
+            return Err(Error::Usage(format!(
+                "--sweep-max-spp {} out of range (1..={})",
+                a.sweep_max_spp,
+                crate::baseline::render::MAX_SPP
+            )));
         }
     }
     let surfel = specs.iter().filter(|s| s.method == Method::Surfel).count();

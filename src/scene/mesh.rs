@@ -59,15 +59,19 @@ impl Mesh {
         !self.nx.is_empty() && self.nx.len() == self.px.len()
     }
     /// Area-weighted vertex normals (for meshes without normals, e.g. OFF files).
+    /// (v1 − v0) × (v2 − v0) of triangle t in f64: twice its area and its normal. In f32, a
+    /// mesh ~1e10 wide overflows the squared length (zero normals, infinite areas).
+    pub fn tri_cross(&self, t: usize) -> glam::DVec3 {
+        let [p0, p1, p2] = self.tri_verts(t).map(Vec3::as_dvec3);
+        (p1 - p0).cross(p2 - p0)
+    }
     pub fn compute_normals(&mut self) {
-        // Summed in f64: for a mesh ~1e10 wide the f32 cross products (~1e20) are finite but
-        // their squared length is not, and an f32 normalisation would give zero normals.
+        // Summed in f64 (see `tri_cross`).
         let n = self.vertex_count();
         let mut acc = vec![glam::DVec3::ZERO; n];
         for t in 0..self.tris.len() {
             let [a, b, c] = self.tris[t];
-            let [p0, p1, p2] = self.tri_verts(t).map(Vec3::as_dvec3);
-            let fnrm = (p1 - p0).cross(p2 - p0); // length = 2·area
+            let fnrm = self.tri_cross(t);
             if fnrm.is_finite() {
                 for i in [a, b, c] {
                     acc[i as usize] += fnrm;
