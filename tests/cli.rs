@@ -685,8 +685,9 @@ fn bad_animate_input_is_one_line_exit_2() {
 fn bench_deforming_sequences() {
     let d = tmp("deformbench");
     // The last row traces ray by ray (packet=1): the same image as the packets of the others;
-    // the second caches ancestors with the paper's unordered traversal (same image too).
-    let m = ["naive", "lazy-cache:warm=1:cache_up=6:ordered=0", "refit", "lazy:packet=1"]
+    // the second caches ancestors with the paper's unordered traversal, the third tests
+    // every ball's root without the instance tree (same images too).
+    let m = ["naive", "lazy-cache:warm=1:cache_up=6:ordered=0", "refit:top=0", "lazy:packet=1"]
         .map(|u| format!("surfel:update={u}:detail=0.03:frames=4"))
         .join(",");
     let (code, out, err) =
@@ -708,7 +709,14 @@ fn bench_deforming_sequences() {
     for f in ["elastic-balls-frame-times.png", "elastic-balls-sphere-tests.png", "radius-ratio.png", "bench.md"] {
         assert!(d.join(f).is_file(), "{f}");
     }
-    for bad in ["surfel:update=lazy,whitted:bvh", "whitted:bvh:warm=1", "surfel:update=lazy:cache_up=2", "surfel:cache_up=65"] {
+    for bad in [
+        "surfel:update=lazy,whitted:bvh",
+        "whitted:bvh:warm=1",
+        "surfel:update=lazy:cache_up=2",
+        "surfel:cache_up=65",
+        "surfel:top=2",
+        "whitted:bvh:top=0",
+    ] {
         let (code, _, err) = lodtrace(&["bench", "heads", "--methods", bad, "--width", "8", "--height", "8"]);
         assert_eq!(code, 2, "{bad}: {err}");
         one_error_line(&err);

@@ -179,35 +179,56 @@ fn same_hits(a: &[Option<SurfelHit>], b: &[Option<SurfelHit>]) -> Result<(), Str
 
 /// Naive, lazy, lazy-cache and refit render the same frames identically (bit for bit), on a
 /// multi-body scene with clipping (heads) and on many instances (elastic balls: roots tested
-/// 8 per SIMD step).
+/// 8 per SIMD step), with and without the instance tree (`top.rs`), which on the 40 balls
+/// must save sphere tests in every mode.
 #[test]
 fn modes_render_identically() {
     for name in ["heads", "elastic-balls"] {
         let opts = SequenceOptions { detail: 0.03, ..Default::default() };
         let mut seq = Sequence::builtin(name, &opts).unwrap();
         let rec = seq.record(12).unwrap();
-        let mut tracers: Vec<DeformTracer> =
-            UpdateMode::ALL.iter().map(|m| DeformTracer::new(&seq.scene, *m, TraceParams::default()).unwrap()).collect();
+        let flat = TraceParams { instance_tree: false, ..TraceParams::default() };
+        let variants: Vec<(UpdateMode, bool)> =
+            [true, false].iter().flat_map(|&tree| UpdateMode::ALL.iter().map(move |&m| (m, tree))).collect();
+        let mut tracers: Vec<DeformTracer> = variants
+            .iter()
+            .map(|&(m, tree)| DeformTracer::new(&seq.scene, m, if tree { TraceParams::default() } else { flat.clone() }).unwrap())
+            .collect();
         let (w, h) = (40, 30);
         for t in &mut tracers {
             t.set_cache_slots((w * h) as usize);
         }
         let mut any_hit = 0;
+        let mut tests = vec![0u64; tracers.len()];
         for (fi, frame) in rec.frames.iter().enumerate().step_by(3) {
             let mut imgs = Vec::new();
-            for t in &mut tracers {
+            for (t, n) in tracers.iter_mut().zip(&mut tests) {
                 t.begin_frame(frame).unwrap();
-                imgs.push(render(t, &seq.camera, w, h, &mut DeformCounters::default()));
+                let mut dc = DeformCounters::default();
+                imgs.push(render(t, &seq.camera, w, h, &mut dc));
+                *n += dc.sphere_tests;
             }
             any_hit += imgs[0].iter().filter(|x| x.is_some()).count();
-            for (m, img) in UpdateMode::ALL.iter().zip(&imgs).skip(1) {
-                same_hits(&imgs[0], img).unwrap_or_else(|e| panic!("{name} frame {fi} naive vs {}: {e}", m.name()));
+            for ((m, tree), img) in variants.iter().zip(&imgs).skip(1) {
+                same_hits(&imgs[0], img).unwrap_or_else(|e| panic!("{name} frame {fi} naive vs {} (instance tree {tree}): {e}", m.name()));
             }
             for t in &tracers {
                 assert!(t.check_containment().is_ok(), "{:?}", t.check_containment());
             }
         }
         assert!(any_hit > 100, "{name}: only {any_hit} hits");
+        if name == "elastic-balls" {
+            let n = UpdateMode::ALL.len();
+            for (i, m) in UpdateMode::ALL.iter().enumerate() {
+                assert!(
+                    (tests[i] as f64) < 0.9 * tests[n + i] as f64,
+                    "{}: {} sphere tests with the instance tree, {} without",
+                    m.name(),
+                    tests[i],
+                    tests[n + i]
+                );
+            }
+        }
     }
 }
 

@@ -70,6 +70,11 @@ pub struct AnimateArgs {
     /// traversal); front to back (the default) finds that bound by itself. Same images.
     #[arg(long)]
     pub unordered: bool,
+    /// Test every instance's root sphere with every ray instead of finding the instances
+    /// along the ray in a sphere tree over them (rebuilt every frame; not in the paper).
+    /// Same images; for scenes of many objects (`elastic-balls`: 40) it costs time.
+    #[arg(long)]
+    pub no_instance_tree: bool,
     /// Profiling: render every frame a second time, untimed in `seconds`, and report that
     /// pass as `warm_seconds` (per frame, in `--stats`) — the rays alone with every sphere
     /// the first pass reached already current (and tightened by Eq. 11), so `seconds −
@@ -252,7 +257,13 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     let mut tracer = DeformTracer::new(
         &seq.scene,
         mode,
-        TraceParams { exact_below: a.exact_below, cache_up: a.cache_up, ordered: !a.unordered, ..TraceParams::default() },
+        TraceParams {
+            exact_below: a.exact_below,
+            cache_up: a.cache_up,
+            ordered: !a.unordered,
+            instance_tree: !a.no_instance_tree,
+            ..TraceParams::default()
+        },
     )
     .map_err(derr)?;
     tracer.set_cache_slots((a.width * a.height) as usize);

@@ -236,6 +236,7 @@ fn render_surfel(a: &RenderArgs, out: &Path) -> Result<()> {
         exact_below: 64,
         cache_up: 0,
         unordered: false,
+        no_instance_tree: false,
         warm_pass: false,
         quiet: a.quiet,
     };

@@ -12,7 +12,8 @@
 //! - [`tree`] hierarchy build (median split, [`miniball`]), Eq. 3–4, 9, 11, f32x8 sphere
 //!   kernels with their scalar references.
 //! - [`object`] the per-model precomputation (§4.4); [`mls`] Eq. 12 and the clipping test;
-//!   [`trace`] the per-frame tracer; [`sequences`] the four built-in animations and the
+//!   [`trace`] the per-frame tracer, which finds the objects along a ray with [`top`], a
+//!   sphere tree over their roots; [`sequences`] the four built-in animations and the
 //!   default drop for any mesh; [`knn`] static k-nearest-neighbour queries.
 //!
 //! # Using it (what `lodtrace animate` calls)
@@ -67,6 +68,8 @@
 //! - Eq. 9 also takes the partition-of-unity maxima (max_j instead of Σ_j A_j) and factors
 //!   out each node's own rotation (the paper's §6 suggestion) when that is smaller ([`tree`]).
 //! - Eq. 11 is re-evaluated at every descent (not once), so tightening propagates upwards.
+//! - Beyond the paper: the instance tree over the objects' root spheres ([`top`]), rebuilt
+//!   every frame, so that a ray does not test all 40 balls of `elastic-balls`.
 //! - Beyond the paper: `UpdateMode::Refit`, an obvhs BVH2 over the surfels' leaf balls,
 //!   refitted every frame — the alternative a user would try today ([`trace`]).
 //! - Centre support (Eq. 3) widened beyond R when fewer than k listed nodes lie within R.
@@ -110,6 +113,7 @@ pub mod ply;
 pub mod sequences;
 pub mod sim;
 pub mod surfel;
+pub mod top;
 pub mod trace;
 pub mod tree;
 

@@ -37,8 +37,10 @@
 //! slightly between multi-threaded runs, because which rays see a tightened radius depends
 //! on timing; single-threaded they are deterministic.
 //!
-//! Instances of the same object share its precomputed data (§6); the roots of all instances
-//! are tested 8 per step with the f32x8 sphere kernel.
+//! Instances of the same object share its precomputed data (§6). A ray finds the instances
+//! along it in a sphere tree over their root spheres, rebuilt in `begin_frame` (not in the
+//! paper: [`super::top`]; `TraceParams::instance_tree = false` tests every root, the
+//! candidates' roots 8 per step with the f32x8 sphere kernel).
 //!
 //! **Packets (the user's design card: sphere tests for several rays per SIMD step).**
 //! `intersect_x8` / `occluded_x8` trace up to eight rays together (`lodtrace animate` uses
@@ -56,6 +58,7 @@ use super::displace::{deform_point, DeformField, DeformedSurfel};
 use super::miniball::miniball;
 use super::mls::{clipped_by, ellipse_hit, mls_intersect_x8, MlsNbr, MlsOutcome, MlsParams, MAX_NBR};
 use super::object::SurfelObject;
+use super::top::TopTree;
 use super::tree::{child_bound, leaf_sphere, sphere_test_1, sphere_test_spheres, RayPacketX8, Topology, LEAF, RADIUS_PAD};
 use super::DeformError;
 use crate::baseline::accel::Ray;
@@ -134,6 +137,9 @@ pub struct TraceParams {
     /// Eq. 11 with the centre moved to the smallest sphere around both children (see
     /// `tighten`); off: the paper's Eq. 11 around the node's Eq. 3 centre.
     pub recentre_eq11: bool,
+    /// Find the instances along a ray through a sphere tree over their roots, rebuilt every
+    /// frame ([`super::top`], not in the paper); off: every ray tests every root. Same images.
+    pub instance_tree: bool,
 }
 
 /// Upper limit of [`TraceParams::exact_below`].
@@ -156,6 +162,7 @@ impl Default for TraceParams {
             node_rotation: true,
             exact_below: 64,
             recentre_eq11: true,
+            instance_tree: true,
         }
     }
 }
@@ -418,6 +425,8 @@ pub struct DeformTracer {
     frame: u32,
     cache: Vec<AtomicU64>,
     update_seconds: f64,
+    /// The instances' sphere tree of this frame ([`super::top`]).
+    top: TopTree,
 }
 
 impl DeformTracer {
@@ -442,7 +451,7 @@ impl DeformTracer {
                 obj,
             });
         }
-        Ok(DeformTracer { mode, params, inst, frame: 0, cache: Vec::new(), update_seconds: 0.0 })
+        Ok(DeformTracer { mode, params, inst, frame: 0, cache: Vec::new(), update_seconds: 0.0, top: TopTree::default() })
     }
 
     pub fn mode(&self) -> UpdateMode {
@@ -512,6 +521,23 @@ impl DeformTracer {
                 i.naive = None;
             }
         }
+        // The instance tree over this frame's root spheres (in the lazy modes this makes the
+        // roots current, which every ray used to do by testing all of them).
+        let roots: Vec<(Vec3, f32)> = self
+            .inst
+            .iter()
+            .map(|ii| match &ii.refit {
+                Some(bvh) => bvh.nodes.first().map_or((Vec3::ZERO, -1.0), |n| {
+                    let b = n.aabb();
+                    let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
+                    let c = 0.5 * (lo + hi);
+                    let r = 0.5 * (hi - lo).length();
+                    (c, r * (1.0 + RADIUS_PAD) + RADIUS_PAD * c.abs().max_element())
+                }),
+                None => self.sphere(ii, 0),
+            })
+            .collect();
+        self.top = if self.params.instance_tree { TopTree::build(&roots) } else { TopTree::flat(roots.len()) };
         self.update_seconds = t0.elapsed().as_secs_f64();
         Ok(())
     }
@@ -807,11 +833,15 @@ impl DeformTracer {
     /// nearest first.
     fn root_hits(&self, ray: &Ray, tfar: f32, dc: &mut DeformCounters, ctr: &mut Counters) -> Vec<(f32, usize)> {
         let mut out = Vec::new();
-        for base in (0..self.inst.len()).step_by(8) {
+        let mut cand = Vec::with_capacity(self.inst.len());
+        let top_tests = self.top.candidates_1(ray, tfar, &mut cand);
+        dc.sphere_tests += top_tests;
+        ctr.add(Counter::node_tests, top_tests);
+        for chunk in cand.chunks(8) {
             let (mut cx, mut cy, mut cz, mut r) = ([0f32; 8], [0f32; 8], [0f32; 8], [-1f32; 8]);
-            let m = (self.inst.len() - base).min(8);
-            for j in 0..m {
-                let (c, rr) = self.sphere(&self.inst[base + j], 0);
+            let m = chunk.len();
+            for (j, &k) in chunk.iter().enumerate() {
+                let (c, rr) = self.sphere(&self.inst[k as usize], 0);
                 cx[j] = c.x;
                 cy[j] = c.y;
                 cz[j] = c.z;
@@ -820,9 +850,9 @@ impl DeformTracer {
             let (mask, entry) = sphere_test_spheres(ray.org, ray.dir, &cx, &cy, &cz, &r, ray.tnear, tfar);
             dc.sphere_tests += m as u64;
             ctr.add(Counter::node_tests, m as u64);
-            for j in 0..m {
+            for (j, &k) in chunk.iter().enumerate() {
                 if mask & (1 << j) != 0 && r[j] >= 0.0 {
-                    out.push((entry[j], base + j));
+                    out.push((entry[j], k as usize));
                 }
             }
         }
@@ -984,14 +1014,19 @@ impl DeformTracer {
             }
         }
         let pk = packet(rays, valid);
-        let mut roots: Vec<(f32, usize, u8, f32x8)> = Vec::with_capacity(self.inst.len());
-        for (k, ii) in self.inst.iter().enumerate() {
-            let (c, r) = self.sphere(ii, 0);
-            let cnt = valid.count_ones() as u64;
+        let mut cand = Vec::with_capacity(self.inst.len());
+        let top_tests = self.top.candidates_x8(&pk, valid, best_t(&best), &mut cand);
+        dc.sphere_tests += top_tests;
+        ctr.add(Counter::node_tests, top_tests);
+        let mut roots: Vec<(f32, usize, u8, f32x8)> = Vec::with_capacity(cand.len());
+        for (k, lm) in cand {
+            let k = k as usize;
+            let (c, r) = self.sphere(&self.inst[k], 0);
+            let cnt = lm.count_ones() as u64;
             dc.sphere_tests += cnt;
             ctr.add(Counter::node_tests, cnt);
             let (m, e) = pk.test(c, r, best_t(&best));
-            let m = m & valid;
+            let m = m & lm;
             if m != 0 {
                 roots.push((hmin(e, m), k, m, e));
             }
@@ -1099,14 +1134,19 @@ impl DeformTracer {
         }
         let pk = packet(rays, valid);
         let tfar = f32x8::from(std::array::from_fn::<f32, 8, _>(|i| if valid & (1 << i) != 0 { rays[i].tfar } else { f32::NEG_INFINITY }));
-        let mut roots: Vec<(f32, usize, u8)> = Vec::with_capacity(self.inst.len());
-        for (k, ii) in self.inst.iter().enumerate() {
-            let (c, r) = self.sphere(ii, 0);
-            let cnt = valid.count_ones() as u64;
+        let mut cand = Vec::with_capacity(self.inst.len());
+        let top_tests = self.top.candidates_x8(&pk, valid, tfar, &mut cand);
+        dc.sphere_tests += top_tests;
+        ctr.add(Counter::node_tests, top_tests);
+        let mut roots: Vec<(f32, usize, u8)> = Vec::with_capacity(cand.len());
+        for (k, lm) in cand {
+            let k = k as usize;
+            let (c, r) = self.sphere(&self.inst[k], 0);
+            let cnt = lm.count_ones() as u64;
             dc.sphere_tests += cnt;
             ctr.add(Counter::node_tests, cnt);
             let (m, e) = pk.test(c, r, tfar);
-            let m = m & valid;
+            let m = m & lm;
             if m != 0 {
                 roots.push((hmin(e, m), k, m));
             }
@@ -1177,8 +1217,13 @@ impl DeformTracer {
     fn refit_traverse(&self, ray: &Ray, best: &mut Best, any: bool, dc: &mut DeformCounters, ctr: &mut Counters) -> bool {
         let slab = Slab::new(ray);
         let mut roots: Vec<(f32, usize)> = Vec::new();
-        for (k, ii) in self.inst.iter().enumerate() {
-            let bvh = ii.refit.as_ref().expect("refit tree");
+        let mut cand = Vec::with_capacity(self.inst.len());
+        let top_tests = self.top.candidates_1(ray, best.t, &mut cand);
+        dc.sphere_tests += top_tests;
+        ctr.add(Counter::node_tests, top_tests);
+        for k in cand {
+            let k = k as usize;
+            let bvh = self.inst[k].refit.as_ref().expect("refit tree");
             dc.sphere_tests += 1;
             ctr.inc(Counter::node_tests);
             if let Some(te) = bvh.nodes.first().and_then(|n| slab.test(n.aabb(), best.t)) {

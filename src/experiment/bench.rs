@@ -9,7 +9,8 @@
 //! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage|mass`, `term=paper|final`, `pw=area|voxel`, `spread=0`, `groups=0`, `agg=0` (surface shadow skip for aggregates too), `plane=0` (`--no-plane-skip`), `tight=1` (a triangle fragment's depth interval from its vertices, not its plane), `mask=1` (`--coverage-masks`);
 //! for `lod`: `f`, `a` (a_LOD), `thres`, `sel=0` (no selective tracing), `levels`, `dist`
 //! (distance criterion), `force` (fixed LOD), `net=1` (net disparity), `select=cone` (the
-//! ray-cone selector).
+//! ray-cone selector); for `surfel`: `update`, `frames`, `detail`, `shadows=0`, `exact`,
+//! `warm=1`, `cache_up`, `ordered=0`, `top=0` (`--no-instance-tree`).
 //!
 //! A `lod` row is also compared with the full-detail row of the same scene (the first
 //! `whitted` row with the same accel, spp, threads and depth): triangle tests and time saved, the maximum
@@ -237,13 +238,14 @@ impl MethodSpec {
                     "warm" => spec.surfel.warm = on(v)?,
                     "cache_up" => spec.surfel.cache_up = int(v)?,
                     "ordered" => spec.surfel.ordered = on(v)?,
+                    "top" => spec.surfel.top = on(v)?,
                     "eigen" => {
                         spec.multires.eigen = crate::multires::trace::EigenMode::from_str(v, true)
                             .map_err(|_| bad(format!("eigen={v}: per-box or exact")))?
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, mip, primary, budget, eigen, tri, term, pw, spread, groups, agg, tight, mask; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, warm, cache_up, ordered)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, mip, primary, budget, eigen, tri, term, pw, spread, groups, agg, tight, mask; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, warm, cache_up, ordered, top)"
                         )))
                     }
                 }
@@ -264,7 +266,9 @@ impl MethodSpec {
                     "multires and cone"
                 }
                 "f" | "a" | "thres" | "sel" | "levels" | "dist" | "force" | "net" | "select" if method != Method::Lod => "lod",
-                "update" | "frames" | "detail" | "shadows" | "exact" | "warm" | "cache_up" | "ordered" if method != Method::Surfel => {
+                "update" | "frames" | "detail" | "shadows" | "exact" | "warm" | "cache_up" | "ordered" | "top"
+                    if method != Method::Surfel =>
+                {
                     "surfel"
                 }
                 "fps" | "vt" if method != Method::Distributed => "distributed",

@@ -20,7 +20,7 @@ use serde::Serialize;
 use std::path::Path;
 
 /// `surfel` spec options (keys `update=`, `frames=`, `detail=`, `shadows=`, `exact=`,
-/// `warm=`, `cache_up=`, `ordered=`; the spec's `packet=` chooses packets of 8 or single rays).
+/// `warm=`, `cache_up=`, `ordered=`, `top=`; the spec's `packet=` chooses packets of 8 or single rays).
 #[derive(Clone, Debug, Serialize)]
 pub struct SurfelSpec {
     pub update: String,
@@ -36,6 +36,8 @@ pub struct SurfelSpec {
     pub cache_up: u32,
     /// `ordered=0`: `--unordered` of `animate`.
     pub ordered: bool,
+    /// `top=0`: `--no-instance-tree` of `animate`.
+    pub top: bool,
 }
 
 impl Default for SurfelSpec {
@@ -49,6 +51,7 @@ impl Default for SurfelSpec {
             warm: false,
             cache_up: 0,
             ordered: true,
+            top: true,
         }
     }
 }
@@ -124,6 +127,7 @@ pub fn run(
                 exact_below: s.exact_below,
                 cache_up: s.cache_up,
                 unordered: !s.ordered,
+                no_instance_tree: !s.top,
                 warm_pass: s.warm,
                 quiet,
             };
