@@ -90,8 +90,8 @@
 //! # Measured
 //! Current figures and the commands that produce them are in the README ("Adams et al."):
 //! `lodtrace bench SEQ --methods surfel:update=naive,...,surfel:update=refit`. In short, at
-//! the paper's size (512×384, detail 1, 16 frames, stop 33), lazy-cache runs at 1.21–1.85×
-//! the speed of a naive rebuild (lazy 1.33–1.94×), and the refitted BVH2 at 1.16–2.10×.
+//! the paper's size (512×384, detail 1, 16 frames, stop 37), lazy-cache runs at 1.30–1.63×
+//! the speed of a naive rebuild (lazy 1.31–1.74×), and the refitted BVH2 at 1.01–1.57×.
 //! `animate --warm-pass` splits a frame: the lazy update costs 33–41 % of the rebuild, but the rays cost 1.10–1.27×
 //! as much in the lazy tree, which keeps the rest pose's topology (the paper's choice): on
 //! `armadillo-ball` its sphere tests grow from 1.01× the rebuilt tree's in frame 0 to 2.38×
