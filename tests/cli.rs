@@ -723,6 +723,41 @@ fn bench_deforming_sequences() {
     }
 }
 
+/// `bench --sizes`: every surfel spec at each image size, a speed-up-by-size table and plot,
+/// each size's files in its own folder; bad size lists exit 2 with one line.
+#[test]
+fn bench_sizes_sweep_deforming_sequences() {
+    let d = tmp("deformsizes");
+    let m = "surfel:update=naive:detail=0.03:frames=3,surfel:update=lazy:detail=0.03:frames=3";
+    let (code, out, err) = lodtrace(&["bench", "bend", "--methods", m, "--sizes", "16x12,40x30", "--quiet", "--out", d.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("Speed-up over the first method by image size"), "{out}");
+    assert!(out.contains("| 16x12 (192 px) | 40x30 (1200 px) |"), "{out}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("bench.json")).unwrap()).unwrap();
+    let rows = v["deform"].as_array().unwrap();
+    let sizes: Vec<(u64, u64)> = rows.iter().map(|r| (r["width"].as_u64().unwrap(), r["height"].as_u64().unwrap())).collect();
+    assert_eq!(sizes, [(16, 12), (16, 12), (40, 30), (40, 30)]);
+    for r in rows {
+        assert_eq!(r["same_image_as_first"], true, "{r}");
+    }
+    // Speed-ups are against the first spec at the same size.
+    assert_eq!(rows[2]["speedup_vs_first"], 1.0);
+    for f in ["speedup-vs-size.png", "bench.md", "16x12/bend-frame-times.png", "40x30/bend-frame-times.png"] {
+        assert!(d.join(f).is_file(), "{f}");
+    }
+    for bad in [&["--sizes", "16x0"][..], &["--sizes", "16"], &["--sizes", "16x12,16x12"], &["--sizes", "16384x16384"]] {
+        let mut args = vec!["bench", "bend", "--methods", "surfel:update=naive:frames=1", "--width", "8", "--height", "8"];
+        args.extend_from_slice(bad);
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{bad:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains("--sizes"), "{err}");
+    }
+    let (code, _, err) = lodtrace(&["bench", "spheres", "--methods", "whitted:bvh", "--sizes", "16x12"]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+}
+
 /// `render SEQ --method surfel`: the first frame of a deforming sequence, PNG and stats.
 #[test]
 fn render_method_surfel() {

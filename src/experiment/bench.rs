@@ -81,6 +81,12 @@ pub struct BenchArgs {
     /// image's FLIP error, RMSE per region. Needs `--reference`.
     #[arg(long = "region", value_name = "NAME=X0,Y0,X1,Y1")]
     pub regions: Vec<String>,
+    /// Deforming sequences (`surfel` specs) only: run every spec at each of these image
+    /// sizes instead of `--width`×`--height`, e.g. `128x96,256x192,512x384,1024x768`. Adds a
+    /// table and a plot (`speedup-vs-size.png`) of each method's speed-up over the first
+    /// against the rays per frame; each size's images and per-frame plots go to `OUT/WxH/`.
+    #[arg(long, value_name = "WxH,...")]
+    pub sizes: Option<String>,
     #[arg(long)]
     pub quiet: bool,
 }
@@ -630,6 +636,9 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
         }
     }
     let surfel = specs.iter().filter(|s| s.method == Method::Surfel).count();
+    if a.sizes.is_some() && surfel == 0 {
+        return Err(Error::Usage("--sizes is for deforming sequences (surfel specs); use --width and --height".into()));
+    }
     if surfel > 0 {
         // Deforming sequences: a different kind of SCENE, and no reference image.
         if surfel < specs.len() || reference.is_some() {
@@ -638,18 +647,39 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             ));
         }
         specs.iter().try_for_each(super::deform_bench::validate)?;
-        if a.width == 0 || a.height == 0 || a.width > 16384 || a.height > 16384 {
-            return Err(Error::Usage(format!("image size {}x{} out of range", a.width, a.height)));
-        }
+        let sizes = match &a.sizes {
+            Some(s) => parse_sizes(s)?,
+            None => {
+                check_size(a.width, a.height)?;
+                vec![(a.width, a.height)]
+            }
+        };
         if let Some(out) = &a.out {
             crate::film::io::create_out_dir(out)?;
             crate::film::io::check_writable_dir(out)?;
         }
-        let deform = super::deform_bench::run(&a.scenes, &specs, a.width, a.height, a.threads, a.repeat, a.out.as_deref(), a.quiet)?;
-        let report =
-            BenchReport { width: a.width, height: a.height, simd: crate::core::SIMD_LEVEL, reference: None, rows: Vec::new(), deform };
+        let mut deform = Vec::new();
+        for &(w, h) in &sizes {
+            let dir = match (&a.out, a.sizes.is_some()) {
+                (Some(out), true) => {
+                    let d = out.join(format!("{w}x{h}"));
+                    crate::film::io::create_out_dir(&d)?;
+                    Some(d)
+                }
+                (out, _) => out.clone(),
+            };
+            if a.sizes.is_some() && !a.quiet {
+                eprintln!("bench: {w}x{h}");
+            }
+            deform.extend(super::deform_bench::run(&a.scenes, &specs, w, h, a.threads, a.repeat, dir.as_deref(), a.quiet)?);
+        }
+        let (width, height) = sizes[0];
+        let report = BenchReport { width, height, simd: crate::core::SIMD_LEVEL, reference: None, rows: Vec::new(), deform };
         if let Some(out) = &a.out {
             write_outputs(out, &report)?;
+            if a.sizes.is_some() {
+                super::deform_bench::size_plot(out, &report.deform)?;
+            }
         }
         return Ok(report);
     }
@@ -879,7 +909,7 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
     let md = table_string(report);
     crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, md).map_err(|e| Error::io(&p, e)))?;
     let mut bars: Vec<(String, f64)> = report.rows.iter().map(|r| (format!("{} {}", r.scene, r.spec), r.stats.render_seconds)).collect();
-    bars.extend(report.deform.iter().map(|r| (format!("{} {}", r.scene, r.spec), r.render_seconds)));
+    bars.extend(report.deform.iter().map(|r| (format!("{} {} {}x{}", r.scene, r.spec, r.width, r.height), r.render_seconds)));
     super::plot::bar_chart(&out.join("bench-time.png"), &format!("Render time, {}x{}", report.width, report.height), "seconds", &bars)?;
     // Error against the reference versus time, one curve per scene: the trade-off a
     // multi-resolution method is meant to win. With a sweep, each scene gets its own plot:
@@ -961,6 +991,9 @@ pub fn table_string(report: &BenchReport) -> String {
     ));
     if report.rows.is_empty() && !report.deform.is_empty() {
         s.push_str(&super::deform_bench::table(&report.deform));
+        if report.deform.iter().any(|r| (r.width, r.height) != (report.width, report.height)) {
+            s.push_str(&super::deform_bench::size_table(&report.deform));
+        }
         return s;
     }
     s.push_str("| scene | method | thr | build s | render s | Mrays/s | speed-up vs first | RMSE | PSNR dB | FLIP | triangle tests | node tests |\n");
@@ -1107,6 +1140,36 @@ pub fn table_string(report: &BenchReport) -> String {
         }
     }
     s
+}
+
+/// A deforming-sequence image size: each side in 1..=16384, at most
+/// [`MAX_PIXELS`](crate::baseline::render::MAX_PIXELS) pixels.
+fn check_size(w: u32, h: u32) -> Result<()> {
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(Error::Usage(format!("image size {w}x{h} out of range (each side 1..=16384)")));
+    }
+    crate::baseline::render::check_pixels(w, h)
+}
+
+/// `--sizes W1xH1,W2xH2,...` (distinct sizes, each checked as `--width`/`--height`).
+fn parse_sizes(s: &str) -> Result<Vec<(u32, u32)>> {
+    let mut v: Vec<(u32, u32)> = Vec::new();
+    for item in s.split(',') {
+        let item = item.trim();
+        let wh = item.split_once(['x', 'X']).and_then(|(w, h)| Some((w.trim().parse::<u32>().ok()?, h.trim().parse::<u32>().ok()?)));
+        let Some((w, h)) = wh else {
+            return Err(Error::Usage(format!("--sizes: '{item}' is not WIDTHxHEIGHT (e.g. 256x192)")));
+        };
+        check_size(w, h).map_err(|e| match e {
+            Error::Usage(m) => Error::Usage(format!("--sizes: {m}")),
+            other => other,
+        })?;
+        if v.contains(&(w, h)) {
+            return Err(Error::Usage(format!("--sizes: {w}x{h} given twice")));
+        }
+        v.push((w, h));
+    }
+    Ok(v)
 }
 
 pub fn print_table(report: &BenchReport) {

@@ -61,6 +61,9 @@ impl Default for SurfelSpec {
 pub struct DeformRow {
     pub scene: String,
     pub spec: String,
+    /// Image size of the row (`bench --sizes` runs several).
+    pub width: u32,
+    pub height: u32,
     pub update: String,
     pub surfels: u64,
     pub frames: u32,
@@ -162,6 +165,8 @@ pub fn run(
             let row = DeformRow {
                 scene: st.scene.clone(),
                 spec: spec.text.clone(),
+                width,
+                height,
                 update: st.update.clone(),
                 surfels: st.surfels,
                 frames: st.frames,
@@ -257,14 +262,16 @@ fn plots(out: &Path, rows: &[DeformRow]) -> Result<()> {
 /// The rows as a Markdown table.
 pub fn table(rows: &[DeformRow]) -> String {
     let mut s = String::from("\nDeforming sequences (Adams et al.):\n\n");
-    s.push_str("| sequence | method | surfels | frames | thr | ms/frame | speed-up vs first | update ms/frame | rays ms/frame (warm) | BV tests/frame | leaf tests/frame | MLS it. | cache hits | inner nodes updated/frame | root ratio | mean ratio | same image |\n");
-    s.push_str("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
+    s.push_str("| sequence | method | size | surfels | frames | thr | ms/frame | speed-up vs first | update ms/frame | rays ms/frame (warm) | BV tests/frame | leaf tests/frame | MLS it. | cache hits | inner nodes updated/frame | root ratio | mean ratio | same image |\n");
+    s.push_str("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
     for r in rows {
         let f = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
         s.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {:.1} | {:.2}x | {:.1} | {} | {:.0} | {:.0} | {:.2} | {} | {:.0} | {} | {} | {} |\n",
+            "| {} | {} | {}x{} | {} | {} | {} | {:.1} | {:.2}x | {:.1} | {} | {:.0} | {:.0} | {:.2} | {} | {:.0} | {} | {} | {} |\n",
             r.scene,
             r.spec,
+            r.width,
+            r.height,
             r.surfels,
             r.frames,
             r.threads,
@@ -283,6 +290,89 @@ pub fn table(rows: &[DeformRow]) -> String {
         ));
     }
     s
+}
+
+/// The (width, height) of `rows` in first-seen order.
+fn sizes_of(rows: &[DeformRow]) -> Vec<(u32, u32)> {
+    let mut v: Vec<(u32, u32)> = Vec::new();
+    for r in rows {
+        if !v.contains(&(r.width, r.height)) {
+            v.push((r.width, r.height));
+        }
+    }
+    v
+}
+
+/// `bench --sizes`: each method's speed-up over the first method of its sequence, one column
+/// per image size (Markdown).
+pub fn size_table(rows: &[DeformRow]) -> String {
+    let sizes = sizes_of(rows);
+    let mut s = String::from("\nSpeed-up over the first method by image size (ms/frame in brackets):\n\n| sequence | method |");
+    for (w, h) in &sizes {
+        let n = *w as u64 * *h as u64;
+        let px = if n < 10_000 { format!("{n} px") } else { format!("{} k px", n / 1000) };
+        s.push_str(&format!(" {w}x{h} ({px}) |"));
+    }
+    s.push_str("\n|---|---|");
+    s.push_str(&"---:|".repeat(sizes.len()));
+    s.push('\n');
+    let mut keys: Vec<(&str, &str)> = Vec::new();
+    for r in rows {
+        if !keys.contains(&(r.scene.as_str(), r.spec.as_str())) {
+            keys.push((&r.scene, &r.spec));
+        }
+    }
+    for (scene, spec) in keys {
+        s.push_str(&format!("| {scene} | {spec} |"));
+        for &(w, h) in &sizes {
+            match rows.iter().find(|r| r.scene == scene && r.spec == spec && (r.width, r.height) == (w, h)) {
+                Some(r) => s.push_str(&format!(" {:.2}x ({:.1}) |", r.speedup_vs_first, r.ms_per_frame)),
+                None => s.push_str(" - |"),
+            }
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// `speedup-vs-size.png`: each method's speed-up over the first method of its sequence
+/// against the pixels (primary rays) per frame, logarithmic; one curve per (sequence, method)
+/// other than the first. Where the rebuild dominates a frame (few rays) the lazy update
+/// gains most (the paper's 2–3× regime).
+pub fn size_plot(out: &Path, rows: &[DeformRow]) -> Result<()> {
+    let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    for r in rows {
+        let first = rows.iter().find(|f| f.scene == r.scene && (f.width, f.height) == (r.width, r.height)).map(|f| f.spec.as_str());
+        if first == Some(r.spec.as_str()) {
+            continue;
+        }
+        let name = format!("{} {}", r.scene, r.spec);
+        let p = (((r.width as f64) * (r.height as f64)).log2(), r.speedup_vs_first);
+        match series.iter_mut().find(|s| s.0 == name) {
+            Some(s) => s.1.push(p),
+            None => series.push((name, vec![p])),
+        }
+    }
+    if series.is_empty() {
+        return Ok(());
+    }
+    let first = rows.first().map(|r| r.spec.as_str()).unwrap_or("");
+    plot::line_chart_fmt(
+        &out.join("speedup-vs-size.png"),
+        &format!("Speed-up over {first} by image size"),
+        "pixels per frame (log scale)",
+        "speed-up (x)",
+        &series,
+        plotters::prelude::SeriesLabelPosition::UpperRight,
+        &|v| {
+            let n = v.exp2();
+            if n >= 1e6 {
+                format!("{:.1} M", n / 1e6)
+            } else {
+                format!("{:.0} k", n / 1e3)
+            }
+        },
+    )
 }
 
 /// Checks a `surfel` spec's options before any work.

@@ -193,6 +193,20 @@ pub fn line_chart_legend(
     series: &[(String, Vec<(f64, f64)>)],
     legend: SeriesLabelPosition,
 ) -> Result<()> {
+    line_chart_fmt(path, title, xlabel, ylabel, series, legend, &fmt_axis)
+}
+
+/// [`line_chart_legend`] with the x-axis labels from `xfmt` (e.g. x = log₂ n labelled as n,
+/// for a logarithmic axis).
+pub fn line_chart_fmt(
+    path: &Path,
+    title: &str,
+    xlabel: &str,
+    ylabel: &str,
+    series: &[(String, Vec<(f64, f64)>)],
+    legend: SeriesLabelPosition,
+    xfmt: &dyn Fn(f64) -> String,
+) -> Result<()> {
     let pts = || series.iter().flat_map(|s| s.1.iter()).filter(|p| p.0.is_finite() && p.1.is_finite());
     if pts().next().is_none() {
         return Err(Error::Usage(format!("{}: line chart needs at least one finite point", path.display())));
@@ -219,7 +233,7 @@ pub fn line_chart_legend(
             .max_light_lines(2)
             .x_desc(xlabel)
             .y_desc(ylabel)
-            .x_label_formatter(&|v| fmt_axis(*v))
+            .x_label_formatter(&|v| xfmt(*v))
             .y_label_formatter(&|v| fmt_axis(*v))
             .label_style((FAMILY, 14))
             .axis_desc_style((FAMILY, 16))
