@@ -910,7 +910,10 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
     crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, md).map_err(|e| Error::io(&p, e)))?;
     let mut bars: Vec<(String, f64)> = report.rows.iter().map(|r| (format!("{} {}", r.scene, r.spec), r.stats.render_seconds)).collect();
     bars.extend(report.deform.iter().map(|r| (format!("{} {} {}x{}", r.scene, r.spec, r.width, r.height), r.render_seconds)));
-    super::plot::bar_chart(&out.join("bench-time.png"), &format!("Render time, {}x{}", report.width, report.height), "seconds", &bars)?;
+
+    let sizes_vary = report.deform.iter().any(|r| (r.width, r.height) != (report.width, report.height));
+    let title = if sizes_vary { "Render time".to_string() } else { format!("Render time, {}x{}", report.width, report.height) };
+    super::plot::bar_chart(&out.join("bench-time.png"), &title, "seconds", &bars)?;
     // Error against the reference versus time, one curve per scene: the trade-off a
     // multi-resolution method is meant to win. With a sweep, each scene gets its own plot:
     // the sweep as a curve, every other method as a point on it or off it.
