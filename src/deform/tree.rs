@@ -414,6 +414,9 @@ pub fn leaf_sphere(s: &DeformedSurfel) -> (Vec3, f32) {
 // [t0, t1] by CONS_TOL·(|b| + √disc)/a. η bounds the rounding of the perpendicular distance
 // ‖(c−o)×d‖/‖d‖: c − o is rounded by ≤ u‖c−o‖ (u = ε/2), each cross-product component by
 // ≤ 2u(|x·y| + |z·w|), together ≤ 6u‖c−o‖, and CONS_TOL = 32u is five times that.
+// ‖c−o‖ itself is bounded by √3·max_i |c_i − o_i| (rounded up), which needs no square root:
+// the x8 kernel's latency chain then has one square root (of the discriminant) instead of
+// two (stop 37), and η grows by at most √3.
 // (Until stop 32 the discriminant was widened by CONS_TOL·a·‖c−o‖², a perpendicular slack of
 // √CONS_TOL·‖c−o‖ ≈ 1.4e-3·‖c−o‖ instead of 1.9e-6·‖c−o‖: a 4 mm surfel 10 units away was
 // tested as a 14 mm one, and a shadow ray from the floor near the horizon, 9,700 units
@@ -425,6 +428,9 @@ pub fn leaf_sphere(s: &DeformedSurfel) -> (Vec3, f32) {
 /// Relative tolerance of the conservative sphere tests (16 ulp).
 pub const CONS_TOL: f32 = 16.0 * f32::EPSILON;
 
+/// √3 rounded up: ‖x‖ ≤ SQRT3_UP·max_i |x_i|.
+const SQRT3_UP: f32 = 1.732_051;
+
 /// The scalar kernel's shared part: (a, b, disc, √disc, slack) of the widened test (module
 /// comment above), in the x8 kernel's order of operations.
 #[inline(always)]
@@ -435,8 +441,8 @@ fn widened_1(o: Vec3, d: Vec3, c: Vec3, r: f32) -> (f32, f32, f32, f32, f32) {
     let cx = oc.y * d.z - oc.z * d.y;
     let cy = oc.z * d.x - oc.x * d.z;
     let cz = oc.x * d.y - oc.y * d.x;
-    let oo = oc.x * oc.x + oc.y * oc.y + oc.z * oc.z;
-    let re = r + CONS_TOL * oo.sqrt();
+    let m = oc.x.abs().max(oc.y.abs()).max(oc.z.abs());
+    let re = r + CONS_TOL * (SQRT3_UP * m);
     let disc = (a * (re * re)) * (1.0 + CONS_TOL) - (cx * cx + cy * cy + cz * cz);
     let sq = disc.max(0.0).sqrt();
     let slack = CONS_TOL * (b.abs() + sq);
@@ -551,9 +557,9 @@ fn kernel_pre(o: [f32x8; 3], d: [f32x8; 3], a: f32x8, inv: f32x8, c: [f32x8; 3],
     let cx = ocy * d[2] - ocz * d[1];
     let cy = ocz * d[0] - ocx * d[2];
     let cz = ocx * d[1] - ocy * d[0];
-    let oo = ocx * ocx + ocy * ocy + ocz * ocz;
+    let m = ocx.abs().max(ocy.abs()).max(ocz.abs());
     let tol = f32x8::splat(CONS_TOL);
-    let re = r + tol * oo.sqrt();
+    let re = r + tol * (f32x8::splat(SQRT3_UP) * m);
     let disc = (a * (re * re)) * f32x8::splat(1.0 + CONS_TOL) - (cx * cx + cy * cy + cz * cz);
     let zero = f32x8::splat(0.0);
     let sq = disc.max(zero).sqrt();
