@@ -30,7 +30,7 @@ pub struct AnimateArgs {
     pub scene: String,
     #[arg(long)]
     pub frames: Option<u32>,
-    /// Hierarchy update: rebuild every frame (naive), lazy (§4.1), lazy with per-ray caching (§4.2.2), or an obvhs BVH2 refitted every frame (refit).
+    /// Hierarchy update: rebuild every frame (naive), lazy (§4.1), lazy with per-ray caching (§4.2.2), an obvhs BVH2 refitted every frame (refit), or per frame naive or lazy, whichever was cheaper when last tried (auto; the paper's §6 heuristic question).
     #[arg(long, default_value = "lazy-cache")]
     pub update: String,
     #[arg(long, default_value_t = 512)]
@@ -90,6 +90,8 @@ pub struct AnimateArgs {
 #[derive(Serialize, Debug, Clone)]
 pub struct FrameRow {
     pub frame: u32,
+    /// The update mode of this frame (`auto/naive` or `auto/lazy` under `--update auto`).
+    pub mode: String,
     pub seconds: f64,
     pub update_seconds: f64,
     pub inner_nodes_updated: u64,
@@ -141,7 +143,7 @@ fn derr(e: DeformError) -> Error {
 }
 
 pub fn parse_mode(s: &str) -> Result<UpdateMode> {
-    s.parse::<UpdateMode>().map_err(|_| Error::Usage(format!("--update {s}: naive, lazy, lazy-cache or refit")))
+    s.parse::<UpdateMode>().map_err(|_| Error::Usage(format!("--update {s}: naive, lazy, lazy-cache, refit or auto")))
 }
 
 pub fn run(a: &AnimateArgs) -> Result<()> {
@@ -293,6 +295,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         let sc = ShadeCtx { colliders: &colliders, colors: &colors, inst_obj: &inst_obj, light, shadows: !a.no_shadows };
         let (film, c, dc) = render_frame(&tracer, &cam, &sc, a.width, a.height, a.packet);
         let secs = t.elapsed().as_secs_f64();
+        tracer.end_frame(secs);
         render_seconds += secs;
         total.merge(&c);
         let fs = tracer.frame_stats();
@@ -303,6 +306,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         });
         rows.push(FrameRow {
             frame: f as u32,
+            mode: fs.mode.clone(),
             seconds: secs,
             update_seconds: fs.update_seconds,
             inner_nodes_updated: fs.inner_nodes_updated,

@@ -79,16 +79,80 @@ pub enum UpdateMode {
     Lazy,
     LazyCache,
     Refit,
+    /// Per frame either `Naive` or `Lazy`, whichever cost less when last tried (the paper's
+    /// §6: "one might want to devise heuristics to decide whether to use lazy updating or to
+    /// perform a (full) sphere hierarchy update"); see [`AutoPick`].
+    Auto,
 }
 
 impl UpdateMode {
-    pub const ALL: [UpdateMode; 4] = [UpdateMode::Naive, UpdateMode::Lazy, UpdateMode::LazyCache, UpdateMode::Refit];
+    pub const ALL: [UpdateMode; 5] = [UpdateMode::Naive, UpdateMode::Lazy, UpdateMode::LazyCache, UpdateMode::Refit, UpdateMode::Auto];
     pub fn name(self) -> &'static str {
         match self {
             UpdateMode::Naive => "naive",
             UpdateMode::Lazy => "lazy",
             UpdateMode::LazyCache => "lazy-cache",
             UpdateMode::Refit => "refit",
+            UpdateMode::Auto => "auto",
+        }
+    }
+}
+
+/// `UpdateMode::Auto`'s choice between a rebuild (naive) and the lazy update, frame by frame
+/// (not in the paper, which names the question in §6). The rebuild's cost does not depend on
+/// the rays, the lazy frame's extra ray cost does (README, "Speed-up against the image
+/// size"), so which one wins depends on the image and the motion: each is tried once, then
+/// the one whose last frame (as reported by [`DeformTracer::end_frame`]) was cheaper is used,
+/// and the other is tried again so that a changing deformation can flip the choice: after
+/// [`AutoPick::PROBE`]·r² frames, where r ≥ 1 is the loser's cost over the winner's (at
+/// most [`AutoPick::MAX_PROBE`]), which keeps the probes' extra cost, (r − 1)/(PROBE·r²) of a
+/// frame, under 1/32 of a frame. Without reports it stays with the lazy update after the
+/// first two frames and still probes the rebuild every `PROBE` frames.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct AutoPick {
+    /// Last reported seconds of a naive and of a lazy frame.
+    cost: [Option<f64>; 2],
+    tried: [bool; 2],
+    /// Whether the current frame rebuilds.
+    naive: bool,
+    /// Frames since the mode not chosen was last tried.
+    since: u32,
+}
+
+impl AutoPick {
+    /// The other mode is tried again after this many frames times the squared cost ratio.
+    pub const PROBE: u32 = 8;
+    /// ... but at least this often.
+    pub const MAX_PROBE: u32 = 64;
+
+    /// Whether the next frame rebuilds.
+    fn pick(&mut self) -> bool {
+        let naive = if !self.tried[0] {
+            true
+        } else if !self.tried[1] {
+            false
+        } else {
+            let (best_naive, r) = match self.cost {
+                [Some(n), Some(l)] => (n < l, if n < l { l / n.max(1e-9) } else { n / l.max(1e-9) }),
+                _ => (false, 1.0),
+            };
+            let every = (Self::PROBE as f64 * r * r).min(Self::MAX_PROBE as f64) as u32;
+            self.since += 1;
+            if self.since >= every {
+                self.since = 0;
+                !best_naive
+            } else {
+                best_naive
+            }
+        };
+        self.tried[naive as usize ^ 1] = true;
+        self.naive = naive;
+        naive
+    }
+
+    fn record(&mut self, seconds: f64) {
+        if seconds.is_finite() && seconds >= 0.0 {
+            self.cost[self.naive as usize ^ 1] = Some(seconds);
         }
     }
 }
@@ -101,7 +165,8 @@ impl std::str::FromStr for UpdateMode {
             "lazy" => Ok(UpdateMode::Lazy),
             "lazy-cache" | "lazycache" | "cache" => Ok(UpdateMode::LazyCache),
             "refit" => Ok(UpdateMode::Refit),
-            _ => Err(DeformError::Invalid(format!("unknown update mode '{s}' (naive, lazy, lazy-cache, refit)"))),
+            "auto" => Ok(UpdateMode::Auto),
+            _ => Err(DeformError::Invalid(format!("unknown update mode '{s}' (naive, lazy, lazy-cache, refit, auto)"))),
         }
     }
 }
@@ -427,6 +492,8 @@ pub struct DeformTracer {
     update_seconds: f64,
     /// The instances' sphere tree of this frame ([`super::top`]).
     top: TopTree,
+    /// `UpdateMode::Auto`'s state.
+    auto: AutoPick,
 }
 
 impl DeformTracer {
@@ -451,7 +518,7 @@ impl DeformTracer {
                 obj,
             });
         }
-        Ok(DeformTracer { mode, params, inst, frame: 0, cache: Vec::new(), update_seconds: 0.0, top: TopTree::default() })
+        Ok(DeformTracer { mode, params, inst, frame: 0, cache: Vec::new(), update_seconds: 0.0, top: TopTree::default(), auto: AutoPick::default() })
     }
 
     pub fn mode(&self) -> UpdateMode {
@@ -468,6 +535,14 @@ impl DeformTracer {
     }
     pub fn object(&self, instance: usize) -> &Arc<SurfelObject> {
         &self.inst[instance].obj
+    }
+
+    /// Reports the wall time of the frame begun last (its `begin_frame` and its rays), which
+    /// `UpdateMode::Auto` compares between its two modes; the other modes ignore it.
+    pub fn end_frame(&mut self, seconds: f64) {
+        if self.mode == UpdateMode::Auto {
+            self.auto.record(seconds);
+        }
     }
 
     /// Sizes the per-ray cache (LazyCache): slots `0..n` (e.g. one per pixel). Clears it.
@@ -492,7 +567,12 @@ impl DeformTracer {
         for (i, f) in self.inst.iter_mut().zip(fields) {
             i.field = f;
         }
-        if self.mode == UpdateMode::Naive {
+        let naive = match self.mode {
+            UpdateMode::Naive => true,
+            UpdateMode::Auto => self.auto.pick(),
+            _ => false,
+        };
+        if naive {
             for i in self.inst.iter_mut() {
                 let obj = &i.obj;
                 let def: Vec<DeformedSurfel> = (0..obj.surfel_count()).into_par_iter().map(|s| deform_surfel(obj, &i.field, s)).collect();
@@ -1314,8 +1394,12 @@ impl DeformTracer {
 
     /// Update statistics of the current frame (count of stamped nodes and surfels).
     pub fn frame_stats(&self) -> FrameStats {
-        let mut fs =
-            FrameStats { frame: self.frame, mode: self.mode.name().into(), update_seconds: self.update_seconds, ..Default::default() };
+        let mode = match self.mode {
+            UpdateMode::Auto if self.auto.naive => "auto/naive".to_string(),
+            UpdateMode::Auto => "auto/lazy".to_string(),
+            m => m.name().to_string(),
+        };
+        let mut fs = FrameStats { frame: self.frame, mode, update_seconds: self.update_seconds, ..Default::default() };
         for ii in &self.inst {
             let topo = &ii.obj.tree.topo;
             let inner = topo.right.iter().filter(|r| **r != LEAF).count() as u64;
@@ -1606,6 +1690,43 @@ impl Slab {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `Auto` tries both modes, then keeps the cheaper one and probes the other after
+    /// PROBE·r² frames; a change in cost flips it; without reports it stays lazy.
+    #[test]
+    fn auto_picks_the_cheaper_mode_and_probes_the_other() {
+        let run = |costs: &dyn Fn(usize, bool) -> f64, n: usize| -> String {
+            let mut a = AutoPick::default();
+            (0..n)
+                .map(|f| {
+                    let naive = a.pick();
+                    a.record(costs(f, naive));
+                    if naive { 'N' } else { 'l' }
+                })
+                .collect()
+        };
+        // Lazy 2× cheaper: probe every 8·4 = 32 frames.
+        let s = run(&|_, naive| if naive { 2.0 } else { 1.0 }, 70);
+        assert_eq!(s, format!("Nl{}N{}N{}", "l".repeat(31), "l".repeat(31), "l".repeat(4)));
+        // Naive 1.25× cheaper: probe lazy every 8·1.5625 = 12 frames.
+        let s = run(&|_, naive| if naive { 1.0 } else { 1.25 }, 30);
+        assert_eq!(&s[..16], "NlNNNNNNNNNNNlNN");
+        // The costs cross at frame 20: the next probe of lazy flips the choice to it.
+        let s = run(&|f, naive| if naive { 1.0 } else if f < 20 { 1.25 } else { 0.5 }, 40);
+        let after = &s[s[20..].find('l').unwrap() + 20..];
+        assert!(after.chars().filter(|&c| c == 'l').count() >= after.len() - 1, "{s}");
+        // No reports (and non-finite ones): lazy after the first two frames, the rebuild
+        // probed every PROBE frames.
+        let mut a = AutoPick::default();
+        let s: String = (0..20)
+            .map(|_| {
+                let n = a.pick();
+                a.record(f64::NAN);
+                if n { 'N' } else { 'l' }
+            })
+            .collect();
+        assert_eq!(s, "NllllllllNlllllllNll");
+    }
 
     /// A node's sphere is four words; a reader racing a writer that keeps moving it must
     /// still get one published sphere, never a centre mixed from two writes (the flaw of the
