@@ -70,6 +70,8 @@
 //! - Eq. 11 is re-evaluated at every descent (not once), so tightening propagates upwards.
 //! - Beyond the paper: the instance tree over the objects' root spheres ([`top`]), rebuilt
 //!   every frame, so that a ray does not test all 40 balls of `elastic-balls`.
+//! - Beyond the paper: `UpdateMode::Auto`, per frame a rebuild or the lazy update, whichever
+//!   was cheaper when last tried (§6 leaves such a heuristic to future work).
 //! - Beyond the paper: `UpdateMode::Refit`, an obvhs BVH2 over the surfels' leaf balls,
 //!   refitted every frame — the alternative a user would try today ([`trace`]).
 //! - Centre support (Eq. 3) widened beyond R when fewer than k listed nodes lie within R.

@@ -11,6 +11,9 @@
 //!   slot k (e.g. pixel k) in the previous frame is tested first, so its hit bounds the
 //!   traversal from the root.
 //!
+//! - `Auto` (not in the paper; the heuristic its §6 asks for): per frame `Naive` or `Lazy`,
+//!   whichever cost less when last tried ([`AutoPick`]; the caller reports frame times with
+//!   [`DeformTracer::end_frame`]).
 //! - `Refit` (not in the paper; the alternative a user would try today): an obvhs BVH2 (PLOC,
 //!   up to 8 surfels per leaf) built once over the undeformed surfels; every frame all
 //!   surfels are deformed and the boxes refitted bottom-up (`Bvh2::refit_all`). Leaf boxes
