@@ -521,7 +521,16 @@ impl DeformTracer {
                 obj,
             });
         }
-        Ok(DeformTracer { mode, params, inst, frame: 0, cache: Vec::new(), update_seconds: 0.0, top: TopTree::default(), auto: AutoPick::default() })
+        Ok(DeformTracer {
+            mode,
+            params,
+            inst,
+            frame: 0,
+            cache: Vec::new(),
+            update_seconds: 0.0,
+            top: TopTree::default(),
+            auto: AutoPick::default(),
+        })
     }
 
     pub fn mode(&self) -> UpdateMode {
@@ -1704,7 +1713,11 @@ mod tests {
                 .map(|f| {
                     let naive = a.pick();
                     a.record(costs(f, naive));
-                    if naive { 'N' } else { 'l' }
+                    if naive {
+                        'N'
+                    } else {
+                        'l'
+                    }
                 })
                 .collect()
         };
@@ -1715,7 +1728,18 @@ mod tests {
         let s = run(&|_, naive| if naive { 1.0 } else { 1.25 }, 30);
         assert_eq!(&s[..16], "NlNNNNNNNNNNNlNN");
         // The costs cross at frame 20: the next probe of lazy flips the choice to it.
-        let s = run(&|f, naive| if naive { 1.0 } else if f < 20 { 1.25 } else { 0.5 }, 40);
+        let s = run(
+            &|f, naive| {
+                if naive {
+                    1.0
+                } else if f < 20 {
+                    1.25
+                } else {
+                    0.5
+                }
+            },
+            40,
+        );
         let after = &s[s[20..].find('l').unwrap() + 20..];
         assert!(after.chars().filter(|&c| c == 'l').count() >= after.len() - 1, "{s}");
         // No reports (and non-finite ones): lazy after the first two frames, the rebuild
@@ -1725,7 +1749,11 @@ mod tests {
             .map(|_| {
                 let n = a.pick();
                 a.record(f64::NAN);
-                if n { 'N' } else { 'l' }
+                if n {
+                    'N'
+                } else {
+                    'l'
+                }
             })
             .collect();
         assert_eq!(s, "NllllllllNlllllllNll");
