@@ -19,7 +19,8 @@
 //! Layout: depth-first, the left child of node n at n + 1, the right one at `right[n]`
 //! ([`LEAF`] for leaves, whose instances are `order[first..first + count]`), struct of arrays.
 
-use super::tree::{sphere_test_1, RayPacketX8, LEAF, RADIUS_PAD};
+use super::trace::enclosing_sphere as enclose;
+use super::tree::{sphere_test_1, RayPacketX8, LEAF};
 use crate::baseline::accel::Ray;
 use glam::Vec3;
 use wide::f32x8;
@@ -36,21 +37,6 @@ pub struct TopTree {
     first: Vec<u32>,
     count: Vec<u32>,
     order: Vec<u32>,
-}
-
-/// The smallest sphere around spheres `a` and `b`, padded (as the per-object Eq. 11).
-fn enclose(a: (Vec3, f32), b: (Vec3, f32)) -> (Vec3, f32) {
-    let ((c1, r1), (c2, r2)) = (a, b);
-    let d = (c2 - c1).length();
-    let (c, r) = if d + r2 <= r1 {
-        (c1, r1)
-    } else if d + r1 <= r2 {
-        (c2, r2)
-    } else {
-        let r = 0.5 * (d + r1 + r2);
-        (c1 + (c2 - c1) * ((r - r1) / d), r)
-    };
-    (c, r * (1.0 + RADIUS_PAD) + RADIUS_PAD * c.abs().max_element())
 }
 
 impl TopTree {

@@ -1554,7 +1554,7 @@ impl DeformTracer {
 
 /// The smallest sphere holding the spheres `a` and `b`, padded like the other radii.
 #[inline]
-fn enclosing_sphere(a: (Vec3, f32), b: (Vec3, f32)) -> (Vec3, f32) {
+pub(super) fn enclosing_sphere(a: (Vec3, f32), b: (Vec3, f32)) -> (Vec3, f32) {
     let ((c1, r1), (c2, r2)) = (a, b);
     let d = (c2 - c1).length();
     let (c, r) = if d + r2 <= r1 {
