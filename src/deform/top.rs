@@ -148,11 +148,12 @@ impl TopTree {
     }
 
     /// Packet form: for the lanes `mask` of `pk`, each instance whose leaf one of them reaches
-    /// within `tfar`, with the lanes that reach it, pushed to `out`. Returns the number of
-    /// sphere tests counted per active lane (as the per-object traversal counts them).
-    pub fn candidates_x8(&self, pk: &RayPacketX8, mask: u8, tfar: f32x8, out: &mut Vec<(u32, u8)>) -> u64 {
+    /// within `tfar` is passed to `visit` with the lanes that reach it (no allocation: this
+    /// runs once per packet). Returns the number of sphere tests counted per active lane (as
+    /// the per-object traversal counts them).
+    pub fn candidates_x8(&self, pk: &RayPacketX8, mask: u8, tfar: f32x8, mut visit: impl FnMut(u32, u8)) -> u64 {
         if self.single() {
-            out.extend(self.order.iter().map(|&k| (k, mask)));
+            self.order.iter().for_each(|&k| visit(k, mask));
             return 0;
         }
         let mut tests = 0;
@@ -170,7 +171,7 @@ impl TopTree {
             }
             if self.right[n] == LEAF {
                 let f = self.first[n] as usize;
-                out.extend(self.order[f..f + self.count[n] as usize].iter().map(|&k| (k, m)));
+                self.order[f..f + self.count[n] as usize].iter().for_each(|&k| visit(k, m));
             } else {
                 stack[sp] = (self.right[n], m);
                 stack[sp + 1] = (n as u32 + 1, m);
@@ -248,7 +249,7 @@ mod tests {
                 &std::array::from_fn(|i| rays[i].tnear),
             );
             let mut px = Vec::new();
-            t.candidates_x8(&pk, 0xff, f32x8::splat(f32::INFINITY), &mut px);
+            t.candidates_x8(&pk, 0xff, f32x8::splat(f32::INFINITY), |k, m| px.push((k, m)));
             for (i, ray) in rays.iter().enumerate() {
                 let mut c1 = Vec::new();
                 t.candidates_1(ray, f32::INFINITY, &mut c1);

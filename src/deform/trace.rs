@@ -1106,23 +1106,21 @@ impl DeformTracer {
             }
         }
         let pk = packet(rays, valid);
-        let mut cand = Vec::with_capacity(self.inst.len());
-        let top_tests = self.top.candidates_x8(&pk, valid, best_t(&best), &mut cand);
-        dc.sphere_tests += top_tests;
-        ctr.add(Counter::node_tests, top_tests);
-        let mut roots: Vec<(f32, usize, u8, f32x8)> = Vec::with_capacity(cand.len());
-        for (k, lm) in cand {
+        let mut roots: Vec<(f32, usize, u8, f32x8)> = Vec::new();
+        let tb = best_t(&best);
+        let mut root_tests = 0;
+        let top_tests = self.top.candidates_x8(&pk, valid, tb, |k, lm| {
             let k = k as usize;
             let (c, r) = self.sphere(&self.inst[k], 0);
-            let cnt = lm.count_ones() as u64;
-            dc.sphere_tests += cnt;
-            ctr.add(Counter::node_tests, cnt);
-            let (m, e) = pk.test(c, r, best_t(&best));
+            root_tests += lm.count_ones() as u64;
+            let (m, e) = pk.test(c, r, tb);
             let m = m & lm;
             if m != 0 {
                 roots.push((hmin(e, m), k, m, e));
             }
-        }
+        });
+        dc.sphere_tests += top_tests + root_tests;
+        ctr.add(Counter::node_tests, top_tests + root_tests);
         roots.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         for (_, k, m, e) in roots {
             self.closest_in_x8(k, rays, &pk, m, e, &mut best, &skip, dc, ctr);
@@ -1226,23 +1224,20 @@ impl DeformTracer {
         }
         let pk = packet(rays, valid);
         let tfar = f32x8::from(std::array::from_fn::<f32, 8, _>(|i| if valid & (1 << i) != 0 { rays[i].tfar } else { f32::NEG_INFINITY }));
-        let mut cand = Vec::with_capacity(self.inst.len());
-        let top_tests = self.top.candidates_x8(&pk, valid, tfar, &mut cand);
-        dc.sphere_tests += top_tests;
-        ctr.add(Counter::node_tests, top_tests);
-        let mut roots: Vec<(f32, usize, u8)> = Vec::with_capacity(cand.len());
-        for (k, lm) in cand {
+        let mut roots: Vec<(f32, usize, u8)> = Vec::new();
+        let mut root_tests = 0;
+        let top_tests = self.top.candidates_x8(&pk, valid, tfar, |k, lm| {
             let k = k as usize;
             let (c, r) = self.sphere(&self.inst[k], 0);
-            let cnt = lm.count_ones() as u64;
-            dc.sphere_tests += cnt;
-            ctr.add(Counter::node_tests, cnt);
+            root_tests += lm.count_ones() as u64;
             let (m, e) = pk.test(c, r, tfar);
             let m = m & lm;
             if m != 0 {
                 roots.push((hmin(e, m), k, m));
             }
-        }
+        });
+        dc.sphere_tests += top_tests + root_tests;
+        ctr.add(Counter::node_tests, top_tests + root_tests);
         roots.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let mut done = 0u8;
         let mut stack: Vec<(u32, u8)> = Vec::with_capacity(64);
