@@ -108,8 +108,8 @@ impl UpdateMode {
 /// the one whose last frame (as reported by [`DeformTracer::end_frame`]) was cheaper is used,
 /// and the other is tried again so that a changing deformation can flip the choice: after
 /// [`AutoPick::PROBE`]·r² frames, where r ≥ 1 is the loser's cost over the winner's (at
-/// most [`AutoPick::MAX_PROBE`]), which keeps the probes' extra cost, (r − 1)/(PROBE·r²) of a
-/// frame, under 1/32 of a frame. Without reports it stays with the lazy update after the
+/// most [`AutoPick::MAX_PROBE`] frames), which keeps the probes' extra cost, (r − 1)/(PROBE·r²)
+/// of a frame, under 1/32 of a frame while r ≤ 2.8 ((r − 1)/64 beyond). Without reports it stays with the lazy update after the
 /// first two frames and still probes the rebuild every `PROBE` frames.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct AutoPick {
