@@ -1106,23 +1106,7 @@ impl DeformTracer {
             }
         }
         let pk = packet(rays, valid);
-        let mut roots: Vec<(f32, usize, u8, f32x8)> = Vec::new();
-        let tb = best_t(&best);
-        let mut root_tests = 0;
-        let top_tests = self.top.candidates_x8(&pk, valid, tb, |k, lm| {
-            let k = k as usize;
-            let (c, r) = self.sphere(&self.inst[k], 0);
-            root_tests += lm.count_ones() as u64;
-            let (m, e) = pk.test(c, r, tb);
-            let m = m & lm;
-            if m != 0 {
-                roots.push((hmin(e, m), k, m, e));
-            }
-        });
-        dc.sphere_tests += top_tests + root_tests;
-        ctr.add(Counter::node_tests, top_tests + root_tests);
-        roots.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        for (_, k, m, e) in roots {
+        for (_, k, m, e) in self.root_hits_x8(&pk, valid, best_t(&best), dc, ctr) {
             self.closest_in_x8(k, rays, &pk, m, e, &mut best, &skip, dc, ctr);
         }
         for i in lanes(valid) {
@@ -1132,6 +1116,35 @@ impl DeformTracer {
             out[i] = best[i].hit;
         }
         out
+    }
+
+    /// Packet form of [`root_hits`](Self::root_hits): the instances along the rays `valid` of
+    /// `pk` (instance tree, then each candidate's root sphere against the lanes that reach
+    /// it) as (nearest entry, instance, lanes hit, entries), nearest first.
+    fn root_hits_x8(
+        &self,
+        pk: &RayPacketX8,
+        valid: u8,
+        tfar: f32x8,
+        dc: &mut DeformCounters,
+        ctr: &mut Counters,
+    ) -> Vec<(f32, usize, u8, f32x8)> {
+        let mut roots = Vec::new();
+        let mut root_tests = 0;
+        let top_tests = self.top.candidates_x8(pk, valid, tfar, |k, lm| {
+            let k = k as usize;
+            let (c, r) = self.sphere(&self.inst[k], 0);
+            root_tests += lm.count_ones() as u64;
+            let (m, e) = pk.test(c, r, tfar);
+            let m = m & lm;
+            if m != 0 {
+                roots.push((hmin(e, m), k, m, e));
+            }
+        });
+        dc.sphere_tests += top_tests + root_tests;
+        ctr.add(Counter::node_tests, top_tests + root_tests);
+        roots.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        roots
     }
 
     /// Packet form of [`closest_in`](Self::closest_in) from the root of instance `k`.
@@ -1224,24 +1237,9 @@ impl DeformTracer {
         }
         let pk = packet(rays, valid);
         let tfar = f32x8::from(std::array::from_fn::<f32, 8, _>(|i| if valid & (1 << i) != 0 { rays[i].tfar } else { f32::NEG_INFINITY }));
-        let mut roots: Vec<(f32, usize, u8)> = Vec::new();
-        let mut root_tests = 0;
-        let top_tests = self.top.candidates_x8(&pk, valid, tfar, |k, lm| {
-            let k = k as usize;
-            let (c, r) = self.sphere(&self.inst[k], 0);
-            root_tests += lm.count_ones() as u64;
-            let (m, e) = pk.test(c, r, tfar);
-            let m = m & lm;
-            if m != 0 {
-                roots.push((hmin(e, m), k, m));
-            }
-        });
-        dc.sphere_tests += top_tests + root_tests;
-        ctr.add(Counter::node_tests, top_tests + root_tests);
-        roots.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let mut done = 0u8;
         let mut stack: Vec<(u32, u8)> = Vec::with_capacity(64);
-        for (_, k, m) in roots {
+        for (_, k, m, _) in self.root_hits_x8(&pk, valid, tfar, dc, ctr) {
             let m = m & !done;
             if m == 0 {
                 continue;
