@@ -736,7 +736,9 @@ impl DeformTracer {
         let s1 = self.sphere(ii, n + 1);
         let s2 = self.sphere(ii, topo.right[n] as usize);
         if ii.naive.is_none() && self.params.eq11 {
-            let (c, _) = self.sphere(ii, n);
+            // n was tested before the descent, so it is current; its centre is read only for
+            // the paper's Eq. 11 (the re-centred form encloses the two child spheres).
+            let c = if self.params.recentre_eq11 { Vec3::NAN } else { self.sphere(ii, n).0 };
             self.tighten(ii, n, c, s1, s2);
         }
         (s1, s2)
