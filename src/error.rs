@@ -36,6 +36,47 @@ impl Error {
     }
 }
 
+/// Warnings found while loading input are held back until the run gets going
+/// ([`flush_warnings`]: when a progress bar starts, or when the command succeeds), so that
+/// a run that then fails prints one line, its error, and nothing before it.
+static PENDING: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
+
+/// Queues `lodtrace: warning: {msg}` for [`flush_warnings`].
+pub fn warn(msg: impl Into<String>) {
+    if let Ok(mut p) = PENDING.lock() {
+        p.push(msg.into());
+    }
+}
+
+/// Prints the queued warnings (each once).
+pub fn flush_warnings() {
+    let msgs = PENDING.lock().map(|mut p| std::mem::take(&mut *p)).unwrap_or_default();
+    for m in msgs {
+        eprintln!("lodtrace: warning: {m}");
+    }
+}
+
+/// Drops the queued warnings (the run failed: its error line is all it prints).
+pub fn discard_warnings() {
+    if let Ok(mut p) = PENDING.lock() {
+        p.clear();
+    }
+}
+
+/// Writes `text` to standard output. A reader that went away (`lodtrace verify | head`) ends
+/// the output quietly; any other failure (`> /dev/full`) is an error, not a panic as with
+/// `print!`.
+pub fn print_stdout(text: &str) -> Result<()> {
+    use std::io::Write;
+    let out = std::io::stdout();
+    let mut out = out.lock();
+    match out.write_all(text.as_bytes()).and_then(|_| out.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        Err(e) => Err(Error::io("<stdout>", e)),
+    }
+}
+
 /// An input must be a regular file (symbolic links followed): a FIFO would block the read
 /// forever and `/dev/zero` would fill the memory before any parser could object.
 pub fn check_input_file(path: &std::path::Path) -> Result<()> {

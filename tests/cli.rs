@@ -1079,3 +1079,61 @@ fn ignored_options_and_meaningless_values_are_refused() {
         assert!(!out.exists(), "{args:?} left {o}");
     }
 }
+
+/// Stop 38's robustness sweep (a helper fed ~1,300 bad inputs): an `mtllib` naming a device
+/// or a pipe, coordinates that overflow the surfel sampler, material values no renderer can
+/// use, stdout that cannot be written, warnings before an error, and a failed run's outputs
+/// in a folder that already existed.
+#[test]
+fn stop_38_bad_inputs_are_one_line_exit_2() {
+    let d = tmp("stop38");
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let quad = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\nf 1 2 5\n";
+    // `mtllib /dev/zero` filled the memory; a FIFO blocked forever. Now: a warning, the default
+    // material, exit 0.
+    std::fs::write(p("zero.obj"), format!("mtllib /dev/zero\n{quad}")).unwrap();
+    assert!(Command::new("mkfifo").arg(p("pipe.mtl")).status().unwrap().success());
+    std::fs::write(p("pipe.obj"), format!("mtllib pipe.mtl\n{quad}")).unwrap();
+    for f in ["zero.obj", "pipe.obj"] {
+        let (code, _, err) = lodtrace(&["render", &p(f), "--width", "16", "--height", "12", "--quiet", "--out", &p("r.png")]);
+        assert_eq!(code, 0, "{f}: {err}");
+        assert!(err.contains("materials not loaded"), "{f}: {err}");
+    }
+    // NaN in an MTL material: an error, as in a TOML scene.
+    std::fs::write(p("nan.mtl"), "newmtl red\nKd nan 0 0\n").unwrap();
+    std::fs::write(p("nan.obj"), format!("mtllib nan.mtl\nusemtl red\n{quad}")).unwrap();
+    let (code, _, err) = lodtrace(&["render", &p("nan.obj"), "--width", "16", "--height", "12", "--quiet", "--out", &p("n.png")]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains("Kd"), "{err}");
+    // 1e38 overflowed the surfel sampler's cell size (index out of bounds, exit 101).
+    std::fs::write(p("huge.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1e38 1e38 1\nf 1 2 3\nf 2 3 4\n").unwrap();
+    let out = p("an");
+    let (code, _, err) =
+        lodtrace(&["animate", &p("huge.obj"), "--frames", "2", "--width", "16", "--height", "12", "--quiet", "--out", &out]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(!std::path::Path::new(&out).exists(), "the output folder stays behind");
+    // A warning (skipped triangles) followed by an error: only the error line.
+    std::fs::write(p("mixed.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nv nan 0 0\nv 1e38 0 0\nv 1e38 1 0\nf 1 2 4\nf 1 5 6\n").unwrap();
+    let (code, _, err) = lodtrace(&["render", &p("mixed.obj"), "--width", "16", "--height", "12", "--quiet", "--out", &p("m.png")]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    // stdout that cannot be written: an error line, not a panic; a closed pipe: quiet.
+    let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_lodtrace")).args(["verify", "plane", "--rays", "50"]).stdout(full).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    one_error_line(&err);
+    // A failed run in a folder that existed leaves none of its own files there, and keeps the
+    // rest.
+    let keep = d.join("existing");
+    std::fs::create_dir_all(keep.join("frame_0001.png")).unwrap();
+    std::fs::write(keep.join("old.txt"), "x").unwrap();
+    let (code, _, err) =
+        lodtrace(&["animate", "bend", "--frames", "3", "--width", "16", "--height", "12", "--quiet", "--out", keep.to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(!keep.join("frame_0000.png").exists(), "frame 0 of the failed run stays behind");
+    assert!(keep.join("old.txt").exists() && keep.join("frame_0001.png").is_dir());
+}

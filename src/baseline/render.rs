@@ -169,6 +169,8 @@ pub(crate) struct Progress {
 
 impl Progress {
     pub(crate) fn new(len: u64, label: &str, quiet: bool) -> Self {
+        // The inputs loaded: their warnings are shown before the long part starts.
+        crate::error::flush_warnings();
         let bar = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::hidden());
         bar.set_style(ProgressStyle::with_template("{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} tiles, eta {eta}").unwrap());
         bar.set_prefix(label.to_string());

@@ -277,6 +277,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     let colors: Vec<Vec<Vec3>> =
         seq.scene.objects.iter().map(|o| o.model.collections.iter().map(|c| Vec3::from(c.color)).collect()).collect();
     let inst_obj: Vec<usize> = seq.scene.instances.iter().map(|&o| o as usize).collect();
+    crate::error::flush_warnings();
     let bar = if a.quiet {
         ProgressBar::hidden()
     } else {

@@ -13,6 +13,7 @@
 
 use crate::error::{Error, Result};
 use crate::film::{io, metrics};
+use std::fmt::Write as _;
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug, Clone)]
@@ -213,6 +214,8 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
         }
     }
 
+    // Written to stdout in one piece (errors there are errors, not panics).
+    let mut text = String::new();
     if a.json {
         let v = serde_json::json!({
             "a": a.a.display().to_string(),
@@ -231,26 +234,28 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
             "pass": failed.is_empty(),
             "failed": failed,
         });
-        println!("{}", serde_json::to_string_pretty(&v).map_err(|e| Error::Usage(format!("json: {e}")))?);
+        text = serde_json::to_string_pretty(&v).map_err(|e| Error::Usage(format!("json: {e}")))? + "\n";
     } else {
-        println!("A: {} ({w}x{h})", a.a.display());
-        println!("B: {}", a.b.display());
+        let _ = writeln!(text, "A: {} ({w}x{h})", a.a.display());
+        let _ = writeln!(text, "B: {}", a.b.display());
         let psnr_s = if psnr.is_finite() { format!("{psnr:.3}") } else { "inf".to_string() };
         for (k, v) in
             [("RMSE", format!("{rmse:.6}")), ("PSNR (dB)", psnr_s), ("mean FLIP", format!("{flip:.6}")), ("SSIM", format!("{ssim:.6}"))]
         {
-            println!("  {k:<10} {v:>12}");
+            let _ = writeln!(text, "  {k:<10} {v:>12}");
         }
         if !regions.is_empty() {
             let nw = regions.iter().map(|r| r.name.len()).max().unwrap_or(0).max(6);
-            println!(
+            let _ = writeln!(
+                text,
                 "  {:<nw$}  {:>19}  {:>6}  {:>9}  {:>11}  {:>9}  {:>10}  {:>12}",
                 "region", "x0,y0,x1,y1", "area", "mean FLIP", "FLIP share", "RMSE", "luma bias", "smooth share"
             );
             for (r, g) in regions.iter().zip(&per_region) {
                 let area = ((r.x1 - r.x0) as f64 * (r.y1 - r.y0) as f64) / (w as f64 * h as f64);
                 let rect = format!("{},{},{},{}", r.x0, r.y0, r.x1, r.y1);
-                println!(
+                let _ = writeln!(
+                    text,
                     "  {:<nw$}  {rect:>19}  {:>5.1}%  {:>9.6}  {:>10.1}%  {:>9.6}  {:>+9.1}%  {:>11.1}%",
                     r.name,
                     100.0 * area,
@@ -263,6 +268,7 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
             }
         }
     }
+    crate::error::print_stdout(&text)?;
     for f in &failed {
         eprintln!("lodtrace: compare: FAIL: {f}");
     }

@@ -174,8 +174,12 @@ pub fn run(cli: Cli) -> i32 {
         Command::Demo(a) => crate::experiment::demo::run(&a).map(|_| 0),
     };
     match r {
-        Ok(code) => code,
+        Ok(code) => {
+            crate::error::flush_warnings();
+            code
+        }
         Err(e) => {
+            crate::error::discard_warnings();
             eprintln!("lodtrace: error: {e}");
             2
         }

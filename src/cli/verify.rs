@@ -34,8 +34,12 @@ pub fn run(a: &VerifyArgs) -> Result<i32> {
     let scene = crate::scene::load::load_scene(&a.scene)?;
     let t0 = std::time::Instant::now();
     let rep = crate::baseline::verify::verify_scene(&scene, a.accel, a.rays, a.seed)?;
-    print!("{}", crate::baseline::verify::format_report(&rep));
-    println!("({} rays in {:.2} s)", rep.total_rays(), t0.elapsed().as_secs_f64());
+    crate::error::print_stdout(&format!(
+        "{}({} rays in {:.2} s)\n",
+        crate::baseline::verify::format_report(&rep),
+        rep.total_rays(),
+        t0.elapsed().as_secs_f64()
+    ))?;
     if let Some(p) = &a.json {
         let text = serde_json::to_string_pretty(&rep).map_err(|e| Error::Usage(e.to_string()))?;
         crate::film::io::write_atomic(p, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::io(p, e)))?;

@@ -83,6 +83,12 @@ impl SurfelSoa {
             if !p.is_finite() {
                 return Err(DeformError::BadSurfel { index: i, msg: format!("non-finite position {p}") });
             }
+            if p.abs().max_element() > crate::scene::MAX_COORD {
+                return Err(DeformError::BadSurfel {
+                    index: i,
+                    msg: format!("position {p} beyond ±{:e}: scale the model down", crate::scene::MAX_COORD),
+                });
+            }
             let n = self.normal(i);
             let l = n.length();
             if !(l.is_finite() && l > 1e-12) {
@@ -191,6 +197,15 @@ impl SurfelModel {
 }
 
 fn mesh_check(mesh: &Mesh) -> Result<f64, DeformError> {
+    // The renderers' bound (`scene::MAX_COORD`): beyond it areas and sampling cells overflow.
+    let ext = (0..mesh.vertex_count() as u32).map(|i| mesh.pos(i).abs().max_element()).filter(|e| e.is_finite()).fold(0.0f32, f32::max);
+    if ext > crate::scene::MAX_COORD {
+        return Err(DeformError::Invalid(format!(
+            "mesh '{}' reaches coordinate {ext:.3e}, beyond ±{:e}: scale the model down",
+            mesh.name,
+            crate::scene::MAX_COORD
+        )));
+    }
     if mesh.vertex_count() < 4 || mesh.tri_count() == 0 {
         return Err(DeformError::TooSmall(format!(
             "mesh '{}' has {} vertices and {} triangles",
@@ -308,7 +323,7 @@ pub fn sample_mesh(mesh: &Mesh, n: usize, seed: u32) -> Result<SurfelSoa, Deform
                 *e = (d, i as u32);
             }
         }
-        let mut idx: Vec<u32> = best.values().map(|v| v.1).collect();
+        let mut idx: Vec<u32> = best.values().map(|v| v.1).filter(|&i| i != u32::MAX).collect();
         idx.sort_unstable();
         chosen = idx.iter().map(|&i| cand[i as usize]).collect();
         let ratio = chosen.len() as f32 / n as f32;

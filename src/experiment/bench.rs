@@ -586,9 +586,8 @@ pub fn errors(film: &Film, reference: &Film) -> Result<(f64, f64, f64, Vec<f32>,
 }
 
 pub fn run(a: &BenchArgs) -> Result<()> {
-    let report = bench(a)?;
-    print_table(&report);
-    Ok(())
+    // The table on stdout is part of the run: if it cannot be printed, the outputs go too.
+    crate::film::io::discard_dir_on_error(a.out.as_deref(), || print_table(&bench(a)?))
 }
 
 /// Runs the whole bench and writes its outputs; returns the report.
@@ -1175,8 +1174,8 @@ fn parse_sizes(s: &str) -> Result<Vec<(u32, u32)>> {
     Ok(v)
 }
 
-pub fn print_table(report: &BenchReport) {
-    print!("{}", table_string(report));
+pub fn print_table(report: &BenchReport) -> Result<()> {
+    crate::error::print_stdout(&table_string(report))
 }
 
 #[cfg(test)]

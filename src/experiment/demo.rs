@@ -129,7 +129,7 @@ fn run_in(a: &DemoArgs) -> Result<()> {
             sizes: None,
         };
         let report = bench::bench(&args)?;
-        bench::print_table(&report);
+        bench::print_table(&report)?;
         sections.push((job, report));
     }
     let deform = deform_section(a)?;

@@ -19,8 +19,14 @@ use std::path::{Path, PathBuf};
 /// Writes via `write` to a temporary file beside `path`, then renames it into place.
 pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    if !dir.is_dir() {
-        return Err(Error::io(dir, std::io::Error::new(std::io::ErrorKind::NotFound, "output folder does not exist")));
+    match std::fs::metadata(dir) {
+        Ok(m) if m.is_dir() => {}
+        Ok(_) => return Err(Error::io(dir, std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a folder"))),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(Error::io(dir, std::io::Error::new(std::io::ErrorKind::NotFound, "output folder does not exist")))
+        }
+        // Exists but cannot be looked into (permissions): say so.
+        Err(e) => return Err(Error::io(dir, e)),
     }
     let name = path.file_name().ok_or_else(|| Error::Usage(format!("{}: not a file name", path.display())))?;
     let ext = path.extension().map(|e| e.to_string_lossy().to_string()).unwrap_or_default();
@@ -33,7 +39,23 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Res
     std::fs::rename(&tmp, path).map_err(|e| {
         let _ = std::fs::remove_file(&tmp);
         Error::io(path, e)
-    })
+    })?;
+    record_written(path);
+    Ok(())
+}
+
+/// Files written by [`write_atomic`] while a [`discard_dir_on_error`] scope runs (absolute
+/// paths), and the number of scopes running. Scopes of different output folders may run at
+/// once (tests): each removes only files under its own folder.
+static WRITTEN: std::sync::Mutex<(usize, Vec<PathBuf>)> = std::sync::Mutex::new((0, Vec::new()));
+
+fn record_written(path: &Path) {
+    if let Ok(mut w) = WRITTEN.lock() {
+        if w.0 > 0 {
+            let p = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+            w.1.push(p);
+        }
+    }
 }
 
 /// Fails early, before any work, when a file cannot be created in `dir` (a folder that is
@@ -118,16 +140,35 @@ impl Drop for Outputs {
 
 /// Runs `f`, which may create the output folder `dir` (and its missing parents); if `f`
 /// fails, whatever of that path did not exist before is removed again, with the files `f`
-/// wrote there. A folder that existed is kept as it is (its files are each written
-/// atomically, so none is half-written).
+/// wrote there. In a folder that existed, the files `f` wrote there (through
+/// [`write_atomic`]) are removed and the rest is kept: a failed run leaves none of its own
+/// outputs, complete or not, beside those of earlier runs.
 pub fn discard_dir_on_error<T>(dir: Option<&Path>, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    let abs = dir.and_then(|d| std::path::absolute(d).ok());
     // The top-most ancestor of `dir` that does not exist yet.
-    let fresh = dir.and_then(|d| {
-        let abs = std::path::absolute(d).ok()?;
-        abs.ancestors().take_while(|a| !a.exists()).last().map(Path::to_path_buf)
+    let fresh = abs.as_ref().and_then(|a| a.ancestors().take_while(|a| !a.exists()).last().map(Path::to_path_buf));
+    let start = WRITTEN.lock().map(|mut w| {
+        w.0 += 1;
+        w.1.len()
     });
     let r = f();
+    let mine: Vec<PathBuf> = match WRITTEN.lock() {
+        Ok(mut w) => {
+            let v = if r.is_err() { start.map(|s| w.1[s.min(w.1.len())..].to_vec()).unwrap_or_default() } else { Vec::new() };
+            w.0 = w.0.saturating_sub(1);
+            if w.0 == 0 {
+                w.1.clear();
+            }
+            v
+        }
+        Err(_) => Vec::new(),
+    };
     if r.is_err() {
+        if let Some(a) = &abs {
+            for p in mine.iter().filter(|p| p.starts_with(a)) {
+                let _ = std::fs::remove_file(p);
+            }
+        }
         if let Some(d) = fresh {
             let _ = std::fs::remove_dir_all(d);
         }

@@ -151,7 +151,7 @@ fn finish_mesh(path: &Path, mut mesh: Mesh) -> Result<Mesh> {
         return Err(Error::parse(path, "every triangle is degenerate or non-finite"));
     }
     if bad > 0 {
-        eprintln!("lodtrace: warning: {}: skipped {bad} degenerate or non-finite triangles", path.display());
+        crate::error::warn(format!("{}: skipped {bad} degenerate or non-finite triangles", path.display()));
     }
     if !mesh.has_normals() || !(0..mesh.vertex_count() as u32).all(|i| mesh.normal(i).is_finite()) {
         mesh.compute_normals();
@@ -164,13 +164,29 @@ fn finish_mesh(path: &Path, mut mesh: Mesh) -> Result<Mesh> {
 pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
     crate::error::check_input_file(path)?;
     let opts = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
-    let (models, mtls) = tobj::load_obj(path, &opts).map_err(|e| match obj_bad_line(path) {
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    // tobj's own `load_obj` opens an `mtllib` path as given: `/dev/zero` filled the memory and
+    // a FIFO blocked forever. Only a regular file of sane size is read.
+    let load_mtl = |p: &Path| -> tobj::MTLLoadResult {
+        let full = dir.join(p);
+        match std::fs::metadata(&full) {
+            Ok(m) if m.is_file() && m.len() <= MAX_MTL_BYTES => {
+                let f = std::fs::File::open(&full).map_err(|_| tobj::LoadError::OpenFileFailed)?;
+                tobj::load_mtl_buf(&mut std::io::BufReader::new(f))
+            }
+            Ok(m) if m.is_file() => Err(tobj::LoadError::ReadError),
+            Ok(_) => Err(tobj::LoadError::OpenFileFailed),
+            Err(_) => Err(tobj::LoadError::OpenFileFailed),
+        }
+    };
+    let (models, mtls) = tobj::load_obj_buf(&mut std::io::BufReader::new(file), &opts, load_mtl).map_err(|e| match obj_bad_line(path) {
         Some(line) => Error::parse(path, format!("line {line}: {e}")),
         None => Error::parse(path, e.to_string()),
     })?;
     let mtls = mtls.unwrap_or_else(|e| {
         // The geometry is still usable: grey diffuse, as for a file without materials.
-        eprintln!("lodtrace: warning: {}: materials not loaded ({e}); using the default material", path.display());
+        crate::error::warn(format!("{}: materials not loaded ({e}); using the default material", path.display()));
         Vec::new()
     });
     let mut mesh = Mesh::new(path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default());
@@ -208,11 +224,34 @@ pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
         mesh.ny.clear();
         mesh.nz.clear();
     }
-    let materials = mtls.iter().map(material_from_mtl).collect();
+    let materials = mtls.iter().map(|m| material_from_mtl(path, m)).collect::<Result<Vec<_>>>()?;
     Ok((finish_mesh(path, mesh)?, materials))
 }
 
-fn material_from_mtl(m: &tobj::Material) -> Material {
+/// A material library larger than this is not a material library.
+const MAX_MTL_BYTES: u64 = 64 << 20;
+
+/// An MTL material; values a renderer cannot use (NaN, infinite, negative colours, dissolve
+/// outside [0, 1], Ns < 0, Ni ≤ 0) are errors, as in a TOML scene.
+fn material_from_mtl(path: &Path, m: &tobj::Material) -> Result<Material> {
+    let bad = |what: &str| Err(Error::parse(path, format!("material '{}' in its MTL file: {what}", m.name)));
+    let fin = |v: &Option<[f32; 3]>| v.is_none_or(|c| c.iter().all(|x| x.is_finite() && *x >= 0.0));
+    if !fin(&m.diffuse) || !fin(&m.specular) || !fin(&m.ambient) {
+        return bad("Ka, Kd and Ks must be finite and ≥ 0");
+    }
+    if m.shininess.is_some_and(|v| !(v.is_finite() && v >= 0.0)) {
+        return bad("Ns must be finite and ≥ 0");
+    }
+    if m.dissolve.is_some_and(|v| !(0.0..=1.0).contains(&v)) {
+        return bad("d (dissolve) must lie in [0, 1]");
+    }
+    if m.optical_density.is_some_and(|v| !(v.is_finite() && v > 0.0)) {
+        return bad("Ni (index of refraction) must be finite and > 0");
+    }
+    Ok(material_from_valid_mtl(m))
+}
+
+fn material_from_valid_mtl(m: &tobj::Material) -> Material {
     let kd = m.diffuse.map(Vec3::from).unwrap_or(Vec3::splat(0.7));
     let ks = m.specular.map(|s| Vec3::from(s).max_element()).unwrap_or(0.0);
     let d = m.dissolve.unwrap_or(1.0).clamp(0.0, 1.0);
