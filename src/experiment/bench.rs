@@ -945,13 +945,14 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
             curves.append(&mut per);
             let per = curves;
             // Fast, noisy renders sit top left and the converged sweep bottom right.
-            super::plot::line_chart_legend(
+            super::plot::line_chart_fmt(
                 &out.join(format!("{sc}-equal-time.png")),
                 &format!("{sc}: mean FLIP against the reference vs render time"),
                 "render time (s)",
                 "mean FLIP",
                 &per,
                 plotters::chart::SeriesLabelPosition::MiddleRight,
+                &super::plot::fmt_axis,
             )?;
         } else {
             let mut v: Vec<(f64, f64)> = rows.map(|r| (r.stats.render_seconds, r.flip.unwrap_or(0.0))).collect();

@@ -90,7 +90,7 @@ fn fmt_value(v: f64) -> String {
 }
 
 /// Axis tick label: no trailing zeros ("64", "0.25", "1.5e-5").
-fn fmt_axis(v: f64) -> String {
+pub fn fmt_axis(v: f64) -> String {
     let a = v.abs();
     if a != 0.0 && !(1e-3..1e6).contains(&a) {
         return format!("{v:.1e}");
@@ -181,23 +181,11 @@ pub fn bar_chart(path: &Path, title: &str, ylabel: &str, bars: &[(String, f64)])
 /// A line chart, one line (with point markers and a legend entry) per named series.
 /// Non-finite points are skipped.
 pub fn line_chart(path: &Path, title: &str, xlabel: &str, ylabel: &str, series: &[(String, Vec<(f64, f64)>)]) -> Result<()> {
-    line_chart_legend(path, title, xlabel, ylabel, series, SeriesLabelPosition::UpperLeft)
+    line_chart_fmt(path, title, xlabel, ylabel, series, SeriesLabelPosition::UpperLeft, &fmt_axis)
 }
 
-/// [`line_chart`] with the legend box at `legend` (where the data leaves room).
-pub fn line_chart_legend(
-    path: &Path,
-    title: &str,
-    xlabel: &str,
-    ylabel: &str,
-    series: &[(String, Vec<(f64, f64)>)],
-    legend: SeriesLabelPosition,
-) -> Result<()> {
-    line_chart_fmt(path, title, xlabel, ylabel, series, legend, &fmt_axis)
-}
-
-/// [`line_chart_legend`] with the x-axis labels from `xfmt` (e.g. x = log₂ n labelled as n,
-/// for a logarithmic axis).
+/// [`line_chart`] with the legend box at `legend` (where the data leaves room) and the x-axis
+/// labels from `xfmt` ([`fmt_axis`], or e.g. x = log₂ n labelled as n for a logarithmic axis).
 pub fn line_chart_fmt(
     path: &Path,
     title: &str,
