@@ -142,6 +142,41 @@ proptest! {
     }
 }
 
+/// Exactly rigid motions far from the origin: the bound then has no slack from the
+/// deformation, and only the f32 padding of the radii (`RADIUS_PAD`, relative to the radius
+/// and to the centre's magnitude) keeps the surfels inside against rounding.
+#[test]
+fn rigid_motions_far_away_keep_surfels_inside() {
+    let obj = shared_ball();
+    for (case, exact_below) in [(0u32, 0u32), (1, 16), (2, 0), (3, 64)] {
+        let params = TraceParams { exact_below, factor_rigid: case % 2 == 0, ..TraceParams::default() };
+        let mut tr = DeformTracer::new(&scene1(obj), UpdateMode::LazyCache, params).unwrap();
+        tr.set_cache_slots(64);
+        let mut ctr = Counters::default();
+        for k in 0..3u32 {
+            let mut s = Sampler::new(case, k, 5);
+            let d = Deform {
+                axis: Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() + 0.1),
+                angle: 6.0 * s.next(),
+                trans: Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * 4000.0,
+                stretch: Vec3::ONE,
+                bend: 0.0,
+                twist: 0.0,
+                noise: 0.0,
+                seed: k,
+            };
+            tr.begin_frame(&[d.apply(&obj.nodes.rest)]).unwrap();
+            for (i, ray) in random_rays(k, 256, d.trans, 6.0, 2.0).iter().enumerate() {
+                let _ = tr.intersect(ray, Some(i as u32), &mut ctr);
+                let _ = tr.occluded(ray, &mut ctr);
+            }
+            assert_eq!(tr.check_containment(), Ok(()), "case {case}, frame {k}");
+            tr.update_all();
+            assert_eq!(tr.check_containment(), Ok(()), "case {case}, frame {k}, all nodes");
+        }
+    }
+}
+
 fn render(tr: &DeformTracer, cam: &Camera, w: u32, h: u32, dc: &mut DeformCounters) -> Vec<Option<SurfelHit>> {
     let f = cam.frame(w, h);
     let mut ctr = Counters::default();

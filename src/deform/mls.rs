@@ -361,5 +361,56 @@ mod tests {
         assert!(!clipped_by(Vec3::new(-0.5, 0.0, -0.5), p1, n1, p2, n2));
         assert!(clipped_by(Vec3::new(0.5, 0.0, -0.5), p1, n1, p2, n2));
         assert!(clipped_by(Vec3::new(-0.5, 0.0, 0.5), p1, n1, p2, n2));
+        assert!(clipped_by(Vec3::new(0.5, 0.0, 0.5), p1, n1, p2, n2));
+        // Concave edge of the L-shaped solid {z < 0} ∪ {x < 0} (its complement is the convex
+        // quadrant x > 0, z > 0): a point under one of the two planes is inside, whatever the
+        // other says; only the quadrant is outside.
+        let (p1, n1, p2, n2) = (Vec3::new(0.1, 0.0, 0.0), Vec3::Z, Vec3::new(0.0, 0.0, 0.1), Vec3::X);
+        assert!(!clipped_by(Vec3::new(0.5, 0.0, -0.5), p1, n1, p2, n2));
+        assert!(!clipped_by(Vec3::new(-0.5, 0.0, 0.5), p1, n1, p2, n2));
+        assert!(!clipped_by(Vec3::new(-0.5, 0.0, -0.5), p1, n1, p2, n2));
+        assert!(clipped_by(Vec3::new(0.5, 0.0, 0.5), p1, n1, p2, n2));
+    }
+
+    /// A converged hit satisfies the paper's criterion |n(x)ᵀ(x − a(x))| < ε at the point it
+    /// returns (re-evaluated here from the neighbourhood, independently of `step`), on curved
+    /// neighbourhoods where the first step does not converge.
+    #[test]
+    fn hits_meet_the_convergence_criterion() {
+        use crate::core::rng::Sampler;
+        let mut s = Sampler::new(5, 1, 2);
+        let prm = MlsParams::default();
+        let (mut hits, mut multi_step) = (0, 0);
+        for _ in 0..2000 {
+            let c = Vec3::new(s.next(), s.next(), s.next()) * 2.0 - 1.0;
+            let rad = 0.3 + s.next();
+            let dir0 = Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5).normalize_or(Vec3::Z);
+            let nb: Vec<(Vec3, Vec3)> = (0..16)
+                .map(|_| {
+                    let q = (dir0 + Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * 0.6).normalize_or(Vec3::Z);
+                    (c + q * rad, q)
+                })
+                .collect();
+            // Start off the surface (a surfel disc is tangent, the sphere curves away).
+            let x0 = c + dir0 * rad * 1.05;
+            let o = x0 + dir0 * 3.0 + Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * 0.3;
+            let d = (x0 - o).normalize();
+            let t0 = (x0 - o).length();
+            let h = rad * (0.4 + 0.4 * s.next());
+            if let MlsOutcome::Hit { t, p, n, iters } = mls_intersect(o, d, t0, x0, &nb, h, x0, rad, 0.0, 100.0, &prm) {
+                let (mut sw, mut sa, mut sn) = (0.0f32, Vec3::ZERO, Vec3::ZERO);
+                for &(q, m) in &nb {
+                    let w = spline_weight((p - q).length() / h);
+                    (sw, sa, sn) = (sw + w, sa + q * w, sn + m * w);
+                }
+                let f = sn.normalize().dot(p - sa / sw);
+                assert!(f.abs() < prm.eps_rel * h, "residual {f} ≥ ε = {}", prm.eps_rel * h);
+                assert!((o + d * t - p).length() <= 1e-5 * (1.0 + t), "the hit is on the ray");
+                assert!((n - sn.normalize()).length() < 1e-4, "the normal is n(x)");
+                hits += 1;
+                multi_step += (iters > 1) as u32;
+            }
+        }
+        assert!(hits > 1000 && multi_step > 500, "{hits} hits, {multi_step} after more than one step");
     }
 }

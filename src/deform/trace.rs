@@ -1698,6 +1698,38 @@ impl Slab {
 mod tests {
     use super::*;
 
+    /// Eq. 11 only ever shrinks a node's radius within a frame (the paper takes
+    /// min(R', R'')): children whose enclosing sphere is larger than the node's current one,
+    /// including one that passes the cheap pre-check (a child larger than the node, at its
+    /// centre), leave the node as it is; a smaller enclosing sphere is taken.
+    #[test]
+    fn eq11_never_grows_a_radius() {
+        use super::super::object::ObjectParams;
+        use super::super::sequences::nodes_inside;
+        use super::super::surfel::{sphere_surfels, SurfelModel};
+        let s = sphere_surfels(Vec3::ZERO, 1.0, 400);
+        let (nd, _) = nodes_inside(&|p: Vec3| p.length() <= 0.9, Vec3::splat(-1.0), Vec3::splat(1.0), 30);
+        let m = vec![1.0; nd.len()];
+        let obj = SurfelObject::build(SurfelModel::single("ball", s, [1.0; 3]), nd.clone(), m, &ObjectParams::default()).unwrap();
+        let scene = DeformScene { objects: vec![obj.clone()], instances: vec![0] };
+        for recentre_eq11 in [true, false] {
+            let mut tr = DeformTracer::new(&scene, UpdateMode::Lazy, TraceParams { recentre_eq11, ..TraceParams::default() }).unwrap();
+            tr.begin_frame(&[obj.nodes.rest.clone()]).unwrap();
+            let ii = &tr.inst[0];
+            let (c, r) = tr.sphere(ii, 0);
+            // A child as large as 1.5 r at the node's centre: enclosing radius 1.5 r > r.
+            tr.tighten(ii, 0, c, (c, 1.5 * r), (c, 0.0));
+            assert_eq!(ii.nodes.load(0), (c, r), "recentre_eq11 {recentre_eq11}: the radius grew");
+            // Two children far apart: larger too.
+            tr.tighten(ii, 0, c, (c - Vec3::X * r, 0.5 * r), (c + Vec3::X * r, 0.5 * r));
+            assert_eq!(ii.nodes.load(0), (c, r));
+            // Two small children near the centre: taken.
+            tr.tighten(ii, 0, c, (c - Vec3::X * 0.1 * r, 0.2 * r), (c + Vec3::X * 0.1 * r, 0.2 * r));
+            let (_, r2) = ii.nodes.load(0);
+            assert!(r2 < 0.5 * r, "recentre_eq11 {recentre_eq11}: {r2} against {r}");
+        }
+    }
+
     /// `Auto` tries both modes, then keeps the cheaper one and probes the other after
     /// PROBE·r² frames; a change in cost flips it; without reports it stays lazy.
     #[test]
