@@ -63,16 +63,16 @@ pub fn discard_warnings() {
     }
 }
 
-/// Writes `text` to standard output. A reader that went away (`lodtrace verify | head`) ends
-/// the output quietly; any other failure (`> /dev/full`) is an error, not a panic as with
-/// `print!`.
-pub fn print_stdout(text: &str) -> Result<()> {
+/// Writes `text` to standard output: `Ok(true)` when written, `Ok(false)` when the reader
+/// went away (`lodtrace verify | head`: the output ends quietly); any other failure
+/// (`> /dev/full`) is an error, not a panic as with `print!`.
+pub fn print_stdout(text: &str) -> Result<bool> {
     use std::io::Write;
     let out = std::io::stdout();
     let mut out = out.lock();
     match out.write_all(text.as_bytes()).and_then(|_| out.flush()) {
-        Ok(()) => Ok(()),
-        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        Ok(()) => Ok(true),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(false),
         Err(e) => Err(Error::io("<stdout>", e)),
     }
 }

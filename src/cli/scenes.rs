@@ -1,20 +1,11 @@
 //! `lodtrace scenes`: the built-in scenes with their triangle counts. A scene whose assets
 //! are missing (run `tools/setup`) is listed as unavailable instead of failing the listing.
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::scene::builtin::BUILTINS;
-use std::io::Write;
 
 pub fn run() -> Result<()> {
-    let out = std::io::stdout();
-    let mut out = out.lock();
-    let mut line = |s: String| -> Result<bool> {
-        match writeln!(out, "{s}") {
-            Ok(()) => Ok(true),
-            // `lodtrace scenes | head`: the reader went away; stop quietly.
-            Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(false),
-            Err(e) => Err(Error::io("<stdout>", e)),
-        }
-    };
+    // Row by row (each loads its scene); `lodtrace scenes | head` stops when the reader goes.
+    let line = |s: String| crate::error::print_stdout(&(s + "\n"));
     if !line(format!("{:<10} {:>12} {:>12}  description", "scene", "triangles", "unique"))? {
         return Ok(());
     }

@@ -1176,7 +1176,7 @@ fn parse_sizes(s: &str) -> Result<Vec<(u32, u32)>> {
 }
 
 pub fn print_table(report: &BenchReport) -> Result<()> {
-    crate::error::print_stdout(&table_string(report))
+    crate::error::print_stdout(&table_string(report)).map(|_| ())
 }
 
 #[cfg(test)]
