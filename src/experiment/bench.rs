@@ -283,6 +283,10 @@ impl MethodSpec {
             };
             return Err(bad(format!("{key} is a key of {of}; {} would ignore it", method.name())));
         }
+        // Refused here, before any method of the list runs, not when its turn comes.
+        if method == Method::Lod && spec.accel == AccelKind::Octree {
+            return Err(bad("lod runs on bvh or embree, not on the octree".into()));
+        }
         Ok(spec)
     }
 
@@ -1194,6 +1198,10 @@ mod tests {
         assert!(parse_list("nope").is_err());
         assert!(parse_list("whitted:gpu").is_err());
         assert!(parse_list("whitted:spp=x").is_err());
+        // Refused when the list is read, before any method runs (a helper saw three minutes of
+        // renders thrown away before `lod:octree` failed).
+        assert!(parse_list("whitted,lod:octree").is_err());
+        assert!(parse_list("lod:bvh,lod").is_ok());
         // Switches take 0 or 1; a bare word after the accelerator is named as such.
         assert!(parse_list("multires:spread=0").unwrap()[0].multires.no_normal_spread);
         let e = |s: &str| parse_list(s).unwrap_err().to_string();
