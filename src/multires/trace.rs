@@ -144,6 +144,10 @@ pub enum Termination {
     Paper,
     /// Conservative: only fragments that end before the traversal front count, so every
     /// fragment is complete when the ray stops (a grazing cone sweeps its whole footprint).
+    /// *Limitation:* completeness includes every piece whose depth interval overlaps, so a
+    /// wide cone over an object standing on a floor merges the floor around the object's
+    /// base into the object's fragment (colour: the weighted mean of both), where the paper's
+    /// rule stopped once the object was opaque (`effects`' out-of-focus posts, stop 38).
     Final,
 }
 
