@@ -111,7 +111,7 @@ fn instance_level_points_keep_a_tiled_floor_opaque_and_exact() {
     scene.background = Vec3::ZERO;
     scene.validate().unwrap();
     let ms = MultiresScene::build(&scene, &BuildParams::default()).unwrap();
-    assert!(ms.groups.points.len() > 0);
+    assert!(!ms.groups.points.is_empty());
     let abort = AtomicBool::new(false);
     let cam = scene.camera.frame(64, 64);
     let expect = Vec3::new(0.8, 0.4, 0.2) / std::f32::consts::PI;

@@ -64,11 +64,11 @@ impl<'a> TraceCtx<'a> {
     }
 
     /// Radiance arriving along `ray` (unit direction). `depth` counts bounces so far.
-    pub fn radiance(&self, ray: &Ray, depth: u32, mut smp: Option<&mut Sampler>, c: &mut Counters) -> Vec3 {
+    pub fn radiance(&self, ray: &Ray, depth: u32, smp: Option<&mut Sampler>, c: &mut Counters) -> Vec3 {
         let Some(hit) = self.accel.intersect1(ray, c) else {
             return self.scene.background;
         };
-        self.shade(ray, &hit, depth, smp.as_deref_mut(), c)
+        self.shade(ray, &hit, depth, smp, c)
     }
 
     /// Shades a known hit (used directly for packet-traced primary rays).

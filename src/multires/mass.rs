@@ -352,7 +352,7 @@ mod tests {
             1 => [c, c + Vec2::X * scale, c + Vec2::X * 2.0 * scale],
             _ => std::array::from_fn(|_| c + Vec2::new(s.next() - 0.5, s.next() - 0.5) * scale),
         };
-        if i % 7 == 0 {
+        if i.is_multiple_of(7) {
             q.swap(1, 2);
         }
         q
