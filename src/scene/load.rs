@@ -170,15 +170,12 @@ pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
     // a FIFO blocked forever. Only a regular file of sane size is read.
     let load_mtl = |p: &Path| -> tobj::MTLLoadResult {
         let full = dir.join(p);
-        match std::fs::metadata(&full) {
-            Ok(m) if m.is_file() && m.len() <= MAX_MTL_BYTES => {
-                let f = std::fs::File::open(&full).map_err(|_| tobj::LoadError::OpenFileFailed)?;
-                tobj::load_mtl_buf(&mut std::io::BufReader::new(f))
-            }
-            Ok(m) if m.is_file() => Err(tobj::LoadError::ReadError),
-            Ok(_) => Err(tobj::LoadError::OpenFileFailed),
-            Err(_) => Err(tobj::LoadError::OpenFileFailed),
+        crate::error::check_input_file(&full).map_err(|_| tobj::LoadError::OpenFileFailed)?;
+        if std::fs::metadata(&full).map_or(true, |m| m.len() > MAX_MTL_BYTES) {
+            return Err(tobj::LoadError::ReadError);
         }
+        let f = std::fs::File::open(&full).map_err(|_| tobj::LoadError::OpenFileFailed)?;
+        tobj::load_mtl_buf(&mut std::io::BufReader::new(f))
     };
     let (models, mtls) = tobj::load_obj_buf(&mut std::io::BufReader::new(file), &opts, load_mtl).map_err(|e| match obj_bad_line(path) {
         Some(line) => Error::parse(path, format!("line {line}: {e}")),
@@ -248,24 +245,20 @@ fn material_from_mtl(path: &Path, m: &tobj::Material) -> Result<Material> {
     if m.optical_density.is_some_and(|v| !(v.is_finite() && v > 0.0)) {
         return bad("Ni (index of refraction) must be finite and > 0");
     }
-    Ok(material_from_valid_mtl(m))
-}
-
-fn material_from_valid_mtl(m: &tobj::Material) -> Material {
     let kd = m.diffuse.map(Vec3::from).unwrap_or(Vec3::splat(0.7));
     let ks = m.specular.map(|s| Vec3::from(s).max_element()).unwrap_or(0.0);
-    let d = m.dissolve.unwrap_or(1.0).clamp(0.0, 1.0);
-    Material {
+    let d = m.dissolve.unwrap_or(1.0);
+    Ok(Material {
         name: m.name.clone(),
-        color: kd.max(Vec3::ZERO),
+        color: kd,
         kd: 1.0,
-        ks: ks.clamp(0.0, 1.0),
+        ks: ks.min(1.0),
         shininess: m.shininess.unwrap_or(32.0).max(1.0),
         reflect: 0.0,
         transmit: 1.0 - d,
         ior: m.optical_density.unwrap_or(1.5).max(1.0),
         roughness: 0.0,
-    }
+    })
 }
 
 /// A scene holding one mesh, grey diffuse, on no floor, framed so the whole mesh fits the
