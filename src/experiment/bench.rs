@@ -225,6 +225,13 @@ impl MethodSpec {
                         spec.multires.tri_weight = crate::multires::trace::TriWeight::from_str(v, true)
                             .map_err(|_| bad(format!("tri={v}: paper, coverage or mass")))?
                     }
+                    "stri" => {
+                        spec.multires.shadow_tri_weight = Some(
+                            crate::multires::trace::TriWeight::from_str(v, true)
+                                .map_err(|_| bad(format!("stri={v}: paper, coverage or mass")))?,
+                        )
+                    }
+                    "facing" => spec.multires.no_facing = !on(v)?,
                     "f" => spec.lod.lod_f = num(v)? as f32,
                     "a" => spec.lod.lod_a = num(v)? as f32,
                     "thres" => spec.lod.lod_threshold = num(v)? as f32,
@@ -251,7 +258,7 @@ impl MethodSpec {
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, mip, primary, budget, eigen, tri, term, pw, spread, groups, agg, tight, mask; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, warm, cache_up, ordered, top)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, mip, primary, budget, eigen, tri, stri, facing, term, pw, spread, groups, agg, plane, tight, mask; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, warm, cache_up, ordered, top)"
                         )))
                     }
                 }

@@ -69,6 +69,9 @@ pub struct Frag {
     /// Of `w`, the weight of pieces that fell on sub-rays already covered by earlier pieces
     /// of the fragment (overlap, not coverage; [`Frag::alpha`]). 0 without masks.
     pub hidden: f32,
+    /// Of `w`, the weight of pieces whose normal faces away from the cone's origin (n·d > 0;
+    /// `TraceParams::facing`, a deviation; 0 when off). See [`Frag::alpha`].
+    pub wb: f32,
 }
 
 impl Frag {
@@ -89,6 +92,7 @@ impl Frag {
         // Overlap within the fragment (`--coverage-masks`): the share of the new piece's
         // coverage that falls on sub-rays already covered here is not coverage.
         self.hidden += s.hidden;
+        self.wb += s.wb;
         if s.mask & self.mask != 0 {
             let over = (s.mask & self.mask).count_ones() as f32 / s.mask.count_ones() as f32;
             self.hidden += (s.w - s.hidden).max(0.0) * over;
@@ -97,9 +101,18 @@ impl Frag {
     }
     /// Coverage: min(1, weight sum) (§4.4), less the weight of pieces that overlap others of
     /// the fragment by their coverage masks (`hidden`, a deviation; 0 without masks).
+    ///
+    /// *Deviation* (`TraceParams::facing`, default on): at most the larger of the weights
+    /// facing towards the cone's origin and away from it, max(w − wb, wb). A line through a
+    /// closed surface enters it as often as it leaves, so where a wide footprint merges a
+    /// solid's near and far sides into one fragment (soft shadows, silhouettes, defocus)
+    /// each side alone measures the solid's coverage and their sum counts it twice — the
+    /// paper's overestimated opacity at silhouettes and soft shadows (§7). A single sheet
+    /// (a floor, a leaf) has all its weight on one side and keeps it. With `wb` = 0 (off)
+    /// this is the paper's rule, bit for bit.
     #[inline]
     pub fn alpha(&self) -> f32 {
-        (self.w - self.hidden).min(1.0)
+        (self.w - self.hidden).min((self.w - self.wb).max(self.wb)).min(1.0)
     }
     /// Mean depth.
     pub fn t(&self) -> f32 {
@@ -299,6 +312,30 @@ mod tests {
         assert_eq!(ab.frags.len(), 1);
         assert_eq!(ab.merges, 3);
         assert!((ab.frags[0].w - 1.5).abs() < 1e-6);
+    }
+
+    /// `TraceParams::facing`: a solid's near side (facing the origin) and far side merged
+    /// into one fragment cover the footprint once; a single sheet keeps its sum either way.
+    #[test]
+    fn near_and_far_sides_of_a_solid_count_once() {
+        let far = |t: f32, w: f32| Frag { wb: w, ..smp(t, 0.5, w, Vec3::ONE) };
+        let mut ab = ABuffer::new(16);
+        ab.insert(smp(2.0, 0.5, 0.4, Vec3::ONE));
+        ab.insert(far(2.6, 0.45));
+        assert_eq!(ab.frags.len(), 1, "merged");
+        assert!((ab.alpha() - 0.45).abs() < 1e-6, "max of the sides, not their sum 0.85: {}", ab.alpha());
+        // Both pieces of one sheet face the same way: summed as in the paper, from either side.
+        for mk in [|t, w| smp(t, 0.5, w, Vec3::ONE), far] {
+            let mut ab = ABuffer::new(16);
+            ab.insert(mk(2.0, 0.4));
+            ab.insert(mk(2.6, 0.45));
+            assert!((ab.alpha() - 0.85).abs() < 1e-6, "{}", ab.alpha());
+        }
+        // Without facing (wb = 0 everywhere) the rule is the paper's, and masks still apply.
+        let f = Frag { w: 1.4, hidden: 0.5, ..Default::default() };
+        assert!((f.alpha() - 0.9).abs() < 1e-6);
+        let f = Frag { w: 1.4, wb: 0.6, hidden: 0.1, ..Default::default() };
+        assert!((f.alpha() - 0.8).abs() < 1e-6, "{}", f.alpha());
     }
 
     #[test]

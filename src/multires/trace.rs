@@ -183,6 +183,12 @@ pub struct TraceParams {
     pub eigen: EigenMode,
     /// Weight of a ray–triangle intersection from the footprint distance d.
     pub tri_weight: TriWeight,
+    /// The triangle weight of shadow cones; `None` (the default): `tri_weight`. `mass` gives
+    /// soft shadows the exact coverage of tessellated occluders (see `shade`).
+    pub shadow_tri_weight: Option<TriWeight>,
+    /// A fragment's alpha counts a closed surface's near and far sides once
+    /// ([`super::abuffer::Frag::alpha`]); off: the paper's weight sum.
+    pub facing: bool,
     /// false: classic cone tracing, triangles only (`--method cone`).
     pub points: bool,
     /// Primary footprint in pixels (1 = the pixel's extent, §4.2).
@@ -228,6 +234,8 @@ impl Default for TraceParams {
             depth_tol: 1.0,
             eigen: EigenMode::PerBox,
             tri_weight: TriWeight::Coverage,
+            shadow_tri_weight: None,
+            facing: true,
             points: true,
             cone_scale: 0.5,
             max_fragments: 16,
@@ -250,17 +258,22 @@ impl TraceParams {
     pub fn clamp_secondary(&self) -> f32 {
         self.secondary_clamp.unwrap_or(self.clamp)
     }
+    /// The triangle weight of shadow cones ([`TraceParams::shadow_tri_weight`]).
+    pub fn shadow_tri(&self) -> TriWeight {
+        self.shadow_tri_weight.unwrap_or(self.tri_weight)
+    }
     /// The cut distance of the node (and instance) test, in footprint units: the largest at
     /// which anything a node holds can still weigh ≥ 2% — its points (√Q_CUT) and, per box,
     /// its triangles ([`TriWeight::cut`]); a node whose sphere lies farther is skipped, with
     /// the same image. Exact mode measures each triangle with its own footprint (not the
-    /// box's, which the per-box cut assumes) and keeps R_CUT, as the paper's bound.
-    pub fn node_cut(&self) -> f32 {
+    /// box's, which the per-box cut assumes) and keeps R_CUT, as the paper's bound. `tri`:
+    /// the triangle weight of the cones concerned ([`Tracer::tri`]).
+    pub fn node_cut(&self, tri: TriWeight) -> f32 {
         if self.eigen == EigenMode::Exact {
             return R_CUT;
         }
         let pts = if self.points { POINT_CUT } else { 0.0 };
-        pts.max(self.tri_weight.cut())
+        pts.max(tri.cut())
     }
 
     pub fn validate(&self) -> Result<()> {
@@ -1093,7 +1106,9 @@ impl PointHits {
 
 /// Scalar reference of the ray–point weight (§4.3): every point of the block with q ≤ Q_CUT
 /// inside the cone's depth range, with its weight `scale`·cover·|n·d|·e^(−q)/(s₁s₂) (which
-/// may be 0: the caller skips those), the paper's form evaluated point by point.
+/// may be 0: the caller skips those), the paper's form evaluated point by point. The weight
+/// carries the sign of n·d: negative for a point facing the cone's origin, positive for one
+/// facing away ([`super::abuffer::Frag::wb`]); its magnitude is the paper's weight.
 pub fn point_w_ref(cone: &Cone, blk: &PointBlock, boxe: Option<&Eigen2>, clamp: f32, floor: f32, scale: f32, out: &mut PointHits) {
     out.prepare(blk.n);
     for i in 0..blk.n {
@@ -1107,7 +1122,7 @@ pub fn point_w_ref(cone: &Cone, blk: &PointBlock, boxe: Option<&Eigen2>, clamp: 
         };
         let q = point_q_1(&e, p.x, p.y);
         if q <= Q_CUT {
-            let cos = quant::oct_decode(blk.normal[i]).dot(blk.dir).abs();
+            let cos = quant::oct_decode(blk.normal[i]).dot(blk.dir); // signed, see above
             out.push(i, p.z, (-q).exp() * scale * quant::decode_cover(blk.cover[i]) * cos / (e.s1 * e.s2));
         }
     }
@@ -1142,7 +1157,7 @@ pub fn widen_u8x8(b: [u8; 8]) -> f32x8 {
     f32x8::from_i32x8(i32x8::from_u16x8(u16x8::from_u8x16_low(u8x16::from(x))))
 }
 
-/// Packet version of [`point_w_ref`] (same output up to rounding, tested): 8 points per
+/// Packet version of [`point_w_ref`] (same output up to rounding, signs included, tested): 8 points per
 /// step, the normal decode, cosine and e^(−q) included, the survivors left-packed into `out`
 /// ([`crate::core::pack`]); exact mode runs the eigen-decompositions 8-wide.
 ///
@@ -1166,7 +1181,7 @@ pub fn point_w_x8(cone: &Cone, blk: &PointBlock, boxe: Option<&Eigen2>, clamp: f
         };
         widen_u8x8(b)
     }
-    /// |n·d| of 8 octahedral normals (tail lanes decode a valid dummy).
+    /// n·d of 8 octahedral normals, signed (tail lanes decode a valid dummy).
     #[inline(always)]
     fn cos_x8(nrm: &[[u16; 2]], i: usize, d: Vec3) -> f32x8 {
         let c: [[u16; 2]; 8] = match nrm.get(i..i + 8) {
@@ -1195,7 +1210,7 @@ pub fn point_w_x8(cone: &Cone, blk: &PointBlock, boxe: Option<&Eigen2>, clamp: f
         let l2 = xx * xx + yy * yy + z * z;
         let r = l2.recip_sqrt();
         let r = r * (f32x8::splat(1.5) - f32x8::splat(0.5) * l2 * r * r);
-        dot.abs() * r
+        dot * r
     }
     #[inline(always)]
     fn lin(o: f32, a: Vec3, q: (f32x8, f32x8, f32x8)) -> f32x8 {
@@ -1507,13 +1522,16 @@ pub struct Tracer<'s, 'a> {
     pub clamp: f32,
     /// Floor of the footprint semi-axes (world units): keeps zero footprints finite.
     pub floor: f32,
+    /// Triangle weight of the cones this tracer traverses: `p.tri_weight`, for shadow cones
+    /// [`TraceParams::shadow_tri`].
+    pub tri: TriWeight,
     pub abort: &'s AtomicBool,
     pub deadline: Option<Instant>,
 }
 
 impl<'s, 'a> Tracer<'s, 'a> {
     pub fn new(ms: &'s MultiresScene<'a>, p: &'s TraceParams, floor: f32, abort: &'s AtomicBool, deadline: Option<Instant>) -> Self {
-        Tracer { ms, p, clamp: p.clamp, floor, abort, deadline }
+        Tracer { ms, p, clamp: p.clamp, floor, tri: p.tri_weight, abort, deadline }
     }
 
     /// The tracer of reflected and refracted cones (and, through their hits, of everything
@@ -1554,7 +1572,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         sc.eigs.clear();
         let clamp = self.clamp;
         let floor = self.floor;
-        let cut = self.p.node_cut();
+        let cut = self.p.node_cut(self.tri);
         let reach = BoxReach::cone(cone, cut, floor);
         c.inc(Counter::instance_tests);
         let Some(t_root) = tlas_box_test_1(&reach, tl, 0) else { return };
@@ -1711,7 +1729,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 for k in (ts..ts + tcount).step_by(8) {
                     let arr = |v: &Vec<f32>| -> [f32; 8] { v[k..k + 8].try_into().expect("padded to 8") };
                     let rem = (ts + tcount - k).min(8);
-                    let cut = self.p.tri_weight.cut();
+                    let cut = self.tri.cut();
                     let mut m = tri_bound_x8(&lc, &arr(&tris.cx), &arr(&tris.cy), &arr(&tris.cz), &arr(&tris.r), &boxe, clamp, lf, cut)
                         as u32
                         & ((1u32 << rem) - 1);
@@ -1719,7 +1737,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                     if m != 0 {
                         m &= tri_footprint_x8(&lc, tris, k, &boxe, clamp, lf, cut) as u32;
                     }
-                    if self.p.tri_weight == TriWeight::Mass {
+                    if self.tri == TriWeight::Mass {
                         // The exact mass of the block's survivors in one eight-lane call,
                         // after the quick reject and the cut-off on the nearest point, as
                         // `weight_2d` does for one triangle.
@@ -1815,7 +1833,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             &arr(&tree.nodes.r),
             self.clamp,
             self.floor * s,
-            self.p.node_cut(),
+            self.p.node_cut(self.tri),
         );
         c.add(Counter::eigen_decompositions, 8);
         let mut m = h.mask as u32 & bm;
@@ -1907,11 +1925,15 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let dz = self.p.depth_tol * h * inv_s;
         for k in 0..hits.len {
             let (j, t, w) = (start + hits.idx[k] as usize, hits.t[k], hits.w[k]);
+            // The sign is the point's facing: > 0 away from the cone's origin.
+            let away = w > 0.0 && self.p.facing;
+            let w = w.abs();
             if !(w > 0.0) {
                 continue;
             }
             let tw = t * inv_s;
-            let mut f = Frag { z0: tw - dz, z1: tw + dz, w, wt: w * tw, best_w: w, ..Default::default() };
+            let wb = if away { w } else { 0.0 };
+            let mut f = Frag { z0: tw - dz, z1: tw + dz, w, wt: w * tw, best_w: w, wb, ..Default::default() };
             if mode == Collect::Shade {
                 let m = ranges.decode(pts.rgb[j], pts.mat[j]);
                 f.col = m.color * w;
@@ -1942,10 +1964,10 @@ impl<'s, 'a> Tracer<'s, 'a> {
             c.add(Counter::eigen_decompositions, 1);
             let lf = self.floor * s;
             let e = eigen_1(lc.sigma(triangle_ref_depth(lc, pw, pv.map(|p| p.z))), self.clamp, lf);
-            let (w, b1, b2, t) = triangle_weight(pv, [e; 3], self.p.tri_weight)?;
+            let (w, b1, b2, t) = triangle_weight(pv, [e; 3], self.tri)?;
             Some((w, b1, b2, t, e))
         } else {
-            let (w, b1, b2, t) = triangle_weight_per_box(lc, pw, boxe, self.clamp, self.floor * s, self.p.tri_weight)?;
+            let (w, b1, b2, t) = triangle_weight_per_box(lc, pw, boxe, self.clamp, self.floor * s, self.tri)?;
             Some((w, b1, b2, t, *boxe))
         }
     }
@@ -1992,12 +2014,25 @@ impl<'s, 'a> Tracer<'s, 'a> {
             z1 = z1.min(tv[0].max(tv[1]).max(tv[2]) + eps);
         }
         let tw = t * inv_s;
-        let mut f = Frag { z0: z0 * inv_s, z1: z1 * inv_s, w, wt: w * tw, best_w: w, ..Default::default() };
+        let [i0, i1, i2] = mesh.tris[tri as usize];
+        // Facing ([`Frag::alpha`]) by the vertex normals, as the points' normals are made,
+        // so that a mesh wound against its normals classifies both alike.
+        let wb = if self.p.facing {
+            let nv = mesh.normal(i0) + mesh.normal(i1) + mesh.normal(i2);
+            let nv = if nv.length_squared() > 0.0 { nv } else { ng };
+            if nv.dot(lc.dir) > 0.0 {
+                w
+            } else {
+                0.0
+            }
+        } else {
+            0.0
+        };
+        let mut f = Frag { z0: z0 * inv_s, z1: z1 * inv_s, w, wt: w * tw, best_w: w, wb, ..Default::default() };
         if self.p.coverage_masks {
             f.mask = super::mask::tri_mask(super::mask::whiten(lc, pw, t, self.clamp, self.floor * s));
         }
         if mode == Collect::Shade {
-            let [i0, i1, i2] = mesh.tris[tri as usize];
             let mat = &self.ms.scene.materials[leaf.material.unwrap_or(mesh.mat[tri as usize]) as usize];
             let b0 = 1.0 - b1 - b2;
             let mut nn = mesh.normal(i0) * b0 + mesh.normal(i1) * b1 + mesh.normal(i2) * b2;
@@ -2362,7 +2397,8 @@ impl<'s, 'a> Tracer<'s, 'a> {
                         } else {
                             Own::NONE
                         };
-                        self.traverse_own(&sh, own, &mut ab, Collect::Alpha, &mut ss.trav, c);
+                        let st = Tracer { tri: self.p.shadow_tri(), ..*self };
+                        st.traverse_own(&sh, own, &mut ab, Collect::Alpha, &mut ss.trav, c);
                         c.add(Counter::fragments_merged, ab.merges);
                         let kind = if depth == 0 { ConeKind::PrimaryShadow } else { ConeKind::SecondaryShadow };
                         ss.profile.record(kind, &before, c, since);
@@ -2765,7 +2801,7 @@ mod tests {
         let tree = build(&mesh, &mats, &BuildParams::default()).unwrap();
         let mut s = Sampler::new(3, 0, 0);
         let (mut refh, mut got) = (PointHits::default(), PointHits::default());
-        let mut total = 0;
+        let (mut total, mut away) = (0, 0);
         for _ in 0..300 {
             let mut cone = rnd_cone(&mut s);
             cone.org = Vec3::new(s.next() - 0.5, s.next() - 0.5, 4.0);
@@ -2792,16 +2828,17 @@ mod tests {
                             boxe.copied().unwrap_or_else(|| eigen_1(cone.sigma(blk.coords(ia.min(ib) as usize).z.max(0.0)), 0.125, 1e-7));
                         let peak = 0.7 * quant::COVER_MAX / (e.s1 * e.s2);
                         if ia < ib {
-                            assert!(refh.w[a] <= 0.0201 * peak, "x8 missed point {ia}: w {}", refh.w[a]);
+                            assert!(refh.w[a].abs() <= 0.0201 * peak, "x8 missed point {ia}: w {}", refh.w[a]);
                             a += 1;
                         } else if ib < ia {
-                            assert!(got.w[b] <= 0.0201 * peak, "x8 extra point {ib}: w {}", got.w[b]);
+                            assert!(got.w[b].abs() <= 0.0201 * peak, "x8 extra point {ib}: w {}", got.w[b]);
                             b += 1;
                         } else {
                             let (w, gw, t, gt) = (refh.w[a], got.w[b], refh.t[a], got.t[b]);
-                            assert!((w - gw).abs() <= 1e-3 * w + 1e-6 * peak, "{w} vs {gw}");
+                            assert!((w - gw).abs() <= 1e-3 * w.abs() + 1e-6 * peak, "{w} vs {gw}");
                             assert!((t - gt).abs() <= 1e-5 * (1.0 + t.abs()), "{t} vs {gt}");
                             total += 1;
+                            away += (w > 0.0) as usize;
                             a += 1;
                             b += 1;
                         }
@@ -2810,6 +2847,8 @@ mod tests {
             }
         }
         assert!(total > 100, "too few point hits exercised: {total}");
+        // The sphere's points face both ways along the cones: both signs were compared.
+        assert!(away > 10 && total - away > 10, "{away} of {total} points facing away");
     }
 
     #[test]
