@@ -59,9 +59,9 @@ fn jobs(quick: bool) -> Vec<Job> {
     // 28: `complex` at 1.8× the octree Whitted frame instead of 3.0×).
     m.push("multires:clamp2=1:lod=4".into());
     let methods = m.join(",");
-    // Fig. 8, with the soft shadows also from triangle masses (stop 39: the paper's
-    // overestimated shadow region, §7, mostly gone).
-    let fx = format!("whitted:{a0},multires,multires:stri=mass");
+    // Fig. 8, also with the shadow cones' triangles by their mass (stop 39: the paper's
+    // overestimated shadow region, §7, mostly gone) and with every cone's.
+    let fx = format!("whitted:{a0},multires,multires:stri=mass,multires:tri=mass");
     // Distributed ray tracing at 1, 2, 4, … spp: the equal-time and equal-error comparison,
     // on the fast back-end and, as in the paper's §6 ("a distributed raytracer based on the
     // same code basis"), on the octree the multi-resolution tracer and its Whitted baseline
