@@ -307,6 +307,26 @@ fn toml_example_loads() {
     assert!(lo.y >= -1e-4, "{lo}");
 }
 
+/// Every scene file shipped in `scenes/` loads (those needing asset meshes once
+/// `tools/setup` has fetched them).
+#[test]
+fn shipped_scene_files_load() {
+    let mut n = 0;
+    for e in std::fs::read_dir(manifest().join("scenes")).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_some_and(|x| x == "toml") {
+            let text = std::fs::read_to_string(&p).unwrap();
+            if text.contains("assets/") && !assets_present() {
+                continue;
+            }
+            let s = load::load_scene(p.to_str().unwrap()).unwrap_or_else(|e| panic!("{e}"));
+            assert!(s.triangle_counts().unwrap().0 > 0, "{}", p.display());
+            n += 1;
+        }
+    }
+    assert!(n >= 4, "{n} scene files");
+}
+
 const GOOD_MESH: &str = "[meshes.ball]\ngenerator = \"icosphere\"\nlevel = 1\n";
 
 fn toml_err(dir: &Path, file: &str, text: &str) -> String {
