@@ -873,3 +873,32 @@ fn a_closed_surface_seen_from_inside_faces_away() {
     }
     assert!(cn.get(lodtrace::core::stats::Counter::surfel_tests) > 0 && cn.get(lodtrace::core::stats::Counter::triangle_tests) > 0);
 }
+
+/// A defocused cube on a floor (`scenes/dof-cube.toml`; the paper's §7 "merges the floor
+/// and the base of the bunny into a single fragment"): with the pieces of the two meshes
+/// composited by depth (`split_meshes`) and each fragment shaded by the side of the cube
+/// that shows (`facing`), the cone tracer comes much closer to the distributed reference
+/// than with the paper's sums, where the floor behind the cube's base averages into its
+/// faces and a face's normal averages with the far side's. Measured at 160×120 against 64
+/// spp: mean FLIP 0.199, against 0.358 with the paper's sums and 0.244 without the split.
+#[test]
+fn a_defocused_cube_keeps_its_faces() {
+    let scene = lodtrace::scene::tomlscene::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/dof-cube.toml")).unwrap();
+    let (w, h) = (160, 120);
+    let reference = conventional(
+        &scene,
+        reference_accel(),
+        &RenderOpts { integrator: Integrator::Distributed, width: w, height: h, spp: 64, variance_threshold: 0.0, ..Default::default() },
+    );
+    let flip = |tp: TraceParams| {
+        let f = cones(&scene, &tp, w, h);
+        lodtrace::film::metrics::flip_mean(&reference.color, &f.color, w, h).unwrap().0
+    };
+    let now = flip(TraceParams::default());
+    let paper = flip(TraceParams { split_meshes: false, facing: false, ..Default::default() });
+    let no_split = flip(TraceParams { split_meshes: false, ..Default::default() });
+    assert!(
+        now < 0.7 * paper && now < 0.9 * no_split,
+        "mean FLIP {now} against {paper} with the paper's sums, {no_split} without the split"
+    );
+}

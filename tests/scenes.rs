@@ -582,3 +582,13 @@ fn obj_errors_name_the_line() {
     }
     let _ = std::fs::remove_dir_all(&d);
 }
+#[test]
+fn closed_meshes_are_told_from_open_ones() {
+    assert!(lodtrace::scene::builtin::cube_mesh(0).is_closed());
+    assert!(lodtrace::scene::builtin::uv_sphere(8, 12, 0).is_closed());
+    assert!(lodtrace::scene::builtin::icosphere(2, 0).is_closed());
+    assert!(!lodtrace::scene::builtin::checkerboard(4, 4.0, 0, 0).is_closed());
+    let mut open = lodtrace::scene::builtin::cube_mesh(0);
+    open.tris.pop();
+    assert!(!open.is_closed(), "a cube with a missing triangle");
+}

@@ -232,6 +232,7 @@ impl MethodSpec {
                         )
                     }
                     "facing" => spec.multires.no_facing = !on(v)?,
+                    "split" => spec.multires.merge_meshes = !on(v)?,
                     "f" => spec.lod.lod_f = num(v)? as f32,
                     "a" => spec.lod.lod_a = num(v)? as f32,
                     "thres" => spec.lod.lod_threshold = num(v)? as f32,
@@ -258,7 +259,7 @@ impl MethodSpec {
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, mip, primary, budget, eigen, tri, stri, facing, term, pw, spread, groups, agg, plane, tight, mask; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, warm, cache_up, ordered, top)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, mip, primary, budget, eigen, tri, stri, facing, split, term, pw, spread, groups, agg, plane, tight, mask; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, warm, cache_up, ordered, top)"
                         )))
                     }
                 }

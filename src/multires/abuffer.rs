@@ -72,10 +72,110 @@ pub struct Frag {
     /// Of `w`, the weight of pieces whose normal faces away from the cone's origin (n·d > 0;
     /// `TraceParams::facing`, a deviation; 0 when off). See [`Frag::alpha`].
     pub wb: f32,
+    /// The mesh of the fragment's first piece (`TraceParams::split_meshes`; 0 for all when
+    /// off). Pieces of another mesh are summed apart in `other` as well.
+    pub key: u32,
+    /// Of the sums above, those of the pieces of one other mesh ([`Frag::parts`]).
+    pub other: Group,
+    /// Σ w·n and Σ w of the pieces of closed meshes facing away from the cone's origin: a
+    /// solid's far side, which shading leaves out when its near side is there too
+    /// (`TraceParams::facing`; [`super::trace`] `shade_visible`).
+    pub nb: Vec3,
+    pub wn: f32,
+}
+
+/// [`Frag::key`] of pieces that join any group (the points of instance-tree slots, which
+/// may hold several meshes and tile one surface with their neighbours): the paper's sum.
+pub const ANY_MESH: u32 = u32::MAX;
+
+/// The sums of a fragment's pieces from one mesh other than its first piece's.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Group {
+    pub key: u32,
+    pub w: f32,
+    pub wt: f32,
+    pub col: Vec3,
+    pub props: [f32; 7],
+    pub n: Vec3,
+    pub wb: f32,
+    pub best_w: f32,
+    pub best: Elem,
+    /// [`Frag::nb`], [`Frag::wn`].
+    pub nb: Vec3,
+    pub wn: f32,
+}
+
+impl Group {
+    fn add(&mut self, g: &Group) {
+        self.w += g.w;
+        self.wt += g.wt;
+        self.col += g.col;
+        for (a, b) in self.props.iter_mut().zip(g.props) {
+            *a += b;
+        }
+        self.n += g.n;
+        self.wb += g.wb;
+        self.nb += g.nb;
+        self.wn += g.wn;
+        if g.best_w > self.best_w {
+            self.best_w = g.best_w;
+            self.best = g.best;
+        }
+    }
 }
 
 impl Frag {
+    /// The sums of the pieces of the fragment's first mesh (`key`): all but `other`'s.
+    fn first(&self) -> Group {
+        let o = &self.other;
+        let mut props = self.props;
+        for (a, b) in props.iter_mut().zip(o.props) {
+            *a -= b;
+        }
+        Group {
+            key: self.key,
+            w: self.w - o.w,
+            wt: self.wt - o.wt,
+            col: self.col - o.col,
+            props,
+            n: self.n - o.n,
+            wb: self.wb - o.wb,
+            best_w: self.best_w,
+            best: self.best,
+            nb: self.nb - o.nb,
+            wn: self.wn - o.wn,
+        }
+    }
+
     fn absorb(&mut self, s: &Frag) {
+        // Split meshes: each of `s`'s groups joins the one here of its mesh; a new mesh
+        // becomes `other` when that is free, else joins the group nearer in depth.
+        let mut to_first = Group::default();
+        for g in [s.first(), s.other] {
+            if !(g.w > 0.0) {
+                continue;
+            }
+            let joins_first = if g.key == self.key || g.key == ANY_MESH || self.key == ANY_MESH {
+                if self.key == ANY_MESH {
+                    self.key = g.key;
+                }
+                true
+            } else if self.other.w > 0.0 && g.key != self.other.key {
+                let (gt, mine) = (g.wt / g.w, self.first());
+                let ta = if mine.w > 0.0 { mine.wt / mine.w } else { gt };
+                (gt - ta).abs() <= (gt - self.other.wt / self.other.w).abs()
+            } else {
+                false
+            };
+            if joins_first {
+                to_first.add(&g);
+            } else {
+                if !(self.other.w > 0.0) {
+                    self.other.key = g.key;
+                }
+                self.other.add(&g);
+            }
+        }
         self.z0 = self.z0.min(s.z0);
         self.z1 = self.z1.max(s.z1);
         self.w += s.w;
@@ -85,9 +185,11 @@ impl Frag {
             *a += b;
         }
         self.n += s.n;
-        if s.best_w > self.best_w {
-            self.best_w = s.best_w;
-            self.best = s.best;
+        self.nb += s.nb;
+        self.wn += s.wn;
+        if to_first.best_w > self.best_w {
+            self.best_w = to_first.best_w;
+            self.best = to_first.best;
         }
         // Overlap within the fragment (`--coverage-masks`): the share of the new piece's
         // coverage that falls on sub-rays already covered here is not coverage.
@@ -112,7 +214,48 @@ impl Frag {
     /// this is the paper's rule, bit for bit.
     #[inline]
     pub fn alpha(&self) -> f32 {
+        if self.other.w > 0.0 {
+            let ([a, b], _) = self.parts();
+            let aa = a.alpha();
+            return aa + (1.0 - aa) * b.alpha();
+        }
         (self.w - self.hidden).min((self.w - self.wb).max(self.wb)).min(1.0)
+    }
+    /// The fragment as its meshes' groups, nearer mean depth first: two fragments when it
+    /// holds pieces of two meshes (`TraceParams::split_meshes`), else itself alone. Within
+    /// one footprint and depth interval, pieces of different meshes (an object and the floor
+    /// it stands on) are separate surfaces, of which the nearer hides the farther; the
+    /// paper's sum lets a floor behind an object's base shine through the object (its §7:
+    /// "the compositing step merges the floor and the base of the bunny into a single
+    /// fragment"). Each group composites front to back as a fragment of its own.
+    pub fn parts(&self) -> ([Frag; 2], usize) {
+        if !(self.other.w > 0.0) {
+            return ([*self, *self], 1);
+        }
+        let part = |g: Group, mask: u64, hidden: f32| Frag {
+            z0: self.z0,
+            z1: self.z1,
+            w: g.w,
+            wt: g.wt,
+            col: g.col,
+            props: g.props,
+            n: g.n,
+            best_w: g.best_w,
+            best: g.best,
+            mask,
+            hidden,
+            wb: g.wb,
+            key: g.key,
+            other: Group::default(),
+            nb: g.nb,
+            wn: g.wn,
+        };
+        let (a, b) = (part(self.first(), self.mask, self.hidden), part(self.other, 0, 0.0));
+        if a.t() <= b.t() {
+            ([a, b], 2)
+        } else {
+            ([b, a], 2)
+        }
     }
     /// Mean depth.
     pub fn t(&self) -> f32 {
@@ -251,7 +394,10 @@ impl ABuffer {
     pub fn alpha(&self) -> f32 {
         let mut o = Over::default();
         for f in &self.frags {
-            o.add(f);
+            let (p, n) = f.parts();
+            for q in &p[..n] {
+                o.add(q);
+            }
         }
         o.acc
     }
@@ -336,6 +482,39 @@ mod tests {
         assert!((f.alpha() - 0.9).abs() < 1e-6);
         let f = Frag { w: 1.4, wb: 0.6, hidden: 0.1, ..Default::default() };
         assert!((f.alpha() - 0.8).abs() < 1e-6, "{}", f.alpha());
+    }
+
+    /// `TraceParams::split_meshes`: an object's face and the floor behind its base, merged
+    /// by their depth intervals, composite front to back as two surfaces: the face hides
+    /// the floor behind it, where the paper's sum averages the floor's colour in by weight.
+    #[test]
+    fn pieces_of_two_meshes_composite_by_depth() {
+        let piece = |t: f32, w: f32, c: Vec3, key: u32| Frag { key, ..smp(t, 0.4, w, c) };
+        for split in [true, false] {
+            let (face, floor) = if split { (1, 0) } else { (0, 0) };
+            let mut ab = ABuffer::new(16);
+            ab.insert(piece(6.6, 0.87, Vec3::X, face));
+            ab.insert(piece(6.73, 1.0, Vec3::Y, floor));
+            assert_eq!(ab.frags.len(), 1, "merged by depth");
+            let (parts, n) = ab.frags[0].parts();
+            let mut over = Over::default();
+            let col: Vec3 = parts[..n].iter().map(|p| p.col / p.w * over.add(p)).sum();
+            assert!((ab.alpha() - 1.0).abs() < 1e-6);
+            if split {
+                assert_eq!(n, 2);
+                assert!((col - Vec3::new(0.87, 0.13, 0.0)).length() < 1e-5, "the face in front: {col}");
+            } else {
+                assert_eq!(n, 1);
+                assert!((col - Vec3::new(0.87, 1.0, 0.0) / 1.87).length() < 1e-5, "the paper's weighted mean: {col}");
+            }
+        }
+        // A third mesh joins the group nearer in depth; the sums stay whole.
+        let mut ab = ABuffer::new(16);
+        ab.insert(piece(6.6, 0.5, Vec3::X, 1));
+        ab.insert(piece(6.9, 0.5, Vec3::Y, 2));
+        ab.insert(piece(6.85, 0.25, Vec3::Z, 3));
+        let f = &ab.frags[0];
+        assert!((f.w - 1.25).abs() < 1e-6 && (f.other.w - 0.75).abs() < 1e-6 && f.other.key == 2, "{:?}", f.other);
     }
 
     #[test]

@@ -80,13 +80,23 @@ pub struct MultiresArgs {
     /// time (README, stop 39).
     #[arg(long, value_enum)]
     pub shadow_tri_weight: Option<trace::TriWeight>,
-    /// Let a fragment's alpha be the sum of all its weights, as the paper, instead of the
-    /// larger of the weights facing towards and away from the cone's origin (the default, a
-    /// deviation): a wide footprint that merges a solid's near and far sides into one
-    /// fragment otherwise counts its coverage twice, the paper's overestimated soft shadows
-    /// and silhouettes (§7). See `multires::abuffer::Frag::alpha`.
+    /// Let a fragment's alpha be the sum of all its weights and its normal the mean of all
+    /// its pieces', as the paper, instead of the larger of the weights facing towards and away
+    /// from the cone's origin and the normal of the closed surfaces' side that shows (the
+    /// default, a deviation): a wide footprint that merges a solid's near and far sides into
+    /// one fragment otherwise counts its coverage twice, the paper's overestimated soft
+    /// shadows and silhouettes (§7), and shades it with a normal averaged from both sides.
+    /// See `multires::abuffer::Frag::alpha`.
     #[arg(long)]
     pub no_facing: bool,
+    /// Sum every piece whose depth interval overlaps a fragment into it, as the paper;
+    /// default (a deviation): a fragment keeps the pieces of two meshes (an object and the
+    /// floor it stands on) apart and composites them front to back by their mean depths, so a
+    /// floor behind an object's base does not average into the object (the paper's §7
+    /// "merges the floor and the base of the bunny into a single fragment"). See
+    /// `multires::abuffer::Frag::parts`.
+    #[arg(long)]
+    pub merge_meshes: bool,
     /// Primary cone footprint in pixels (1 = the pixel's extent, the paper's wording). The
     /// default 0.5 is close to 0.41, where the Gaussian's variance equals a box pixel's.
     #[arg(long, default_value_t = 0.5)]
@@ -158,6 +168,7 @@ impl Default for MultiresArgs {
             tri_weight: t.tri_weight,
             shadow_tri_weight: t.shadow_tri_weight,
             no_facing: !t.facing,
+            merge_meshes: !t.split_meshes,
             cone_scale: t.cone_scale,
             no_mipmap: !t.mipmap,
             primary_only: t.primary_only,
@@ -190,7 +201,7 @@ impl MultiresArgs {
         diff!(trace:
             anisotropy_clamp => "--anisotropy-clamp", secondary_clamp => "--secondary-clamp", lod_scale => "--lod-scale",
             depth_tolerance => "--depth-tolerance", eigen => "--eigen", tri_weight => "--tri-weight",
-            shadow_tri_weight => "--shadow-tri-weight", no_facing => "--no-facing", cone_scale => "--cone-scale",
+            shadow_tri_weight => "--shadow-tri-weight", no_facing => "--no-facing", merge_meshes => "--merge-meshes", cone_scale => "--cone-scale",
             no_mipmap => "--no-mipmap", primary_only => "--primary-only", termination => "--termination",
             no_normal_spread => "--no-normal-spread", no_group_points => "--no-group-points",
             no_aggregate_shadow => "--no-aggregate-shadow", tight_depth => "--tight-depth", coverage_masks => "--coverage-masks",
@@ -210,6 +221,7 @@ impl MultiresArgs {
             tri_weight: self.tri_weight,
             shadow_tri_weight: self.shadow_tri_weight,
             facing: !self.no_facing,
+            split_meshes: !self.merge_meshes,
             cone_scale: self.cone_scale,
             mipmap: !self.no_mipmap,
             primary_only: self.primary_only,

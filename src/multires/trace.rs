@@ -187,8 +187,12 @@ pub struct TraceParams {
     /// soft shadows the exact coverage of tessellated occluders (see `shade`).
     pub shadow_tri_weight: Option<TriWeight>,
     /// A fragment's alpha counts a closed surface's near and far sides once
-    /// ([`super::abuffer::Frag::alpha`]); off: the paper's weight sum.
+    /// ([`super::abuffer::Frag::alpha`]), and it is shaded by the side that shows
+    /// (`shade_visible`); off: the paper's weight sum and mean normal.
     pub facing: bool,
+    /// A fragment keeps the pieces of two meshes apart and composites them by depth
+    /// ([`super::abuffer::Frag::parts`]); off: the paper's sum over all its pieces.
+    pub split_meshes: bool,
     /// false: classic cone tracing, triangles only (`--method cone`).
     pub points: bool,
     /// Primary footprint in pixels (1 = the pixel's extent, §4.2).
@@ -236,6 +240,7 @@ impl Default for TraceParams {
             tri_weight: TriWeight::Coverage,
             shadow_tri_weight: None,
             facing: true,
+            split_meshes: true,
             points: true,
             cone_scale: 0.5,
             max_fragments: 16,
@@ -468,6 +473,9 @@ pub struct MultiresScene<'a> {
     pub groups: GroupPoints,
     /// The planes of the flat instances, per leaf and per slot ([`super::plane`]).
     pub flat: super::plane::FlatPlanes,
+    /// Per scene mesh: closed ([`crate::scene::Mesh::is_closed`]), so that a piece facing
+    /// away from a cone belongs to a solid's far side (`shade_visible`).
+    pub closed: Vec<bool>,
     /// Wall time of [`MultiresScene::build`]: building the trees, or reading them from the
     /// cache, and the instance-level points.
     pub build_seconds: f64,
@@ -551,8 +559,22 @@ impl<'a> MultiresScene<'a> {
             .collect();
         let groups = super::group::build(&scene.materials, &tree_meshes, &mleaves, &tlas, bp);
         let flat = super::plane::FlatPlanes::build(scene, &mleaves, &tlas);
+        let mut closed = vec![false; scene.meshes.len()];
+        for &(m, _) in &keys {
+            closed[m as usize] = scene.meshes[m as usize].is_closed();
+        }
         let group_seconds = t1.elapsed().as_secs_f64();
-        Ok(MultiresScene { scene, trees, leaves: mleaves, tlas, groups, flat, build_seconds: t0.elapsed().as_secs_f64(), group_seconds })
+        Ok(MultiresScene {
+            scene,
+            trees,
+            leaves: mleaves,
+            tlas,
+            groups,
+            flat,
+            closed,
+            build_seconds: t0.elapsed().as_secs_f64(),
+            group_seconds,
+        })
     }
 
     pub fn memory_bytes(&self) -> usize {
@@ -1534,6 +1556,18 @@ impl<'s, 'a> Tracer<'s, 'a> {
         Tracer { ms, p, clamp: p.clamp, floor, tri: p.tri_weight, abort, deadline }
     }
 
+    /// A fragment piece's mesh key ([`Frag::key`]): `mesh` (or
+    /// [`super::abuffer::ANY_MESH`] for an instance-tree slot's points), 0 for all without
+    /// `split_meshes`.
+    #[inline]
+    fn mesh_key(&self, mesh: u32) -> u32 {
+        if self.p.split_meshes {
+            mesh
+        } else {
+            0
+        }
+    }
+
     /// The tracer of reflected and refracted cones (and, through their hits, of everything
     /// below them): the same but for the anisotropy clamp (`--secondary-clamp`).
     fn secondary(&self) -> Self {
@@ -1867,7 +1901,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let pts = (&tree.points, start, &tree.ranges);
         let normal_mat = Some(&self.ms.leaves[li as usize].normal_mat);
         let best = |j: usize| Elem::Point { leaf: li, node: n as u32, idx: j as u32 };
-        self.weigh_points(lc, &blk, s, h, boxe, blend, pts, normal_mat, best, ab, hits, mode, c);
+        let mesh = self.ms.leaves[li as usize].mesh;
+        let piece = (best, self.mesh_key(mesh), self.ms.closed[mesh as usize]);
+        self.weigh_points(lc, &blk, s, h, boxe, blend, pts, normal_mat, piece, ab, hits, mode, c);
     }
 
     /// The points of instance-tree slot `gi` ([`super::group`]), as [`Tracer::test_points`]
@@ -1891,7 +1927,8 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let q = (&p.qx[start..e], &p.qy[start..e], &p.qz[start..e]);
         let blk = PointBlock { n, ..PointBlock::from_grid(q, &p.normal[start..e], &p.cover[start..e], g.grid_lo[gi], g.step[gi], cone) };
         let best = |j: usize| Elem::Group { slot: gi as u32, idx: j as u32 };
-        self.weigh_points(cone, &blk, 1.0, g.h[gi], boxe, blend, (p, start, &g.ranges), None, best, ab, hits, mode, c);
+        let piece = (best, self.mesh_key(super::abuffer::ANY_MESH), false);
+        self.weigh_points(cone, &blk, 1.0, g.h[gi], boxe, blend, (p, start, &g.ranges), None, piece, ab, hits, mode, c);
     }
 
     /// Weighs a block of points (§4.3; spacing `h`, `pts` = the points, the block's first index
@@ -1908,7 +1945,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         blend: f32,
         (pts, start, ranges): (&PointSoa, usize, &MatRanges),
         normal_mat: Option<&Mat3>,
-        best: impl Fn(usize) -> Elem,
+        (best, key, closed): (impl Fn(usize) -> Elem, u32, bool),
         ab: &mut ABuffer,
         hits: &mut PointHits,
         mode: Collect,
@@ -1933,7 +1970,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             }
             let tw = t * inv_s;
             let wb = if away { w } else { 0.0 };
-            let mut f = Frag { z0: tw - dz, z1: tw + dz, w, wt: w * tw, best_w: w, wb, ..Default::default() };
+            let mut f = Frag { z0: tw - dz, z1: tw + dz, w, wt: w * tw, best_w: w, wb, key, ..Default::default() };
             if mode == Collect::Shade {
                 let m = ranges.decode(pts.rgb[j], pts.mat[j]);
                 f.col = m.color * w;
@@ -1946,6 +1983,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
                     None => nrm,
                 };
                 f.n = nrm * (w * spread);
+                if away && closed {
+                    (f.nb, f.wn) = (f.n, w);
+                }
                 f.best = best(j);
             }
             ab.insert(f);
@@ -2028,7 +2068,8 @@ impl<'s, 'a> Tracer<'s, 'a> {
         } else {
             0.0
         };
-        let mut f = Frag { z0: z0 * inv_s, z1: z1 * inv_s, w, wt: w * tw, best_w: w, wb, ..Default::default() };
+        let key = self.mesh_key(leaf.mesh);
+        let mut f = Frag { z0: z0 * inv_s, z1: z1 * inv_s, w, wt: w * tw, best_w: w, wb, key, ..Default::default() };
         if self.p.coverage_masks {
             f.mask = super::mask::tri_mask(super::mask::whiten(lc, pw, t, self.clamp, self.floor * s));
         }
@@ -2042,6 +2083,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
             f.col = mat.color * w;
             f.props = mat_props(mat).map(|v| v * w);
             f.n = (leaf.normal_mat * nn).normalize_or_zero() * w;
+            if wb > 0.0 && self.ms.closed[leaf.mesh as usize] {
+                (f.nb, f.wn) = (f.n, w);
+            }
             f.best = Elem::Tri { leaf: li, tri, b1, b2 };
         }
         ab.insert(f);
@@ -2237,18 +2281,20 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let scene = self.ms.scene;
         let mut res = ConeResult { color: Vec3::ZERO, alpha: 0.0, depth: f32::INFINITY, normal: Vec3::ZERO };
         let mut over = super::abuffer::Over::default();
-        for f in &ab.frags {
-            let k = over.add(f);
-            let acc = over.acc;
-            if res.depth.is_infinite() && f.w >= 0.5 {
-                res.depth = f.t();
-                res.normal = f.n.normalize_or_zero();
+        'frags: for whole in &ab.frags {
+            if res.depth.is_infinite() && whole.w >= 0.5 {
+                res.depth = whole.t();
+                res.normal = whole.n.normalize_or_zero();
             }
-            if k > 1e-4 {
-                res.color += self.shade(cone, f, depth, importance * k, ss, c) * k;
-            }
-            if acc >= super::abuffer::OPAQUE {
-                break;
+            let (parts, n) = whole.parts();
+            for f in &parts[..n] {
+                let k = over.add(f);
+                if k > 1e-4 {
+                    res.color += self.shade_visible(cone, f, depth, importance * k, ss, c) * k;
+                }
+                if over.acc >= super::abuffer::OPAQUE {
+                    break 'frags;
+                }
             }
         }
         let acc = over.acc;
@@ -2256,6 +2302,21 @@ impl<'s, 'a> Tracer<'s, 'a> {
         res.color += scene.background * (1.0 - acc);
         ss.bufs[depth as usize] = ab;
         res
+    }
+
+    /// Shades a fragment by the side of it that shows (`TraceParams::facing`, a
+    /// deviation): where a wide footprint merges a closed surface's near and far sides into
+    /// one fragment, its averaged normal is meaningless (a cube's top and back faces average
+    /// to a normal turned from the light: dark patches under defocus). The near side (the
+    /// pieces facing the cone's origin) shows unless it weighs under half the far side's
+    /// (a cone leaving a glass solid from inside sees only the far side). Open meshes
+    /// (leaves, floors) have no far side: every piece counts.
+    fn shade_visible(&self, cone: &Cone, f: &Frag, depth: u32, importance: f32, ss: &mut ShadeScratch, c: &mut Counters) -> Vec3 {
+        if !(f.wn > 0.0) {
+            return self.shade(cone, f, depth, importance, ss, c);
+        }
+        let (n, w) = if f.w - f.wn < 0.5 * f.wn { (f.nb, f.wn) } else { (f.n - f.nb, f.w - f.wn) };
+        self.shade(cone, &Frag { n: n * (f.w / w), ..*f }, depth, importance, ss, c)
     }
 
     fn shade(&self, cone: &Cone, f: &Frag, depth: u32, importance: f32, ss: &mut ShadeScratch, c: &mut Counters) -> Vec3 {

@@ -83,6 +83,33 @@ impl Mesh {
         self.ny = unit.iter().map(|v| v.y).collect();
         self.nz = unit.iter().map(|v| v.z).collect();
     }
+    /// Whether the mesh is closed: with vertices welded by exact position, every edge is
+    /// shared by exactly two triangles (the surface of a solid; a sphere, a cube, a closed
+    /// scan), so a line through it crosses it as often inwards as outwards.
+    pub fn is_closed(&self) -> bool {
+        if self.tris.is_empty() {
+            return false;
+        }
+        let mut id = std::collections::HashMap::new();
+        let weld: Vec<u32> = (0..self.vertex_count() as u32)
+            .map(|i| {
+                let p = self.pos(i);
+                let n = id.len() as u32;
+                *id.entry([p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]).or_insert(n)
+            })
+            .collect();
+        let mut edges = std::collections::HashMap::new();
+        for t in &self.tris {
+            for k in 0..3 {
+                let (a, b) = (weld[t[k] as usize], weld[t[(k + 1) % 3] as usize]);
+                if a == b {
+                    return false;
+                }
+                *edges.entry((a.min(b), a.max(b))).or_insert(0u32) += 1;
+            }
+        }
+        edges.values().all(|&n| n == 2)
+    }
     /// Removes triangles with non-finite vertices or zero area; returns how many were removed.
     pub fn remove_degenerate(&mut self) -> usize {
         let before = self.tris.len();
