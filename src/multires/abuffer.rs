@@ -19,6 +19,12 @@
 //! masks; overlap within a fragment is then not counted as coverage ([`Frag::hidden`]) and
 //! the compositing across fragments is corrected for it ([`Over`]).
 //!
+//! *Deviations* for the paper's §7 limitations (stop 39, default on): a fragment's alpha
+//! counts a closed surface's near and far sides once (`--no-facing`, [`Frag::alpha`]), and
+//! a fragment keeps the pieces of a second mesh apart and composites the two by depth, so a
+//! floor behind an object's base does not average into it (`--merge-meshes`,
+//! [`Frag::parts`]).
+//!
 //! Bounded memory: at most `cap` fragments (default 16); when full, the two adjacent
 //! fragments with the smallest gap are merged (a documented approximation; it is counted in
 //! `fragments_merged` like every merge).
