@@ -112,45 +112,55 @@ pub struct Group {
 }
 
 impl Group {
-    fn add(&mut self, g: &Group) {
-        self.w += g.w;
-        self.wt += g.wt;
-        self.col += g.col;
+    /// Adds `k` times `g`'s sums; for k > 0 `g`'s best element may take over.
+    fn add_scaled(&mut self, g: &Group, k: f32) {
+        self.w += k * g.w;
+        self.wt += k * g.wt;
+        self.col += k * g.col;
         for (a, b) in self.props.iter_mut().zip(g.props) {
-            *a += b;
+            *a += k * b;
         }
-        self.n += g.n;
-        self.wb += g.wb;
-        self.nb += g.nb;
-        self.wn += g.wn;
-        if g.best_w > self.best_w {
+        self.n += k * g.n;
+        self.wb += k * g.wb;
+        self.nb += k * g.nb;
+        self.wn += k * g.wn;
+        if k > 0.0 && g.best_w > self.best_w {
             self.best_w = g.best_w;
             self.best = g.best;
         }
     }
+    fn add(&mut self, g: &Group) {
+        self.add_scaled(g, 1.0);
+    }
 }
 
 impl Frag {
-    /// The sums of the pieces of the fragment's first mesh (`key`): all but `other`'s.
-    fn first(&self) -> Group {
-        let o = &self.other;
-        let mut props = self.props;
-        for (a, b) in props.iter_mut().zip(o.props) {
-            *a -= b;
-        }
+    /// All the fragment's sums as a group (its first mesh's key and best element).
+    fn sums(&self) -> Group {
         Group {
             key: self.key,
-            w: self.w - o.w,
-            wt: self.wt - o.wt,
-            col: self.col - o.col,
-            props,
-            n: self.n - o.n,
-            wb: self.wb - o.wb,
+            w: self.w,
+            wt: self.wt,
+            col: self.col,
+            props: self.props,
+            n: self.n,
+            wb: self.wb,
             best_w: self.best_w,
             best: self.best,
-            nb: self.nb - o.nb,
-            wn: self.wn - o.wn,
+            nb: self.nb,
+            wn: self.wn,
         }
+    }
+    /// Sets the fragment's sums, key and best element from `g`.
+    fn set_sums(&mut self, g: &Group) {
+        (self.key, self.w, self.wt, self.col, self.props, self.n) = (g.key, g.w, g.wt, g.col, g.props, g.n);
+        (self.wb, self.best_w, self.best, self.nb, self.wn) = (g.wb, g.best_w, g.best, g.nb, g.wn);
+    }
+    /// The sums of the pieces of the fragment's first mesh (`key`): all but `other`'s.
+    fn first(&self) -> Group {
+        let mut g = self.sums();
+        g.add_scaled(&self.other, -1.0);
+        g
     }
 
     fn absorb(&mut self, s: &Frag) {
@@ -184,15 +194,11 @@ impl Frag {
         }
         self.z0 = self.z0.min(s.z0);
         self.z1 = self.z1.max(s.z1);
-        self.w += s.w;
-        self.wt += s.wt;
-        self.col += s.col;
-        for (a, b) in self.props.iter_mut().zip(s.props) {
-            *a += b;
-        }
-        self.n += s.n;
-        self.nb += s.nb;
-        self.wn += s.wn;
+        // The totals; the best element only from the pieces that joined the first group.
+        let mut t = self.sums();
+        t.add_scaled(&s.sums(), 1.0);
+        (t.best_w, t.best) = (self.best_w, self.best);
+        self.set_sums(&t);
         if to_first.best_w > self.best_w {
             self.best_w = to_first.best_w;
             self.best = to_first.best;
@@ -200,7 +206,6 @@ impl Frag {
         // Overlap within the fragment (`--coverage-masks`): the share of the new piece's
         // coverage that falls on sub-rays already covered here is not coverage.
         self.hidden += s.hidden;
-        self.wb += s.wb;
         if s.mask & self.mask != 0 {
             let over = (s.mask & self.mask).count_ones() as f32 / s.mask.count_ones() as f32;
             self.hidden += (s.w - s.hidden).max(0.0) * over;
@@ -238,23 +243,10 @@ impl Frag {
         if !(self.other.w > 0.0) {
             return ([*self, *self], 1);
         }
-        let part = |g: Group, mask: u64, hidden: f32| Frag {
-            z0: self.z0,
-            z1: self.z1,
-            w: g.w,
-            wt: g.wt,
-            col: g.col,
-            props: g.props,
-            n: g.n,
-            best_w: g.best_w,
-            best: g.best,
-            mask,
-            hidden,
-            wb: g.wb,
-            key: g.key,
-            other: Group::default(),
-            nb: g.nb,
-            wn: g.wn,
+        let part = |g: Group, mask: u64, hidden: f32| {
+            let mut f = Frag { z0: self.z0, z1: self.z1, mask, hidden, ..Default::default() };
+            f.set_sums(&g);
+            f
         };
         let (a, b) = (part(self.first(), self.mask, self.hidden), part(self.other, 0, 0.0));
         if a.t() <= b.t() {
