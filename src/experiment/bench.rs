@@ -6,7 +6,7 @@
 //! A method spec is `METHOD[:ACCEL][:key=value...]`, keys: `spp`, `threads`, `packet`,
 //! `fps` (distributed first-pass spp), `vt` (distributed variance threshold), `depth`; for
 //! the cone tracers (`multires`, `cone`): `k`, `c` (oversampling), `clamp`, `clamp2` (secondary cones), `lod`, `dtol`,
-//! `cs` (cone scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage|mass`, `term=paper|final`, `pw=area|voxel`, `spread=0`, `groups=0`, `agg=0` (surface shadow skip for aggregates too), `plane=0` (`--no-plane-skip`), `tight=1` (a triangle fragment's depth interval from its vertices, not its plane), `mask=1` (`--coverage-masks`);
+//! `cs` (cone scale), `lens` (lens scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage|mass`, `term=paper|final`, `pw=area|voxel`, `spread=0`, `groups=0`, `agg=0` (surface shadow skip for aggregates too), `plane=0` (`--no-plane-skip`), `tight=1` (a triangle fragment's depth interval from its vertices, not its plane), `mask=1` (`--coverage-masks`);
 //! for `lod`: `f`, `a` (a_LOD), `thres`, `sel=0` (no selective tracing), `levels`, `dist`
 //! (distance criterion), `force` (fixed LOD), `net=1` (net disparity), `select=cone` (the
 //! ray-cone selector); for `surfel`: `update`, `frames`, `detail`, `shadows=0`, `exact`,
@@ -204,6 +204,7 @@ impl MethodSpec {
                     "lod" => spec.multires.lod_scale = num(v)? as f32,
                     "dtol" => spec.multires.depth_tolerance = num(v)? as f32,
                     "cs" => spec.multires.cone_scale = num(v)? as f32,
+                    "lens" => spec.multires.lens_scale = num(v)? as f32,
                     "mip" => spec.multires.no_mipmap = !on(v)?,
                     "primary" => spec.multires.primary_only = on(v)?,
                     "budget" => spec.multires.time_budget = Some(num(v)?),
@@ -273,8 +274,8 @@ impl MethodSpec {
         for key in &seen {
             let of = match *key {
                 "k" | "c" | "pw" if !(cone || octree) => "multires and cone, and of the accel octree",
-                "clamp" | "clamp2" | "lod" | "dtol" | "cs" | "mip" | "primary" | "budget" | "spread" | "groups" | "agg" | "plane"
-                | "tight" | "mask" | "term" | "tri" | "eigen"
+                "clamp" | "clamp2" | "lod" | "dtol" | "cs" | "lens" | "mip" | "primary" | "budget" | "spread" | "groups" | "agg"
+                | "plane" | "tight" | "mask" | "term" | "tri" | "eigen"
                     if !cone =>
                 {
                     "multires and cone"

@@ -15,6 +15,10 @@
 //! - primary: zero startDev, incrDev = the pixel's extent (the derivative of the DESIGN.md
 //!   camera direction per pixel), scaled by `cone_scale` (1 = the pixel size). Depth of field:
 //!   a second pair with startDev = the lens radius and footprint zero at the focal plane.
+//!   *Deviation (stop 40, `--lens-scale`):* by default the lens part is the radius × 1/√2, so
+//!   that its Gaussian, exp(−x²/a²) of variance a²/2 per axis, has the variance of the thin
+//!   lens's uniform disk (R²/4) that distributed ray tracing samples; with the radius itself
+//!   (`--lens-scale 1`) a defocused object blurs √2 times too wide.
 //!   *Deviation:* the paper takes the maximum of the lens and the pixel cone; we add their
 //!   squares (the convolution used for shadow rays), which is smooth, never smaller than the
 //!   maximum and at most √2 larger.
@@ -170,8 +174,9 @@ impl Cone {
         [f0, f1, e1 * rate(e.cos, e.sin), e2 * rate(-e.sin, e.cos)]
     }
 
-    /// The primary cone through pixel (i, j) (its centre, as the DESIGN.md camera).
-    pub fn primary(cam: &CameraFrame, i: u32, j: u32, cone_scale: f32) -> Cone {
+    /// The primary cone through pixel (i, j) (its centre, as the DESIGN.md camera): its pixel
+    /// part scaled by `cone_scale`, its lens part by `lens_scale` (1: the lens radius).
+    pub fn primary(cam: &CameraFrame, i: u32, j: u32, cone_scale: f32, lens_scale: f32) -> Cone {
         let (px, py) = (i as f32 + 0.5, j as f32 + 0.5);
         let x = (2.0 * px / cam.width as f32 - 1.0) * cam.aspect * cam.s;
         let y = (1.0 - 2.0 * py / cam.height as f32) * cam.s;
@@ -186,9 +191,10 @@ impl Cone {
         let incr = c.fp_of(ix, iy);
         c.add_pair(Fp::ZERO, incr);
         if cam.aperture > 0.0 {
-            // Lens: radius `aperture` at t = 0, zero at the focal plane.
+            // Lens: `lens_scale` × radius `aperture` at t = 0, zero at the focal plane.
             let t_focus = cam.focal_dist / dir.dot(cam.f).max(1e-3);
-            let s = c.fp_of(cam.r * cam.aperture, cam.u * cam.aperture);
+            let a = cam.aperture * lens_scale;
+            let s = c.fp_of(cam.r * a, cam.u * a);
             c.add_pair(s, s.scale(-1.0 / t_focus));
         }
         c
@@ -336,7 +342,7 @@ mod tests {
         let cam = Camera { eye: Vec3::ZERO, look: Vec3::new(0.0, 0.0, -1.0), up: Vec3::Y, fovy: 60.0, ..Default::default() };
         let fr = cam.frame(200, 100);
         for (i, j) in [(100, 50), (0, 0), (199, 99), (37, 80)] {
-            let c = Cone::primary(&fr, i, j, 1.0);
+            let c = Cone::primary(&fr, i, j, 1.0, 1.0);
             for t in [0.5f32, 3.0, 40.0] {
                 // Pixel neighbours' directions at distance t, projected on the plane ⟂ dir.
                 let d0 = fr.pixel_center_dir(i, j);
@@ -362,9 +368,9 @@ mod tests {
     fn depth_of_field_cone_is_narrowest_at_focus() {
         let cam = Camera { eye: Vec3::ZERO, look: Vec3::new(0.0, 0.0, -1.0), up: Vec3::Y, fovy: 40.0, aperture: 0.1, focal_dist: 5.0 };
         let fr = cam.frame(64, 64);
-        let c = Cone::primary(&fr, 32, 32, 1.0);
+        let c = Cone::primary(&fr, 32, 32, 1.0, 1.0);
         let size = |t: f32| eigen_1(c.sigma(t), 1e-9, 1e-30).s1;
-        let pixel_only = Cone::primary(&Camera { aperture: 0.0, ..cam.clone() }.frame(64, 64), 32, 32, 1.0);
+        let pixel_only = Cone::primary(&Camera { aperture: 0.0, ..cam.clone() }.frame(64, 64), 32, 32, 1.0, 1.0);
         assert!(size(5.0) < size(2.0) && size(5.0) < size(9.0));
         // At focus only the pixel cone remains.
         assert!((size(5.0) - eigen_1(pixel_only.sigma(5.0), 1e-9, 1e-30).s1).abs() < 1e-3);

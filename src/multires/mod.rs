@@ -101,6 +101,11 @@ pub struct MultiresArgs {
     /// default 0.5 is close to 0.41, where the Gaussian's variance equals a box pixel's.
     #[arg(long, default_value_t = 0.5)]
     pub cone_scale: f32,
+    /// Depth of field: the cone's footprint at the lens in lens radii (the paper does not say;
+    /// 1 = the radius). The default 1/√2 gives the Gaussian the variance of the thin lens's
+    /// uniform disk, which distributed ray tracing samples.
+    #[arg(long, default_value_t = std::f32::consts::FRAC_1_SQRT_2)]
+    pub lens_scale: f32,
     /// Disable the mipmap blend one level down.
     #[arg(long)]
     pub no_mipmap: bool,
@@ -170,6 +175,7 @@ impl Default for MultiresArgs {
             no_facing: !t.facing,
             merge_meshes: !t.split_meshes,
             cone_scale: t.cone_scale,
+            lens_scale: t.lens_scale,
             no_mipmap: !t.mipmap,
             primary_only: t.primary_only,
             time_budget: t.time_budget,
@@ -201,7 +207,7 @@ impl MultiresArgs {
         diff!(trace:
             anisotropy_clamp => "--anisotropy-clamp", secondary_clamp => "--secondary-clamp", lod_scale => "--lod-scale",
             depth_tolerance => "--depth-tolerance", eigen => "--eigen", tri_weight => "--tri-weight",
-            shadow_tri_weight => "--shadow-tri-weight", no_facing => "--no-facing", merge_meshes => "--merge-meshes", cone_scale => "--cone-scale",
+            shadow_tri_weight => "--shadow-tri-weight", no_facing => "--no-facing", merge_meshes => "--merge-meshes", cone_scale => "--cone-scale", lens_scale => "--lens-scale",
             no_mipmap => "--no-mipmap", primary_only => "--primary-only", termination => "--termination",
             no_normal_spread => "--no-normal-spread", no_group_points => "--no-group-points",
             no_aggregate_shadow => "--no-aggregate-shadow", tight_depth => "--tight-depth", coverage_masks => "--coverage-masks",
@@ -223,6 +229,7 @@ impl MultiresArgs {
             facing: !self.no_facing,
             split_meshes: !self.merge_meshes,
             cone_scale: self.cone_scale,
+            lens_scale: self.lens_scale,
             mipmap: !self.no_mipmap,
             primary_only: self.primary_only,
             time_budget: self.time_budget,

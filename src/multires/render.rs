@@ -59,7 +59,7 @@ pub fn render(ms: &MultiresScene, tp: &TraceParams, cam: &CameraFrame, opts: &Re
                     }
                     for j in t.y0..t.y1 {
                         for i in t.x0..t.x1 {
-                            let cone = Cone::primary(cam, i, j, tp.cone_scale);
+                            let cone = Cone::primary(cam, i, j, tp.cone_scale, tp.lens_scale);
                             c.inc(Counter::rays_primary);
                             c.inc(Counter::samples);
                             let before = ConeProfile::tests(&c);

@@ -197,6 +197,8 @@ pub struct TraceParams {
     pub points: bool,
     /// Primary footprint in pixels (1 = the pixel's extent, §4.2).
     pub cone_scale: f32,
+    /// Lens footprint at the lens in lens radii (`--lens-scale`; [`super::cone::Cone::primary`]).
+    pub lens_scale: f32,
     /// A-buffer capacity.
     pub max_fragments: usize,
     /// Secondary cones below this contribution to the pixel are not traced.
@@ -243,6 +245,7 @@ impl Default for TraceParams {
             split_meshes: true,
             points: true,
             cone_scale: 0.5,
+            lens_scale: std::f32::consts::FRAC_1_SQRT_2,
             max_fragments: 16,
             min_importance: 1e-3,
             primary_only: false,
@@ -300,6 +303,9 @@ impl TraceParams {
         }
         if !(self.cone_scale.is_finite() && self.cone_scale > 0.0 && self.cone_scale <= 16.0) {
             return bad(format!("--cone-scale {} out of range (0, 16]", self.cone_scale));
+        }
+        if !(self.lens_scale.is_finite() && self.lens_scale > 0.0 && self.lens_scale <= 16.0) {
+            return bad(format!("--lens-scale {} out of range (0, 16]", self.lens_scale));
         }
         if self.max_fragments < 2 || self.max_fragments > 256 {
             return bad(format!("--max-fragments {} out of range [2, 256]", self.max_fragments));
