@@ -917,3 +917,24 @@ fn a_defocused_cube_keeps_its_faces() {
     let differ = with.color.iter().zip(&without.color).filter(|(a, b)| (**a - **b).abs().max_element() > 1e-4).count();
     assert_eq!(differ, 0, "{differ} pixels change with the aggregate shadow rule on a solid");
 }
+
+/// `scenes/dof-ball.toml` (stop 40): a defocused ball in front of a floor. Its silhouette's
+/// edge-on triangles reach deep in depth, and the floor behind joins their fragment; the
+/// paper's early termination counted the floor from where the ball's first piece begins and
+/// ended the cones before the ball's nearer pieces were found, leaving shards and bites in
+/// the blurred silhouette. Each mesh of a fragment now counts from its own beginning. With
+/// the exact triangle mass, measured at 160×120 against 64 spp: mean FLIP 0.059 (0.124
+/// before); at 400×300 against 128 spp 0.058 (0.119).
+#[test]
+fn a_defocused_ball_keeps_a_soft_silhouette() {
+    let scene = lodtrace::scene::tomlscene::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/dof-ball.toml")).unwrap();
+    let (w, h) = (160, 120);
+    let reference = conventional(
+        &scene,
+        reference_accel(),
+        &RenderOpts { integrator: Integrator::Distributed, width: w, height: h, spp: 64, variance_threshold: 0.0, ..Default::default() },
+    );
+    let f = cones(&scene, &TraceParams { tri_weight: TriWeight::Mass, ..Default::default() }, w, h);
+    let flip = lodtrace::film::metrics::flip_mean(&reference.color, &f.color, w, h).unwrap().0;
+    assert!(flip < 0.09, "mean FLIP {flip} against the distributed reference");
+}

@@ -23,7 +23,10 @@
 //! counts a closed surface's near and far sides once (`--no-facing`, [`Frag::alpha`]), and
 //! a fragment keeps the pieces of a second mesh apart and composites the two by depth, so a
 //! floor behind an object's base does not average into it (`--merge-meshes`,
-//! [`Frag::parts`]).
+//! [`Frag::parts`]). With the split, each mesh of a fragment counts for the paper's
+//! termination from where its own pieces begin (stop 40, [`ABuffer::opaque`]): a
+//! silhouette's edge-on pieces reach deep, and the floor behind that joined them counted
+//! from their beginning, ending defocused cones before the object's nearer pieces were found.
 //!
 //! Bounded memory: at most `cap` fragments (default 16); when full, the two adjacent
 //! fragments with the smallest gap are merged (a documented approximation; it is counted in
@@ -83,6 +86,9 @@ pub struct Frag {
     pub key: u32,
     /// Of the sums above, those of the pieces of one other mesh ([`Frag::parts`]).
     pub other: Group,
+    /// Where the pieces of the first mesh (`key`) begin; `z0` is where all begin. Set by
+    /// [`ABuffer::insert`].
+    pub z0_key: f32,
     /// Σ w·n and Σ w of the pieces of closed meshes facing away from the cone's origin: a
     /// solid's far side, which shading leaves out when its near side is there too
     /// (`TraceParams::facing`; [`super::trace`] `shade_visible`).
@@ -98,6 +104,8 @@ pub const ANY_MESH: u32 = u32::MAX;
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Group {
     pub key: u32,
+    /// Where the group's pieces begin (not a sum; [`Frag::z0_key`]).
+    pub z0: f32,
     pub w: f32,
     pub wt: f32,
     pub col: Vec3,
@@ -139,6 +147,7 @@ impl Frag {
     fn sums(&self) -> Group {
         Group {
             key: self.key,
+            z0: self.z0_key,
             w: self.w,
             wt: self.wt,
             col: self.col,
@@ -167,7 +176,7 @@ impl Frag {
         // Split meshes: each of `s`'s groups joins the one here of its mesh; a new mesh
         // becomes `other` when that is free, else joins the group nearer in depth.
         let mut to_first = Group::default();
-        for g in [s.first(), s.other] {
+        for (g, gz0) in [(s.first(), s.z0_key), (s.other, s.other.z0)] {
             if !(g.w > 0.0) {
                 continue;
             }
@@ -185,11 +194,13 @@ impl Frag {
             };
             if joins_first {
                 to_first.add(&g);
+                self.z0_key = self.z0_key.min(gz0);
             } else {
                 if !(self.other.w > 0.0) {
-                    self.other.key = g.key;
+                    (self.other.key, self.other.z0) = (g.key, gz0);
                 }
                 self.other.add(&g);
+                self.other.z0 = self.other.z0.min(gz0);
             }
         }
         self.z0 = self.z0.min(s.z0);
@@ -243,12 +254,12 @@ impl Frag {
         if !(self.other.w > 0.0) {
             return ([*self, *self], 1);
         }
-        let part = |g: Group, mask: u64, hidden: f32| {
-            let mut f = Frag { z0: self.z0, z1: self.z1, mask, hidden, ..Default::default() };
+        let part = |g: Group, z0: f32, mask: u64, hidden: f32| {
+            let mut f = Frag { z0, z0_key: z0, z1: self.z1, mask, hidden, ..Default::default() };
             f.set_sums(&g);
             f
         };
-        let (a, b) = (part(self.first(), self.mask, self.hidden), part(self.other, 0, 0.0));
+        let (a, b) = (part(self.first(), self.z0_key, self.mask, self.hidden), part(self.other, self.other.z0, 0, 0.0));
         if a.t() <= b.t() {
             ([a, b], 2)
         } else {
@@ -309,7 +320,8 @@ impl ABuffer {
     }
 
     /// Inserts one sample (a fragment of a single point or triangle).
-    pub fn insert(&mut self, s: Frag) {
+    pub fn insert(&mut self, mut s: Frag) {
+        s.z0_key = s.z0;
         self.dirty = true;
         // First fragment that does not end before the sample starts.
         let i = self.frags.partition_point(|f| f.z1 < s.z0);
@@ -382,7 +394,18 @@ impl ABuffer {
         }
         self.front = t_front;
         while self.n_begun < self.frags.len() && self.frags[self.n_begun].z0 < t_front {
-            self.alpha_begun += (1.0 - self.alpha_begun) * self.frags[self.n_begun].alpha();
+            let f = &self.frags[self.n_begun];
+            if f.other.w > 0.0 && f.z0_key.max(f.other.z0) >= t_front {
+                // Two meshes, one of which begins past the front (`split_meshes`): only the
+                // part that has begun counts, and the fragment stays open (*deviation*: the
+                // paper's fragment begins where its first piece does, so an object's
+                // silhouette, whose edge-on pieces reach deep, let the floor behind it end
+                // the cone before the object's nearer pieces were found).
+                let ([a, b], _) = f.parts();
+                let begun = if a.z0 < t_front { a.alpha() } else { b.alpha() };
+                return self.alpha_begun + (1.0 - self.alpha_begun) * begun >= OPAQUE;
+            }
+            self.alpha_begun += (1.0 - self.alpha_begun) * f.alpha();
             self.n_begun += 1;
         }
         self.alpha_begun >= OPAQUE
@@ -513,6 +536,30 @@ mod tests {
         ab.insert(piece(6.85, 0.25, Vec3::Z, 3));
         let f = &ab.frags[0];
         assert!((f.w - 1.25).abs() < 1e-6 && (f.other.w - 0.75).abs() < 1e-6 && f.other.key == 2, "{:?}", f.other);
+    }
+
+    /// A silhouette's edge-on piece reaches deep (here from 5.4); the floor behind it joins
+    /// its fragment but begins only at 6.8. The paper's termination counted the floor from
+    /// 5.4 and ended the cone at any front past it; each mesh now counts from where its own
+    /// pieces begin, and the parts keep those beginnings.
+    #[test]
+    fn each_mesh_of_a_fragment_counts_from_its_own_beginning() {
+        let mut ab = ABuffer::new(16);
+        ab.insert(Frag { key: 1, ..smp(6.4, 1.0, 0.1, Vec3::X) });
+        ab.insert(Frag { key: 0, ..smp(6.9, 0.1, 1.0, Vec3::Y) });
+        assert_eq!(ab.frags.len(), 1, "merged by depth");
+        let f = ab.frags[0];
+        assert!((f.z0 - 5.4).abs() < 1e-6 && (f.z0_key - 5.4).abs() < 1e-6 && (f.other.z0 - 6.8).abs() < 1e-6, "{f:?}");
+        assert!(!ab.opaque(6.0), "the floor has not begun at 6.0");
+        assert!(ab.opaque(6.85), "the floor has begun at 6.85");
+        assert!(!ab.opaque(6.0), "a front moved back recounts");
+        let (parts, n) = f.parts();
+        assert_eq!(n, 2);
+        assert!((parts[0].z0 - 5.4).abs() < 1e-6 && (parts[1].z0 - 6.8).abs() < 1e-6);
+        // Merged into a third fragment's, the beginnings travel with their groups.
+        ab.insert(Frag { key: 0, ..smp(6.7, 0.1, 0.2, Vec3::Y) });
+        let f = ab.frags[0];
+        assert!((f.other.z0 - 6.6).abs() < 1e-6 && (f.z0_key - 5.4).abs() < 1e-6, "{f:?}");
     }
 
     #[test]
