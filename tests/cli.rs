@@ -1137,3 +1137,37 @@ fn stop_38_bad_inputs_are_one_line_exit_2() {
     assert!(!keep.join("frame_0000.png").exists(), "frame 0 of the failed run stays behind");
     assert!(keep.join("old.txt").exists() && keep.join("frame_0001.png").is_dir());
 }
+
+/// `render --debug-pixel X,Y` explains one pixel of the cone tracers: its A-buffer as a
+/// table and the pixel's colour, which is the rendered image's; anything else is refused.
+#[test]
+fn debug_pixel_explains_the_rendered_pixel() {
+    let d = tmp("debug-pixel");
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/dof-ball.toml");
+    let common = ["render", scene, "--method", "multires", "--width", "40", "--height", "30", "--quiet"];
+    let exr = d.join("ball.exr");
+    let (code, _, err) = lodtrace(&[&common[..], &["--out", exr.to_str().unwrap()]].concat());
+    assert_eq!(code, 0, "{err}");
+    let img = lodtrace::film::io::read_image_linear(&exr).unwrap().2;
+    for (x, y) in [(20, 15), (31, 15), (2, 2)] {
+        let px = format!("{x},{y}");
+        let (code, out, err) = lodtrace(&[&common[..], &["--debug-pixel", &px]].concat());
+        assert_eq!(code, 0, "{err}");
+        assert!(out.contains("| frag | part | mesh |"), "{out}");
+        let line = out.lines().find(|l| l.starts_with("pixel ")).expect("pixel line");
+        let v: Vec<f32> = line.split_whitespace().skip(1).take(3).map(|t| t.parse().unwrap()).collect();
+        let want = img[(y * 40 + x) as usize];
+        assert!((glam::Vec3::new(v[0], v[1], v[2]) - want).abs().max_element() < 2e-3, "{px}: {line} against {want}");
+        if (x, y) == (20, 15) {
+            assert!(out.contains("| 0 | 0 | ball |"), "the ball in front at the centre:\n{out}");
+        }
+    }
+    for bad in [vec!["--debug-pixel", "40,0"], vec!["--debug-pixel", "1"], vec!["--debug-pixel", "1,1", "--out", "x.png"]] {
+        let (code, out, err) = lodtrace(&[&common[..], &bad[..]].concat());
+        assert_eq!(code, 2, "{bad:?}: {out}");
+        one_error_line(&err);
+    }
+    let (code, _, err) = lodtrace(&["render", scene, "--method", "whitted", "--debug-pixel", "1,1", "--quiet"]);
+    assert_eq!(code, 2);
+    one_error_line(&err);
+}

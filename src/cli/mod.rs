@@ -132,10 +132,23 @@ pub struct RenderArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Explain one pixel instead of rendering (--method multires, cone): its primary cone's
+    /// A-buffer, front to back (depth interval, weights, mesh, alpha, share of the pixel,
+    /// colour), and the tests it took. X,Y from the top left; writes no image.
+    #[arg(long, value_parser = parse_pixel)]
+    pub debug_pixel: Option<(u32, u32)>,
     #[command(flatten)]
     pub multires: crate::multires::MultiresArgs,
     #[command(flatten)]
     pub lod: crate::lod::LodArgs,
+}
+
+fn parse_pixel(s: &str) -> Result<(u32, u32), String> {
+    let v: Vec<u32> = s.split(',').map(|x| x.trim().parse::<u32>()).collect::<Result<_, _>>().map_err(|e| format!("'{s}': {e}"))?;
+    match v[..] {
+        [x, y] => Ok((x, y)),
+        _ => Err(format!("'{s}': expected a pixel x,y")),
+    }
 }
 
 pub fn parse_vec3(s: &str) -> Result<glam::Vec3, String> {

@@ -150,6 +150,14 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         }
         return render_surfel(a, &out);
     }
+    if a.debug_pixel.is_some() {
+        if !matches!(a.method, crate::cli::Method::Multires | crate::cli::Method::Cone) {
+            return Err(Error::Usage("--debug-pixel explains a cone: --method multires or cone".into()));
+        }
+        if a.out.is_some() || !a.aov.is_empty() || a.stats.is_some() {
+            return Err(Error::Usage("--debug-pixel writes no image, AOV or stats".into()));
+        }
+    }
     if a.method == crate::cli::Method::Lod && a.accel == crate::baseline::accel::AccelKind::Octree {
         // Before loading, so that the error is the only line (no mesh warnings first).
         return Err(Error::Usage("--method lod runs on --accel bvh or --accel embree".into()));
@@ -163,6 +171,10 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         scene.max_depth = d;
     }
     scene.shadows = !a.no_shadows;
+    if let Some(px) = a.debug_pixel {
+        print!("{}", run::explain_cone(&scene, a.method, &opts, &a.multires, px)?);
+        return Ok(());
+    }
     let r = run::run(&scene, a.method, a.accel, &opts, &a.multires, &a.lod)?;
     // A failed write removes the outputs written before it.
     let mut outs = io::Outputs::default();

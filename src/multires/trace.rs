@@ -1574,6 +1574,14 @@ impl<'s, 'a> Tracer<'s, 'a> {
         }
     }
 
+    /// The scene mesh of a fragment's best piece (None for instance-level points).
+    fn mesh_of(&self, f: &Frag) -> Option<u32> {
+        match f.best {
+            Elem::Point { leaf, .. } | Elem::Tri { leaf, .. } => Some(self.ms.leaves[leaf as usize].mesh),
+            Elem::None | Elem::Group { .. } => None,
+        }
+    }
+
     /// The tracer of reflected and refracted cones (and, through their hits, of everything
     /// below them): the same but for the anisotropy clamp (`--secondary-clamp`).
     fn secondary(&self) -> Self {
@@ -2168,6 +2176,32 @@ pub struct ConeResult {
     pub normal: Vec3,
 }
 
+/// One composited part of a primary cone's A-buffer ([`Tracer::explain`]): a fragment, or
+/// one mesh's group of it under `split_meshes`.
+#[derive(Clone, Debug)]
+pub struct PartReport {
+    /// Fragment index, front to back, and the part within it (0, or 1 for its second mesh).
+    pub frag: u32,
+    pub part: u32,
+    /// Depth interval and mean depth (world t).
+    pub z0: f32,
+    pub z1: f32,
+    pub t: f32,
+    /// The cone's footprint semi-axes at `t` (world units, after the clamp).
+    pub axes: [f32; 2],
+    /// Weight sum, and of it the pieces facing away from the cone's origin.
+    pub w: f32,
+    pub wb: f32,
+    /// The scene mesh of the part's best piece (None: instance-level points of several).
+    pub mesh: Option<u32>,
+    pub alpha: f32,
+    /// Its share of the pixel (front-to-back compositing).
+    pub share: f32,
+    /// Mean colour of its pieces, and the radiance it was shaded to.
+    pub color: Vec3,
+    pub shaded: Vec3,
+}
+
 pub struct ShadeScratch {
     pub trav: Scratch,
     /// One A-buffer per recursion level.
@@ -2275,7 +2309,29 @@ impl<'s, 'a> Tracer<'s, 'a> {
         self.radiance_own(cone, Own::NONE, depth, importance, ss, c)
     }
 
+    /// [`Tracer::radiance`] of a primary cone, with its fragments' parts as composited
+    /// (`lodtrace render --debug-pixel`).
+    pub fn explain(&self, cone: &Cone, ss: &mut ShadeScratch, c: &mut Counters) -> (ConeResult, Vec<PartReport>) {
+        let mut parts = Vec::new();
+        let r = self.radiance_report(cone, Own::NONE, 0, 1.0, ss, c, Some(&mut parts));
+        (r, parts)
+    }
+
     fn radiance_own(&self, cone: &Cone, own: Own, depth: u32, importance: f32, ss: &mut ShadeScratch, c: &mut Counters) -> ConeResult {
+        self.radiance_report(cone, own, depth, importance, ss, c, None)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn radiance_report(
+        &self,
+        cone: &Cone,
+        own: Own,
+        depth: u32,
+        importance: f32,
+        ss: &mut ShadeScratch,
+        c: &mut Counters,
+        mut report: Option<&mut Vec<PartReport>>,
+    ) -> ConeResult {
         let mut ab = std::mem::replace(&mut ss.bufs[depth as usize], ABuffer::new(0));
         ab.clear();
         ab.cap = self.p.max_fragments;
@@ -2287,16 +2343,33 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let scene = self.ms.scene;
         let mut res = ConeResult { color: Vec3::ZERO, alpha: 0.0, depth: f32::INFINITY, normal: Vec3::ZERO };
         let mut over = super::abuffer::Over::default();
-        'frags: for whole in &ab.frags {
+        'frags: for (fi, whole) in ab.frags.iter().enumerate() {
             if res.depth.is_infinite() && whole.w >= 0.5 {
                 res.depth = whole.t();
                 res.normal = whole.n.normalize_or_zero();
             }
             let (parts, n) = whole.parts();
-            for f in &parts[..n] {
+            for (i, f) in parts[..n].iter().enumerate() {
                 let k = over.add(f);
-                if k > 1e-4 {
-                    res.color += self.shade_visible(cone, f, depth, importance * k, ss, c) * k;
+                let shaded = if k > 1e-4 { self.shade_visible(cone, f, depth, importance * k, ss, c) } else { Vec3::ZERO };
+                res.color += shaded * k;
+                if let Some(r) = report.as_deref_mut() {
+                    let fs = cone.footprint_and_spread(f.t(), self.clamp, self.floor);
+                    r.push(PartReport {
+                        frag: fi as u32,
+                        part: i as u32,
+                        z0: f.z0,
+                        z1: f.z1,
+                        t: f.t(),
+                        axes: [fs[0].length(), fs[1].length()],
+                        w: f.w,
+                        wb: f.wb,
+                        mesh: self.mesh_of(f),
+                        alpha: f.alpha(),
+                        share: k,
+                        color: f.col / f.w,
+                        shaded,
+                    });
                 }
                 if over.acc >= super::abuffer::OPAQUE {
                     break 'frags;
