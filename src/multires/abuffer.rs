@@ -89,11 +89,12 @@ pub struct Frag {
     /// Where the pieces of the first mesh (`key`) begin; `z0` is where all begin. Set by
     /// [`ABuffer::insert`].
     pub z0_key: f32,
-    /// Σ w·n and Σ w of the pieces of closed meshes facing away from the cone's origin: a
-    /// solid's far side, which shading leaves out when its near side is there too
+    /// Σ w·n, Σ w and Σ w·t of the pieces of closed meshes facing away from the cone's
+    /// origin: a solid's far side, which shading leaves out when its near side is there too
     /// (`TraceParams::facing`; [`super::trace`] `shade_visible`).
     pub nb: Vec3,
     pub wn: f32,
+    pub wtn: f32,
 }
 
 /// [`Frag::key`] of pieces that join any group (the points of instance-tree slots, which
@@ -114,9 +115,10 @@ pub struct Group {
     pub wb: f32,
     pub best_w: f32,
     pub best: Elem,
-    /// [`Frag::nb`], [`Frag::wn`].
+    /// [`Frag::nb`], [`Frag::wn`], [`Frag::wtn`].
     pub nb: Vec3,
     pub wn: f32,
+    pub wtn: f32,
 }
 
 impl Group {
@@ -132,6 +134,7 @@ impl Group {
         self.wb += k * g.wb;
         self.nb += k * g.nb;
         self.wn += k * g.wn;
+        self.wtn += k * g.wtn;
         if k > 0.0 && g.best_w > self.best_w {
             self.best_w = g.best_w;
             self.best = g.best;
@@ -158,12 +161,13 @@ impl Frag {
             best: self.best,
             nb: self.nb,
             wn: self.wn,
+            wtn: self.wtn,
         }
     }
     /// Sets the fragment's sums, key and best element from `g`.
     fn set_sums(&mut self, g: &Group) {
         (self.key, self.w, self.wt, self.col, self.props, self.n) = (g.key, g.w, g.wt, g.col, g.props, g.n);
-        (self.wb, self.best_w, self.best, self.nb, self.wn) = (g.wb, g.best_w, g.best, g.nb, g.wn);
+        (self.wb, self.best_w, self.best, self.nb, self.wn, self.wtn) = (g.wb, g.best_w, g.best, g.nb, g.wn, g.wtn);
     }
     /// The sums of the pieces of the fragment's first mesh (`key`): all but `other`'s.
     fn first(&self) -> Group {

@@ -1998,7 +1998,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 };
                 f.n = nrm * (w * spread);
                 if away && closed {
-                    (f.nb, f.wn) = (f.n, w);
+                    (f.nb, f.wn, f.wtn) = (f.n, w, f.wt);
                 }
                 f.best = best(j);
             }
@@ -2098,7 +2098,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             f.props = mat_props(mat).map(|v| v * w);
             f.n = (leaf.normal_mat * nn).normalize_or_zero() * w;
             if wb > 0.0 && self.ms.closed[leaf.mesh as usize] {
-                (f.nb, f.wn) = (f.n, w);
+                (f.nb, f.wn, f.wtn) = (f.n, w, f.wt);
             }
             f.best = Elem::Tri { leaf: li, tri, b1, b2 };
         }
@@ -2394,8 +2394,15 @@ impl<'s, 'a> Tracer<'s, 'a> {
         if !(f.wn > 0.0) {
             return self.shade(cone, f, depth, importance, ss, c);
         }
-        let (n, w) = if f.w - f.wn < 0.5 * f.wn { (f.nb, f.wn) } else { (f.n - f.nb, f.w - f.wn) };
-        self.shade(cone, &Frag { n: n * (f.w / w), ..*f }, depth, importance, ss, c)
+        // The side's own normal and mean depth (until stop 40 the whole fragment's depth: a
+        // point between a cube's top and its far side, inside the solid, whose shadow cones
+        // the solid itself then darkened: dark hooks on the defocused cube's lit top). Mean
+        // FLIP against distributed references: `dof-cube` 400×300 0.154 → 0.147 (with
+        // `--tri-weight mass` 0.133 → 0.124), `spheres` 320×240 0.0291 → 0.0280 (mass 0.0153 →
+        // 0.0113), `complex` and `effects` within ±0.0005.
+        let (n, w, wt) = if f.w - f.wn < 0.5 * f.wn { (f.nb, f.wn, f.wtn) } else { (f.n - f.nb, f.w - f.wn, f.wt - f.wtn) };
+        let k = f.w / w;
+        self.shade(cone, &Frag { n: n * k, wt: wt * k, ..*f }, depth, importance, ss, c)
     }
 
     fn shade(&self, cone: &Cone, f: &Frag, depth: u32, importance: f32, ss: &mut ShadeScratch, c: &mut Counters) -> Vec3 {
