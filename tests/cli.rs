@@ -1160,8 +1160,14 @@ fn debug_pixel_explains_the_rendered_pixel() {
         assert!((glam::Vec3::new(v[0], v[1], v[2]) - want).abs().max_element() < 2e-3, "{px}: {line} against {want}");
         if (x, y) == (20, 15) {
             assert!(out.contains("| 0 | 0 | ball |"), "the ball in front at the centre:\n{out}");
+            assert!(out.contains("| 0 | ball | front |"), "the shading tree starts with it:\n{out}");
         }
     }
+    // A glass ball's pixel: the tree goes through the glass (its back, from inside) and on.
+    let (code, out, err) =
+        lodtrace(&["render", "spheres", "--method", "multires", "--width", "64", "--height", "48", "--quiet", "--debug-pixel", "40,28"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("| · 1 | sphere | back |") && out.contains("| · · 2 |"), "{out}");
     for bad in [vec!["--debug-pixel", "40,0"], vec!["--debug-pixel", "1"], vec!["--debug-pixel", "1,1", "--out", "x.png"]] {
         let (code, out, err) = lodtrace(&[&common[..], &bad[..]].concat());
         assert_eq!(code, 2, "{bad:?}: {out}");

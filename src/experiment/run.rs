@@ -299,7 +299,7 @@ pub fn explain_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &Multi
     opts.validate()?;
     let ms = MultiresScene::build(scene, &bp)?;
     let cam = scene.camera.frame(opts.width, opts.height);
-    let (r, parts, c) = crate::multires::render::explain_pixel(&ms, &tp, &cam, px)?;
+    let (r, parts, tree, c) = crate::multires::render::explain_pixel(&ms, &tp, &cam, px)?;
     let rgb = |v: glam::Vec3| format!("{:.3} {:.3} {:.3}", v.x, v.y, v.z);
     let mut s = String::new();
     let _ = writeln!(
@@ -348,6 +348,33 @@ pub fn explain_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &Multi
         1.0 - r.alpha,
         parts.len()
     );
+    let _ = writeln!(s);
+    let _ = writeln!(
+        s,
+        "Every fragment shaded, depth first (depth 0: the parts above; below each, the reflected and refracted cones it spawned):"
+    );
+    let _ = writeln!(s);
+    let _ = writeln!(s, "| depth | mesh | side | mean t | weight | footprint axes | growth per unit t | importance | radiance |");
+    let _ = writeln!(s, "|---|---|---|---:|---:|---|---|---:|---|");
+    for e in &tree {
+        let mesh = e.mesh.map_or("instance points".to_string(), |m| scene.meshes[m as usize].name.clone());
+        let side = if e.front { "front" } else { "back" };
+        let _ = writeln!(
+            s,
+            "| {}{} | {mesh} | {side} | {:.4} | {:.3} | {:.4} × {:.4} | {:.4} × {:.4} | {:.3} | {} |",
+            "· ".repeat(e.depth as usize),
+            e.depth,
+            e.t,
+            e.w,
+            e.axes[0],
+            e.axes[1],
+            e.spread[0],
+            e.spread[1],
+            e.importance,
+            rgb(e.radiance)
+        );
+    }
+    let _ = writeln!(s);
     let named: Vec<String> = c.to_map().into_iter().filter(|(_, v)| *v > 0).map(|(k, v)| format!("{k} {v}")).collect();
     let _ = writeln!(s, "work, shadow and secondary cones included: {}", named.join(", "));
     Ok(s)

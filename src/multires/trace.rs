@@ -2208,6 +2208,8 @@ pub struct ShadeScratch {
     pub bufs: Vec<ABuffer>,
     /// Where the traversal work went, by cone kind (the caller takes it per tile).
     pub profile: ConeProfile,
+    /// Every fragment shaded, depth first (`lodtrace render --debug-pixel`); None: off.
+    pub log: Option<Vec<ShadeEvent>>,
 }
 
 impl ShadeScratch {
@@ -2216,8 +2218,28 @@ impl ShadeScratch {
             trav: Scratch::default(),
             bufs: (0..depth as usize + 2).map(|_| ABuffer::new(cap)).collect(),
             profile: ConeProfile::default(),
+            log: None,
         }
     }
+}
+
+/// One shaded fragment of a pixel's cone tree ([`ShadeScratch::log`]), in depth-first order:
+/// the primary cone's fragments at depth 0, the reflected and refracted cones' below them.
+#[derive(Clone, Debug)]
+pub struct ShadeEvent {
+    pub depth: u32,
+    /// The scene mesh of the fragment's best piece (None: instance-level points).
+    pub mesh: Option<u32>,
+    /// Mean depth along its cone, and whether the cone met the front of the surface.
+    pub t: f32,
+    pub front: bool,
+    pub w: f32,
+    /// The cone's footprint semi-axes there and their growth per unit t.
+    pub axes: [f32; 2],
+    pub spread: [f32; 2],
+    /// The fragment's share of the pixel's radiance it carries, and the radiance it shaded to.
+    pub importance: f32,
+    pub radiance: Vec3,
 }
 
 /// What a traversed cone is, for [`ConeProfile`].
@@ -2309,12 +2331,13 @@ impl<'s, 'a> Tracer<'s, 'a> {
         self.radiance_own(cone, Own::NONE, depth, importance, ss, c)
     }
 
-    /// [`Tracer::radiance`] of a primary cone, with its fragments' parts as composited
-    /// (`lodtrace render --debug-pixel`).
-    pub fn explain(&self, cone: &Cone, ss: &mut ShadeScratch, c: &mut Counters) -> (ConeResult, Vec<PartReport>) {
+    /// [`Tracer::radiance`] of a primary cone, with its fragments' parts as composited and
+    /// every fragment shaded below it (`lodtrace render --debug-pixel`).
+    pub fn explain(&self, cone: &Cone, ss: &mut ShadeScratch, c: &mut Counters) -> (ConeResult, Vec<PartReport>, Vec<ShadeEvent>) {
         let mut parts = Vec::new();
+        ss.log = Some(Vec::new());
         let r = self.radiance_report(cone, Own::NONE, 0, 1.0, ss, c, Some(&mut parts));
-        (r, parts)
+        (r, parts, ss.log.take().unwrap_or_default())
     }
 
     fn radiance_own(&self, cone: &Cone, own: Own, depth: u32, importance: f32, ss: &mut ShadeScratch, c: &mut Counters) -> ConeResult {
@@ -2406,6 +2429,30 @@ impl<'s, 'a> Tracer<'s, 'a> {
     }
 
     fn shade(&self, cone: &Cone, f: &Frag, depth: u32, importance: f32, ss: &mut ShadeScratch, c: &mut Counters) -> Vec3 {
+        let Some(log) = ss.log.as_mut() else {
+            return self.shade_fragment(cone, f, depth, importance, ss, c);
+        };
+        let fs = cone.footprint_and_spread(f.t(), self.clamp, self.floor);
+        log.push(ShadeEvent {
+            depth,
+            mesh: self.mesh_of(f),
+            t: f.t(),
+            front: f.n.dot(cone.dir) < 0.0,
+            w: f.w,
+            axes: [fs[0].length(), fs[1].length()],
+            spread: [fs[2].length(), fs[3].length()],
+            importance,
+            radiance: Vec3::ZERO,
+        });
+        let i = log.len() - 1;
+        let r = self.shade_fragment(cone, f, depth, importance, ss, c);
+        if let Some(log) = ss.log.as_mut() {
+            log[i].radiance = r;
+        }
+        r
+    }
+
+    fn shade_fragment(&self, cone: &Cone, f: &Frag, depth: u32, importance: f32, ss: &mut ShadeScratch, c: &mut Counters) -> Vec3 {
         let scene = self.ms.scene;
         let inv = 1.0 / f.w;
         let color = f.col * inv;
