@@ -38,6 +38,20 @@ fn cones(scene: &Scene, tp: &TraceParams, w: u32, h: u32) -> Film {
     cone_render(&ms, tp, &scene.camera.frame(w, h), &opts).unwrap().out.film
 }
 
+/// The distributed reference at 64 spp, every pixel fully sampled.
+fn distributed_64(scene: &Scene, w: u32, h: u32) -> Film {
+    conventional(
+        scene,
+        reference_accel(),
+        &RenderOpts { integrator: Integrator::Distributed, width: w, height: h, spp: 64, variance_threshold: 0.0, ..Default::default() },
+    )
+}
+
+/// A scene file shipped in `scenes/`.
+fn shipped_scene(name: &str) -> Scene {
+    lodtrace::scene::tomlscene::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("scenes/{name}.toml"))).unwrap()
+}
+
 fn rmse(a: &Film, b: &Film) -> f64 {
     let s: f64 = a.color.iter().zip(&b.color).map(|(x, y)| (*x - *y).length_squared() as f64 / 3.0).sum();
     (s / a.color.len() as f64).sqrt()
@@ -384,11 +398,7 @@ fn shadow_cones_give_a_dark_umbra_and_a_lit_floor() {
     let mut open = s.clone();
     open.shadows = false;
     let (w, h) = (48, 48);
-    let reference = conventional(
-        &s,
-        reference_accel(),
-        &RenderOpts { integrator: Integrator::Distributed, width: w, height: h, spp: 64, variance_threshold: 0.0, ..Default::default() },
-    );
+    let reference = distributed_64(&s, w, h);
     let unshadowed = conventional(&open, reference_accel(), &RenderOpts { width: w, height: h, spp: 16, ..Default::default() });
     let lum = |f: &Film| f.color.iter().map(|c| c.x).collect::<Vec<f32>>();
     let (r, ro) = (lum(&reference), lum(&unshadowed));
@@ -885,13 +895,9 @@ fn a_closed_surface_seen_from_inside_faces_away() {
 /// the near side's own depth, 0.175 with the lens radius, 0.191 before all three).
 #[test]
 fn a_defocused_cube_keeps_its_faces() {
-    let scene = lodtrace::scene::tomlscene::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/dof-cube.toml")).unwrap();
+    let scene = shipped_scene("dof-cube");
     let (w, h) = (160, 120);
-    let reference = conventional(
-        &scene,
-        reference_accel(),
-        &RenderOpts { integrator: Integrator::Distributed, width: w, height: h, spp: 64, variance_threshold: 0.0, ..Default::default() },
-    );
+    let reference = distributed_64(&scene, w, h);
     let flip = |tp: TraceParams| {
         let f = cones(&scene, &tp, w, h);
         lodtrace::film::metrics::flip_mean(&reference.color, &f.color, w, h).unwrap().0
@@ -935,13 +941,9 @@ fn a_defocused_cube_keeps_its_faces() {
 /// before); at 400×300 against 128 spp 0.058 (0.119).
 #[test]
 fn a_defocused_ball_keeps_a_soft_silhouette() {
-    let scene = lodtrace::scene::tomlscene::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/dof-ball.toml")).unwrap();
+    let scene = shipped_scene("dof-ball");
     let (w, h) = (160, 120);
-    let reference = conventional(
-        &scene,
-        reference_accel(),
-        &RenderOpts { integrator: Integrator::Distributed, width: w, height: h, spp: 64, variance_threshold: 0.0, ..Default::default() },
-    );
+    let reference = distributed_64(&scene, w, h);
     let f = cones(&scene, &TraceParams { tri_weight: TriWeight::Mass, ..Default::default() }, w, h);
     let flip = lodtrace::film::metrics::flip_mean(&reference.color, &f.color, w, h).unwrap().0;
     assert!(flip < 0.09, "mean FLIP {flip} against the distributed reference");

@@ -299,7 +299,8 @@ pub fn explain_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &Multi
     opts.validate()?;
     let ms = MultiresScene::build(scene, &bp)?;
     let cam = scene.camera.frame(opts.width, opts.height);
-    let (r, parts, tree, c) = crate::multires::render::explain_pixel(&ms, &tp, &cam, px)?;
+    let (r, log, c) = crate::multires::render::explain_pixel(&ms, &tp, &cam, px)?;
+    let (parts, tree) = (&log.parts, &log.tree);
     let rgb = |v: glam::Vec3| format!("{:.3} {:.3} {:.3}", v.x, v.y, v.z);
     let mut s = String::new();
     let _ = writeln!(
@@ -318,7 +319,7 @@ pub fn explain_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &Multi
         "| frag | part | mesh | depth z0..z1 | mean t | footprint axes | weight | facing away | alpha | share | colour | shaded |"
     );
     let _ = writeln!(s, "|---:|---:|---|---|---:|---|---:|---:|---:|---:|---|---|");
-    for p in &parts {
+    for p in parts {
         let mesh = p.mesh.map_or("instance points".to_string(), |m| scene.meshes[m as usize].name.clone());
         let _ = writeln!(
             s,
@@ -356,7 +357,7 @@ pub fn explain_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &Multi
     let _ = writeln!(s);
     let _ = writeln!(s, "| depth | mesh | side | mean t | weight | footprint axes | growth per unit t | importance | radiance |");
     let _ = writeln!(s, "|---|---|---|---:|---:|---|---|---:|---|");
-    for e in &tree {
+    for e in tree {
         let mesh = e.mesh.map_or("instance points".to_string(), |m| scene.meshes[m as usize].name.clone());
         let side = if e.front { "front" } else { "back" };
         let _ = writeln!(

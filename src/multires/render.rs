@@ -103,7 +103,7 @@ pub fn explain_pixel(
     tp: &TraceParams,
     cam: &CameraFrame,
     (i, j): (u32, u32),
-) -> Result<(super::trace::ConeResult, Vec<super::trace::PartReport>, Vec<super::trace::ShadeEvent>, Counters)> {
+) -> Result<(super::trace::ConeResult, super::trace::DebugLog, Counters)> {
     tp.validate()?;
     if i >= cam.width || j >= cam.height {
         return Err(Error::Usage(format!("--debug-pixel {i},{j} lies outside the {}x{} image", cam.width, cam.height)));
@@ -113,6 +113,6 @@ pub fn explain_pixel(
     let tracer = Tracer::new(ms, tp, 1e-7 * (hi - lo).max_element().max(1e-6), &abort, None);
     let mut ss = ShadeScratch::new(tp.max_fragments, ms.scene.max_depth);
     let mut c = Counters::default();
-    let (r, parts, tree) = tracer.explain(&Cone::primary(cam, i, j, tp.cone_scale, tp.lens_scale), &mut ss, &mut c);
-    Ok((r, parts, tree, c))
+    let (r, log) = tracer.explain(&Cone::primary(cam, i, j, tp.cone_scale, tp.lens_scale), &mut ss, &mut c);
+    Ok((r, log, c))
 }

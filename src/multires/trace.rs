@@ -2208,8 +2208,17 @@ pub struct ShadeScratch {
     pub bufs: Vec<ABuffer>,
     /// Where the traversal work went, by cone kind (the caller takes it per tile).
     pub profile: ConeProfile,
-    /// Every fragment shaded, depth first (`lodtrace render --debug-pixel`); None: off.
-    pub log: Option<Vec<ShadeEvent>>,
+    /// What `lodtrace render --debug-pixel` prints ([`Tracer::explain`]); None: off.
+    pub log: Option<DebugLog>,
+}
+
+/// One pixel's cone as traced and shaded ([`Tracer::explain`]).
+#[derive(Clone, Debug, Default)]
+pub struct DebugLog {
+    /// The primary cone's A-buffer parts as composited, front to back.
+    pub parts: Vec<PartReport>,
+    /// Every fragment shaded, depth first.
+    pub tree: Vec<ShadeEvent>,
 }
 
 impl ShadeScratch {
@@ -2333,28 +2342,13 @@ impl<'s, 'a> Tracer<'s, 'a> {
 
     /// [`Tracer::radiance`] of a primary cone, with its fragments' parts as composited and
     /// every fragment shaded below it (`lodtrace render --debug-pixel`).
-    pub fn explain(&self, cone: &Cone, ss: &mut ShadeScratch, c: &mut Counters) -> (ConeResult, Vec<PartReport>, Vec<ShadeEvent>) {
-        let mut parts = Vec::new();
-        ss.log = Some(Vec::new());
-        let r = self.radiance_report(cone, Own::NONE, 0, 1.0, ss, c, Some(&mut parts));
-        (r, parts, ss.log.take().unwrap_or_default())
+    pub fn explain(&self, cone: &Cone, ss: &mut ShadeScratch, c: &mut Counters) -> (ConeResult, DebugLog) {
+        ss.log = Some(DebugLog::default());
+        let r = self.radiance(cone, 0, 1.0, ss, c);
+        (r, ss.log.take().unwrap_or_default())
     }
 
     fn radiance_own(&self, cone: &Cone, own: Own, depth: u32, importance: f32, ss: &mut ShadeScratch, c: &mut Counters) -> ConeResult {
-        self.radiance_report(cone, own, depth, importance, ss, c, None)
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn radiance_report(
-        &self,
-        cone: &Cone,
-        own: Own,
-        depth: u32,
-        importance: f32,
-        ss: &mut ShadeScratch,
-        c: &mut Counters,
-        mut report: Option<&mut Vec<PartReport>>,
-    ) -> ConeResult {
         let mut ab = std::mem::replace(&mut ss.bufs[depth as usize], ABuffer::new(0));
         ab.clear();
         ab.cap = self.p.max_fragments;
@@ -2376,9 +2370,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 let k = over.add(f);
                 let shaded = if k > 1e-4 { self.shade_visible(cone, f, depth, importance * k, ss, c) } else { Vec3::ZERO };
                 res.color += shaded * k;
-                if let Some(r) = report.as_deref_mut() {
+                if let (0, Some(log)) = (depth, ss.log.as_mut()) {
                     let fs = cone.footprint_and_spread(f.t(), self.clamp, self.floor);
-                    r.push(PartReport {
+                    log.parts.push(PartReport {
                         frag: fi as u32,
                         part: i as u32,
                         z0: f.z0,
@@ -2433,7 +2427,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             return self.shade_fragment(cone, f, depth, importance, ss, c);
         };
         let fs = cone.footprint_and_spread(f.t(), self.clamp, self.floor);
-        log.push(ShadeEvent {
+        log.tree.push(ShadeEvent {
             depth,
             mesh: self.mesh_of(f),
             t: f.t(),
@@ -2444,10 +2438,10 @@ impl<'s, 'a> Tracer<'s, 'a> {
             importance,
             radiance: Vec3::ZERO,
         });
-        let i = log.len() - 1;
+        let i = log.tree.len() - 1;
         let r = self.shade_fragment(cone, f, depth, importance, ss, c);
         if let Some(log) = ss.log.as_mut() {
-            log[i].radiance = r;
+            log.tree[i].radiance = r;
         }
         r
     }
