@@ -2514,10 +2514,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         // starting with no skip, shadowed the solid's own lit face with sharp-edged patches
         // (`scenes/dof-cube.toml`; mean FLIP at 400×300 against 128 spp 0.191 → 0.175, and at
         // 320×240 `effects` 0.1726 → 0.1720, `complex` 0.1207 → 0.1205, `spheres` same).
-        let on_solid = match f.best {
-            Elem::Point { leaf, .. } | Elem::Tri { leaf, .. } => self.ms.closed[self.ms.leaves[leaf as usize].mesh as usize],
-            Elem::None | Elem::Group { .. } => false,
-        };
+        let on_solid = self.mesh_of(f).is_some_and(|m| self.ms.closed[m as usize]);
         let aggregate = self.p.aggregate_shadow && m_len <= 0.95 && !on_solid;
         // The shadow cones' start footprint: a surface's is the incoming footprint on its
         // tangent plane (§4.2), `g`. An aggregate has no tangent plane (its mean normal is a
