@@ -249,6 +249,7 @@ fn render_surfel(a: &RenderArgs, out: &Path) -> Result<()> {
         cache_up: 0,
         unordered: false,
         no_instance_tree: false,
+        nearest: super::animate::Nearest::Ellipse,
         warm_pass: false,
         quiet: a.quiet,
     };

@@ -10,7 +10,7 @@
 //! for `lod`: `f`, `a` (a_LOD), `thres`, `sel=0` (no selective tracing), `levels`, `dist`
 //! (distance criterion), `force` (fixed LOD), `net=1` (net disparity), `select=cone` (the
 //! ray-cone selector); for `surfel`: `update`, `frames`, `detail`, `shadows=0`, `exact`,
-//! `warm=1`, `cache_up`, `ordered=0`, `top=0` (`--no-instance-tree`).
+//! `warm=1`, `cache_up`, `ordered=0`, `top=0` (`--no-instance-tree`), `nearest=mls`.
 //!
 //! A `lod` row is also compared with the full-detail row of the same scene (the first
 //! `whitted` row with the same accel, spp, threads and depth): triangle tests and time saved, the maximum
@@ -254,13 +254,20 @@ impl MethodSpec {
                     "cache_up" => spec.surfel.cache_up = int(v)?,
                     "ordered" => spec.surfel.ordered = on(v)?,
                     "top" => spec.surfel.top = on(v)?,
+                    "nearest" => {
+                        spec.surfel.nearest_ellipse = match v {
+                            "ellipse" => true,
+                            "mls" => false,
+                            _ => return Err(bad(format!("nearest={v}: ellipse or mls"))),
+                        }
+                    }
                     "eigen" => {
                         spec.multires.eigen = crate::multires::trace::EigenMode::from_str(v, true)
                             .map_err(|_| bad(format!("eigen={v}: per-box or exact")))?
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, mip, primary, budget, eigen, tri, stri, facing, split, term, pw, spread, groups, agg, plane, tight, mask; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, warm, cache_up, ordered, top)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, mip, primary, budget, eigen, tri, stri, facing, split, term, pw, spread, groups, agg, plane, tight, mask; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, warm, cache_up, ordered, top, nearest)"
                         )))
                     }
                 }
@@ -281,7 +288,7 @@ impl MethodSpec {
                     "multires and cone"
                 }
                 "f" | "a" | "thres" | "sel" | "levels" | "dist" | "force" | "net" | "select" if method != Method::Lod => "lod",
-                "update" | "frames" | "detail" | "shadows" | "exact" | "warm" | "cache_up" | "ordered" | "top"
+                "update" | "frames" | "detail" | "shadows" | "exact" | "warm" | "cache_up" | "ordered" | "top" | "nearest"
                     if method != Method::Surfel =>
                 {
                     "surfel"

@@ -20,7 +20,7 @@ use serde::Serialize;
 use std::path::Path;
 
 /// `surfel` spec options (keys `update=`, `frames=`, `detail=`, `shadows=`, `exact=`,
-/// `warm=`, `cache_up=`, `ordered=`, `top=`; the spec's `packet=` chooses packets of 8 or single rays).
+/// `warm=`, `cache_up=`, `ordered=`, `top=`, `nearest=`; the spec's `packet=` chooses packets of 8 or single rays).
 #[derive(Clone, Debug, Serialize)]
 pub struct SurfelSpec {
     pub update: String,
@@ -38,6 +38,8 @@ pub struct SurfelSpec {
     pub ordered: bool,
     /// `top=0`: `--no-instance-tree` of `animate`.
     pub top: bool,
+    /// `nearest=mls`: `--nearest mls` of `animate`.
+    pub nearest_ellipse: bool,
 }
 
 impl Default for SurfelSpec {
@@ -52,6 +54,7 @@ impl Default for SurfelSpec {
             cache_up: 0,
             ordered: true,
             top: true,
+            nearest_ellipse: true,
         }
     }
 }
@@ -131,6 +134,7 @@ pub fn run(
                 cache_up: s.cache_up,
                 unordered: !s.ordered,
                 no_instance_tree: !s.top,
+                nearest: if s.nearest_ellipse { crate::cli::animate::Nearest::Ellipse } else { crate::cli::animate::Nearest::Mls },
                 warm_pass: s.warm,
                 quiet,
             };
