@@ -533,6 +533,35 @@ fn animate_writes_frames_and_per_frame_stats() {
     assert!(v["per_frame"][0].get("warm_seconds").is_none(), "warm_seconds only with --warm-pass");
 }
 
+/// `--cost` writes each frame's work per pixel beside it (magma, log scale): the frames are
+/// the same bytes as without it, the map varies across the image (the figure's pixels cost
+/// more than the floor's), and without `--out` it is refused with one line, exit 2.
+#[test]
+fn animate_cost_maps_beside_the_frames() {
+    for packet in ["1", "8"] {
+        let d = tmp(&format!("animatecost{packet}"));
+        let plain = tmp(&format!("animatecostplain{packet}"));
+        let args = ["--frames", "2", "--detail", "0.05", "--update", "lazy", "--packet", packet];
+        small_animate(&plain, "bend", &args);
+        let mut with = args.to_vec();
+        with.push("--cost");
+        small_animate(&d, "bend", &with);
+        for f in 0..2 {
+            let name = format!("frame_{f:04}.png");
+            assert_eq!(std::fs::read(d.join(&name)).unwrap(), std::fs::read(plain.join(&name)).unwrap(), "{name} changed with --cost");
+            let cost = image::open(d.join(format!("cost_{f:04}.png"))).unwrap().to_rgb8();
+            assert_eq!(cost.dimensions(), (48, 36));
+            let colours: std::collections::HashSet<[u8; 3]> = cost.pixels().map(|p| p.0).collect();
+            assert!(colours.len() >= 4, "packet {packet}: cost map of frame {f} has {} colours", colours.len());
+        }
+        assert!(!plain.join("cost_0000.png").exists());
+    }
+    let (code, _, err) = lodtrace(&["animate", "bend", "--frames", "1", "--detail", "0.05", "--width", "48", "--height", "36", "--cost"]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains("--out"), "{err}");
+}
+
 /// `--warm-pass` times a second render of every frame (hierarchy already updated) apart
 /// from the frame's own time, which `render_seconds` still sums.
 #[test]

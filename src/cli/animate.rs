@@ -84,10 +84,16 @@ pub struct AnimateArgs {
     pub no_instance_tree: bool,
     /// Which MLS hit is a ray's closest: `ellipse` (default) iterates from the nearest
     /// ellipse hit only; `mls` iterates from every ellipse hit the ray meets (4–5 overlapping
-    /// splats per visible point) and keeps the nearest result. Images differ by far less
-    /// than a pixel's colour step (README, "Nearest ellipse").
+    /// splats per visible point) and keeps the nearest result. Images differ at a few
+    /// grazing pixels (`armadillo-ball`: mean FLIP 0.0014; README, "Nearest ellipse").
     #[arg(long, value_enum, default_value_t = Nearest::Ellipse)]
     pub nearest: Nearest,
+    /// Profiling: with `--out`, also write each frame's work per pixel as `cost_NNNN.png`:
+    /// bounding-volume and ray–surfel tests of the pixel's primary and shadow rays, on a log
+    /// scale in magma colours (black none, pale yellow the frame's most). With packets of 8
+    /// (the default) each 4×2 tile shows its rays' mean; `--packet 1` gives each pixel its own.
+    #[arg(long)]
+    pub cost: bool,
     /// Profiling: render every frame a second time, untimed in `seconds`, and report that
     /// pass as `warm_seconds` (per frame, in `--stats`) — the rays alone with every sphere
     /// the first pass reached already current (and tightened by Eq. 11), so `seconds −
@@ -211,6 +217,9 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
     if a.cache_up > crate::deform::trace::MAX_CACHE_UP {
         return Err(Error::Usage(format!("--cache-up {}: at most {}", a.cache_up, crate::deform::trace::MAX_CACHE_UP)));
     }
+    if a.cost && a.out.is_none() {
+        return Err(Error::Usage("--cost writes cost_NNNN.png beside the frames: give --out DIR".into()));
+    }
     if a.cache_up > 0 && mode != UpdateMode::LazyCache {
         return Err(Error::Usage(format!("--cache-up is an option of --update lazy-cache; --update {} would ignore it", mode.name())));
     }
@@ -311,7 +320,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         let t = Instant::now();
         tracer.begin_frame(nodes).map_err(derr)?;
         let sc = ShadeCtx { colliders: &colliders, colors: &colors, inst_obj: &inst_obj, light, shadows: !a.no_shadows };
-        let (film, c, dc) = render_frame(&tracer, &cam, &sc, a.width, a.height, a.packet);
+        let (film, c, dc, cost) = render_frame(&tracer, &cam, &sc, a.width, a.height, a.packet, a.cost);
         let secs = t.elapsed().as_secs_f64();
         tracer.end_frame(secs);
         render_seconds += secs;
@@ -319,7 +328,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         let fs = tracer.frame_stats();
         let warm_seconds = a.warm_pass.then(|| {
             let t = Instant::now();
-            let _ = render_frame(&tracer, &cam, &sc, a.width, a.height, a.packet);
+            let _ = render_frame(&tracer, &cam, &sc, a.width, a.height, a.packet, false);
             t.elapsed().as_secs_f64()
         });
         rows.push(FrameRow {
@@ -341,6 +350,10 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         });
         if let Some(d) = &a.out {
             io::write_png(&d.join(format!("frame_{f:04}.png")), &film)?;
+            if a.cost {
+                let img = crate::film::metrics::cost_map(&cost, a.width, a.height)?;
+                io::write_rgb8_png(&d.join(format!("cost_{f:04}.png")), &img)?;
+            }
         }
         last_frame = film;
         bar.inc(1);
@@ -381,26 +394,33 @@ fn render_frame(
     width: u32,
     height: u32,
     packet: u32,
-) -> (Film, Counters, DeformCounters) {
+    want_cost: bool,
+) -> (Film, Counters, DeformCounters, Vec<u32>) {
     let w = width as usize;
     let mut film = Film::new(width, height);
     // Packets: two rows per task, 4×2 pixel tiles.
     let rows_per_task = if packet == 8 { 2 } else { 1 };
-    let (c, dc) = film
+    let work = |dc: &DeformCounters| dc.sphere_tests + dc.leaf_tests;
+    let parts: Vec<(Counters, DeformCounters, Vec<u32>)> = film
         .color
         .par_chunks_mut(w * rows_per_task)
         .enumerate()
         .map(|(jb, block)| {
             let mut c = Counters::default();
             let mut dc = DeformCounters::default();
+            let mut cost = if want_cost { vec![0u32; block.len()] } else { Vec::new() };
             let j0 = jb * rows_per_task;
             if packet == 1 {
                 for (i, px) in block.iter_mut().enumerate() {
                     let ray = Ray::new(cam.eye, cam.pixel_center_dir(i as u32, j0 as u32));
                     let slot = Some((j0 * w + i) as u32);
+                    let before = work(&dc);
                     *px = shade(tr, &ray, slot, sc, &mut c, &mut dc);
+                    if want_cost {
+                        cost[i] = (work(&dc) - before).min(u32::MAX as u64) as u32;
+                    }
                 }
-                return (c, dc);
+                return (c, dc, cost);
             }
             let nrows = block.len() / w;
             let mut rays = Vec::with_capacity(8);
@@ -418,22 +438,26 @@ fn render_frame(
                         idx.push(dy * w + x);
                     }
                 }
+                let before = work(&dc);
                 let col = shade_x8(tr, &rays, &slots, sc, &mut c, &mut dc);
+                let mean = ((work(&dc) - before) / idx.len() as u64).min(u32::MAX as u64) as u32;
                 for (k, &p) in idx.iter().enumerate() {
                     block[p] = col[k];
+                    if want_cost {
+                        cost[p] = mean;
+                    }
                 }
             }
-            (c, dc)
+            (c, dc, cost)
         })
-        .reduce(
-            || (Counters::default(), DeformCounters::default()),
-            |mut x, y| {
-                x.0.merge(&y.0);
-                x.1.merge(&y.1);
-                x
-            },
-        );
-    (film, c, dc)
+        .collect();
+    let (mut c, mut dc, mut cost) = (Counters::default(), DeformCounters::default(), Vec::new());
+    for (pc, pdc, pcost) in parts {
+        c.merge(&pc);
+        dc.merge(&pdc);
+        cost.extend(pcost);
+    }
+    (film, c, dc, cost)
 }
 
 /// A light above and a little behind the camera's right shoulder.

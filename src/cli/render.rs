@@ -250,6 +250,7 @@ fn render_surfel(a: &RenderArgs, out: &Path) -> Result<()> {
         unordered: false,
         no_instance_tree: false,
         nearest: super::animate::Nearest::Ellipse,
+        cost: false,
         warm_pass: false,
         quiet: a.quiet,
     };

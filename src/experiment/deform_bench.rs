@@ -134,6 +134,7 @@ pub fn run(
                 cache_up: s.cache_up,
                 unordered: !s.ordered,
                 no_instance_tree: !s.top,
+                cost: false,
                 nearest: if s.nearest_ellipse { crate::cli::animate::Nearest::Ellipse } else { crate::cli::animate::Nearest::Mls },
                 warm_pass: s.warm,
                 quiet,
