@@ -155,6 +155,9 @@ pub struct AnimateStats {
     /// The last frame rendered (for image comparisons across update modes).
     #[serde(skip)]
     pub last_frame: Film,
+    /// With `--cost`: the last frame's tests per pixel (row-major), else empty.
+    #[serde(skip)]
+    pub last_cost: Vec<u32>,
 }
 
 fn derr(e: DeformError) -> Error {
@@ -316,6 +319,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     let mut total = Counters::default();
     let mut render_seconds = 0.0;
     let mut last_frame = Film::new(a.width, a.height);
+    let mut last_cost = Vec::new();
     for (f, nodes) in rec.frames.iter().enumerate() {
         let t = Instant::now();
         tracer.begin_frame(nodes).map_err(derr)?;
@@ -356,6 +360,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
             }
         }
         last_frame = film;
+        last_cost = cost;
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -378,6 +383,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         radius_ratios: tracer.radius_ratios(64),
         counters: total.to_map(),
         last_frame,
+        last_cost,
     };
     if let Some(p) = &a.stats {
         let json = serde_json::to_string_pretty(&stats).expect("stats serialise");

@@ -201,8 +201,54 @@ fn deform_section(a: &DemoArgs) -> Result<String> {
             r.image.as_deref().unwrap_or(""),
         );
     }
+    if rows.iter().any(|r| r.scene == "elastic-balls") {
+        h_out.push_str(&cost_section(a, &dir, (w, h, frames, detail))?);
+    }
     h_out.push_str(&size_section(a, &dir, detail)?);
     Ok(h_out)
+}
+
+/// Where the rays' work goes in `elastic-balls`' last frame, rebuilt tree against lazy tree:
+/// `animate --cost` maps on one scale (the lazy tree's loose upper spheres show as halos).
+fn cost_section(a: &DemoArgs, dir: &Path, (w, h, frames, detail): (u32, u32, u32, f32)) -> Result<String> {
+    let mut maps = Vec::new();
+    for update in ["naive", "lazy"] {
+        let args = crate::cli::animate::AnimateArgs {
+            scene: "elastic-balls".into(),
+            frames: Some(frames),
+            update: update.into(),
+            width: w,
+            height: h,
+            out: Some(dir.join(format!("cost-{update}"))),
+            stats: None,
+            detail,
+            no_shadows: false,
+            threads: a.threads,
+            packet: 8,
+            exact_below: crate::deform::TraceParams::default().exact_below,
+            cache_up: 0,
+            unordered: false,
+            no_instance_tree: false,
+            cost: true,
+            nearest: crate::cli::animate::Nearest::Ellipse,
+            warm_pass: false,
+            quiet: true,
+        };
+        maps.push((update, crate::cli::animate::animate(&args)?.last_cost));
+    }
+    let max = maps.iter().flat_map(|(_, v)| v.iter().copied()).max().unwrap_or(0);
+    let mut out = String::from("<h3>Where the rays' work goes (elastic-balls, last frame)</h3><p>Bounding-volume and ray–surfel tests per pixel, primary and shadow rays, each 4×2 packet's mean (<code>lodtrace animate elastic-balls --update naive|lazy --out D --cost</code>), both maps on one log scale (magma: black none, pale yellow the most of either). Around every ball the lazy tree's map has a halo of rays that enter its loose upper spheres and miss; the rebuilt tree's spheres are tight.</p>");
+    for (update, v) in &maps {
+        let name = format!("elastic-balls-cost-{update}.png");
+        let img = crate::film::metrics::cost_map_to(v, w, h, max)?;
+        crate::film::io::write_rgb8_png(&dir.join(&name), &img)?;
+        let mean = v.iter().map(|&x| x as f64).sum::<f64>() / v.len().max(1) as f64;
+        let _ = write!(
+            out,
+            "<figure><img src=\"deform/{name}\"><figcaption>{update}: {mean:.0} tests per pixel on average</figcaption></figure>"
+        );
+    }
+    Ok(out)
 }
 
 /// The lazy update's speed-up over the rebuild against the image size: naive, lazy-cache and

@@ -192,12 +192,17 @@ pub fn ssim(a: &[Vec3], b: &[Vec3], w: u32, h: u32) -> f64 {
 /// The magma-coloured log-scale map of a per-pixel count (module docs); all black when every
 /// count is 0.
 pub fn cost_map(v: &[u32], w: u32, h: u32) -> Result<image::RgbImage> {
+    cost_map_to(v, w, h, v.iter().copied().max().unwrap_or(0))
+}
+
+/// [`cost_map`] on a given scale: `max` (and above) is the LUT's brightest colour, so that
+/// maps of two runs compare.
+pub fn cost_map_to(v: &[u32], w: u32, h: u32, max: u32) -> Result<image::RgbImage> {
     if v.len() != w as usize * h as usize {
         return Err(Error::Image(format!("cost map: {} values for {w}x{h} pixels", v.len())));
     }
     let lut = nv_flip::magma_lut().to_vec();
     let n = lut.len() / 3;
-    let max = v.iter().copied().max().unwrap_or(0);
     let scale = if max > 0 { 1.0 / (max as f64).ln_1p() } else { 0.0 };
     let mut img = image::RgbImage::new(w, h);
     for (p, &x) in img.pixels_mut().zip(v) {
