@@ -534,8 +534,9 @@ fn animate_writes_frames_and_per_frame_stats() {
 }
 
 /// `--cost` writes each frame's work per pixel beside it (magma, log scale): the frames are
-/// the same bytes as without it, the map varies across the image (the figure's pixels cost
-/// more than the floor's), and without `--out` it is refused with one line, exit 2.
+/// the same bytes as without it, the map varies across the image, the counts behind it add
+/// up to the frame's tests (ray by ray exactly, in packets to the tiles' rounding) and peak
+/// well above the median, and without `--out` it is refused with one line, exit 2.
 #[test]
 fn animate_cost_maps_beside_the_frames() {
     for packet in ["1", "8"] {
@@ -560,6 +561,35 @@ fn animate_cost_maps_beside_the_frames() {
     assert_eq!(code, 2, "{err}");
     one_error_line(&err);
     assert!(err.contains("--out"), "{err}");
+    // The counts behind the maps: ray by ray they add up to the frame's tests; in packets each
+    // 4×2 tile holds its rays' mean (rounded down), so the sum falls short by < 8 per tile.
+    for packet in [1u32, 8] {
+        let d = tmp(&format!("animatecostsum{packet}"));
+        let args = lodtrace::cli::animate::AnimateArgs {
+            frames: Some(2),
+            detail: 0.05,
+            width: 48,
+            height: 36,
+            update: "lazy".into(),
+            packet,
+            out: Some(d),
+            cost: true,
+            quiet: true,
+            ..lodtrace::cli::animate::AnimateArgs::new("bend")
+        };
+        let st = lodtrace::cli::animate::animate(&args).unwrap();
+        let last = st.per_frame.last().unwrap();
+        let total = last.sphere_tests + last.leaf_tests;
+        let sum: u64 = st.last_cost.iter().map(|&x| x as u64).sum();
+        let tiles = (48 / 4) * (36 / 2);
+        let short = if packet == 1 { 0 } else { 7 * tiles };
+        assert!(sum <= total && total - sum <= short, "packet {packet}: map sums to {sum}, the frame did {total} tests");
+        // Pixels whose rays hit the figure cost more than the floor's: the costliest pixel
+        // costs several times the median.
+        let mut v = st.last_cost.clone();
+        v.sort_unstable();
+        assert!(v[v.len() - 1] > 3 * v[v.len() / 2].max(1), "packet {packet}: max {} median {}", v[v.len() - 1], v[v.len() / 2]);
+    }
 }
 
 /// `--warm-pass` times a second render of every frame (hierarchy already updated) apart

@@ -105,6 +105,17 @@ pub struct AnimateArgs {
     pub quiet: bool,
 }
 
+impl AnimateArgs {
+    /// `lodtrace animate SCENE` with every option at its command-line default, for callers
+    /// (render, bench, demo) that set a few (the defaults come from the clap attributes above,
+    /// so they cannot drift).
+    pub fn new(scene: &str) -> Self {
+        use clap::{Args, FromArgMatches};
+        let m = Self::augment_args(clap::Command::new("animate")).get_matches_from(["animate", "--", scene]);
+        Self::from_arg_matches(&m).expect("the defaults parse")
+    }
+}
+
 /// Per-frame statistics (the paper's Fig. 5 curves come from `seconds`).
 #[derive(Serialize, Debug, Clone)]
 pub struct FrameRow {
@@ -117,7 +128,7 @@ pub struct FrameRow {
     pub surfels_deformed: u64,
     pub sphere_tests: u64,
     pub leaf_tests: u64,
-    /// Leaves whose ellipse the ray hit (MLS iterations started), and those that converged.
+    /// MLS iterations started, and those that converged.
     pub mls_runs: u64,
     pub mls_hits: u64,
     pub mls_iterations_mean: f64,

@@ -234,25 +234,15 @@ fn render_surfel(a: &RenderArgs, out: &Path) -> Result<()> {
         return Err(Error::Usage("--method surfel renders one ray per pixel and no AOVs (use --spp 1, no --aov)".into()));
     }
     let args = super::animate::AnimateArgs {
-        scene: a.scene.clone(),
         frames: Some(1),
         update: "lazy".into(),
         width: a.width,
         height: a.height,
-        out: None,
         stats: a.stats.clone(),
-        detail: 1.0,
-        no_shadows: false,
         threads: a.threads,
         packet: a.packet,
-        exact_below: 64,
-        cache_up: 0,
-        unordered: false,
-        no_instance_tree: false,
-        nearest: super::animate::Nearest::Ellipse,
-        cost: false,
-        warm_pass: false,
         quiet: a.quiet,
+        ..super::animate::AnimateArgs::new(&a.scene)
     };
     let st = super::animate::animate(&args)?;
     io::write_beauty(out, &st.last_frame)?;

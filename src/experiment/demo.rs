@@ -214,25 +214,16 @@ fn cost_section(a: &DemoArgs, dir: &Path, (w, h, frames, detail): (u32, u32, u32
     let mut maps = Vec::new();
     for update in ["naive", "lazy"] {
         let args = crate::cli::animate::AnimateArgs {
-            scene: "elastic-balls".into(),
             frames: Some(frames),
             update: update.into(),
             width: w,
             height: h,
             out: Some(dir.join(format!("cost-{update}"))),
-            stats: None,
             detail,
-            no_shadows: false,
             threads: a.threads,
-            packet: 8,
-            exact_below: crate::deform::TraceParams::default().exact_below,
-            cache_up: 0,
-            unordered: false,
-            no_instance_tree: false,
             cost: true,
-            nearest: crate::cli::animate::Nearest::Ellipse,
-            warm_pass: false,
             quiet: true,
+            ..crate::cli::animate::AnimateArgs::new("elastic-balls")
         };
         maps.push((update, crate::cli::animate::animate(&args)?.last_cost));
     }
