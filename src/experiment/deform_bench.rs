@@ -84,6 +84,9 @@ pub struct DeformRow {
     pub rays_ms_per_frame: Option<f64>,
     pub sphere_tests_per_frame: f64,
     pub leaf_tests_per_frame: f64,
+    /// MLS iterations started per frame (one per closest-hit ray under the nearest-ellipse
+    /// rule, one per ellipse hit under the paper's).
+    pub mls_runs_per_frame: f64,
     pub mls_iterations_mean: f64,
     pub cache_lookups: u64,
     pub cache_hits: u64,
@@ -184,6 +187,7 @@ pub fn run(
                 rays_ms_per_frame: s.warm.then(|| 1e3 * st.per_frame.iter().filter_map(|r| r.warm_seconds).sum::<f64>() / n),
                 sphere_tests_per_frame: st.per_frame.iter().map(|r| r.sphere_tests).sum::<u64>() as f64 / n,
                 leaf_tests_per_frame: st.per_frame.iter().map(|r| r.leaf_tests).sum::<u64>() as f64 / n,
+                mls_runs_per_frame: st.per_frame.iter().map(|r| r.mls_runs).sum::<u64>() as f64 / n,
                 mls_iterations_mean: st.per_frame.iter().map(|r| r.mls_iterations_mean).sum::<f64>() / n,
                 cache_lookups: st.per_frame.iter().map(|r| r.cache_lookups).sum(),
                 cache_hits: st.per_frame.iter().map(|r| r.cache_hits).sum(),
@@ -267,12 +271,12 @@ fn plots(out: &Path, rows: &[DeformRow]) -> Result<()> {
 /// The rows as a Markdown table.
 pub fn table(rows: &[DeformRow]) -> String {
     let mut s = String::from("\nDeforming sequences (Adams et al.):\n\n");
-    s.push_str("| sequence | method | size | surfels | frames | thr | ms/frame | speed-up vs first | update ms/frame | rays ms/frame (warm) | BV tests/frame | leaf tests/frame | MLS it. | cache hits | inner nodes updated/frame | root ratio | mean ratio | same image |\n");
-    s.push_str("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
+    s.push_str("| sequence | method | size | surfels | frames | thr | ms/frame | speed-up vs first | update ms/frame | rays ms/frame (warm) | BV tests/frame | leaf tests/frame | MLS runs/frame | MLS it. | cache hits | inner nodes updated/frame | root ratio | mean ratio | same image |\n");
+    s.push_str("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
     for r in rows {
         let f = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
         s.push_str(&format!(
-            "| {} | {} | {}x{} | {} | {} | {} | {:.1} | {:.2}x | {:.1} | {} | {:.0} | {:.0} | {:.2} | {} | {:.0} | {} | {} | {} |\n",
+            "| {} | {} | {}x{} | {} | {} | {} | {:.1} | {:.2}x | {:.1} | {} | {:.0} | {:.0} | {:.0} | {:.2} | {} | {:.0} | {} | {} | {} |\n",
             r.scene,
             r.spec,
             r.width,
@@ -286,6 +290,7 @@ pub fn table(rows: &[DeformRow]) -> String {
             r.rays_ms_per_frame.map(|v| format!("{v:.1}")).unwrap_or_else(|| "-".into()),
             r.sphere_tests_per_frame,
             r.leaf_tests_per_frame,
+            r.mls_runs_per_frame,
             r.mls_iterations_mean,
             if r.cache_lookups > 0 { format!("{}/{}", r.cache_hits, r.cache_lookups) } else { "-".into() },
             r.inner_nodes_updated_per_frame,
