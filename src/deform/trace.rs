@@ -900,8 +900,7 @@ impl DeformTracer {
     fn leaf(&self, k: usize, n: usize, ray: &Ray, dc: &mut DeformCounters, ctr: &mut Counters) -> Option<SurfelHit> {
         let ii = &self.inst[k];
         let s = self.topo(ii).surfel[n] as usize;
-        let node = if ii.naive.is_some() { u32::MAX } else { n as u32 };
-        self.leaf_surfel(k, s, node, ray, dc, ctr)
+        self.leaf_surfel(k, s, leaf_node(ii, n), ray, dc, ctr)
     }
 
     /// [`leaf`](Self::leaf) by surfel; `node` is reported in the hit (for the cache).
@@ -918,7 +917,7 @@ impl DeformTracer {
     #[inline]
     fn visit(&self, k: usize, s: usize, node: u32, ray: &Ray, best: &mut Best, dc: &mut DeformCounters, ctr: &mut Counters) {
         let ii = &self.inst[k];
-        if best.rule == Rule::EveryMls || (ii.clipped && !ii.obj.clip_partners[ii.obj.coll[s] as usize].is_empty()) {
+        if best.rule == Rule::EveryMls || clipped_surfel(ii, s) {
             if let Some(h) = self.leaf_surfel(k, s, node, ray, dc, ctr) {
                 best.offer(h, h.t);
             }
@@ -1093,8 +1092,7 @@ impl DeformTracer {
                 let Some(h) = self.leaf_surfel(k, s, u32::MAX, ray, &mut dc, &mut ctr) else {
                     continue;
                 };
-                let clipped = !ii.obj.clip_partners[ii.obj.coll[s] as usize].is_empty();
-                let key = if self.params.nearest_ellipse && !clipped { h.t0 } else { h.t };
+                let key = if self.params.nearest_ellipse && !clipped_surfel(ii, s) { h.t0 } else { h.t };
                 if best.as_ref().is_none_or(|b| (key, k as u32, s as u32) < (b.0, b.1, b.2)) {
                     best = Some((key, k as u32, s as u32, h));
                 }
@@ -1207,8 +1205,7 @@ impl DeformTracer {
             }
             let n = n as usize;
             if topo.right[n] == LEAF {
-                let node = if ii.naive.is_some() { u32::MAX } else { n as u32 };
-                self.visit(k, topo.surfel[n] as usize, node, ray, best, dc, ctr);
+                self.visit(k, topo.surfel[n] as usize, leaf_node(ii, n), ray, best, dc, ctr);
                 continue;
             }
             let (l, r) = (n + 1, topo.right[n] as usize);
@@ -1425,7 +1422,7 @@ impl DeformTracer {
             }
             let n = n as usize;
             if topo.right[n] == LEAF {
-                let node = if ii.naive.is_some() { u32::MAX } else { n as u32 };
+                let node = leaf_node(ii, n);
                 for i in lanes(m) {
                     self.visit(k, topo.surfel[n] as usize, node, &rays[i], &mut best[i], dc, ctr);
                 }
@@ -1784,6 +1781,22 @@ impl DeformTracer {
             None => Ok(()),
         }
     }
+}
+
+/// The node a hit at leaf `n` reports (for the per-ray cache): none in a rebuilt tree.
+#[inline]
+fn leaf_node(ii: &Instance, n: usize) -> u32 {
+    if ii.naive.is_some() {
+        u32::MAX
+    } else {
+        n as u32
+    }
+}
+
+/// Whether surfel `s` belongs to a collection with clipping partners (§4.3).
+#[inline]
+fn clipped_surfel(ii: &Instance, s: usize) -> bool {
+    ii.clipped && !ii.obj.clip_partners[ii.obj.coll[s] as usize].is_empty()
 }
 
 /// The smallest sphere holding the spheres `a` and `b`, padded like the other radii.

@@ -122,13 +122,10 @@ pub fn run(
         for spec in specs {
             let s = &spec.surfel;
             let args = AnimateArgs {
-                scene: seq.clone(),
                 frames: s.frames,
                 update: s.update.clone(),
                 width,
                 height,
-                out: None,
-                stats: None,
                 detail: s.detail,
                 no_shadows: !s.shadows,
                 threads: spec.threads.unwrap_or(threads),
@@ -137,10 +134,10 @@ pub fn run(
                 cache_up: s.cache_up,
                 unordered: !s.ordered,
                 no_instance_tree: !s.top,
-                cost: false,
                 nearest: if s.nearest_ellipse { crate::cli::animate::Nearest::Ellipse } else { crate::cli::animate::Nearest::Mls },
                 warm_pass: s.warm,
                 quiet,
+                ..AnimateArgs::new(seq)
             };
             let mut best: Option<crate::cli::animate::AnimateStats> = None;
             for _ in 0..repeat.max(1) {
