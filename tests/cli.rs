@@ -726,7 +726,7 @@ fn bad_animate_input_is_one_line_exit_2() {
         &["animate", "no-such-sequence"],
         &["animate", "heads", "--detail", "0"],
         &["animate", "heads", "--packet", "4"],
-        &["animate", "heads", "--exact-below", "65"],
+        &["animate", "heads", "--exact-below", "16777217"],
         &["animate", "heads", "--width", "0"],
         &["animate", "heads", "--frames", "1", "--threads", "100000"],
         &["animate", bad_ply.to_str().unwrap(), "--frames", "1"],

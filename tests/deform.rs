@@ -103,7 +103,8 @@ proptest! {
 
     /// After every lazy update of every frame (partial updates with Eq. 11 tightening from
     /// traversal, then a full refit), every surfel ellipse of a node lies inside its sphere,
-    /// also for the small nodes bounded from their surfels (`exact_below`) and with Eq. 11's
+    /// also for the subtrees refitted from their surfels (`exact_below`: small ones, one of
+    /// 200 surfels, the whole tree at 4096) and with Eq. 11's
     /// centre moved between the children (`recentre_eq11`).
     #[test]
     fn lazy_spheres_contain_their_surfels(
@@ -112,7 +113,7 @@ proptest! {
         recentred in any::<bool>(),
         eq11 in any::<bool>(),
         node_rotation in any::<bool>(),
-        exact_below in prop::sample::select(vec![0u32, 3, 16, 64]),
+        exact_below in prop::sample::select(vec![0u32, 3, 16, 64, 200, 4096]),
         recentre_eq11 in any::<bool>(),
     ) {
         let obj = shared_ball();
@@ -148,7 +149,7 @@ proptest! {
 #[test]
 fn rigid_motions_far_away_keep_surfels_inside() {
     let obj = shared_ball();
-    for (case, exact_below) in [(0u32, 0u32), (1, 16), (2, 0), (3, 64)] {
+    for (case, exact_below) in [(0u32, 0u32), (1, 16), (2, 0), (3, 64), (4, 4096), (5, 300)] {
         let params = TraceParams { exact_below, factor_rigid: case % 2 == 0, ..TraceParams::default() };
         let mut tr = DeformTracer::new(&scene1(obj), UpdateMode::LazyCache, params).unwrap();
         tr.set_cache_slots(64);
@@ -773,7 +774,7 @@ fn csg_head_hits_stay_on_the_solid() {
 /// `DEFORM_SEQ=armadillo-ball DEFORM_DETAIL=1 DEFORM_FRAMES=30 DEFORM_W=256 DEFORM_H=192 \
 ///  cargo test --release --test deform measure -- --ignored --nocapture`
 /// Ablations (default 1): DEFORM_EQ11, DEFORM_RIGID, DEFORM_ORDERED, DEFORM_RECENTRED,
-/// DEFORM_NODE_ROTATION, DEFORM_RECENTRE_EQ11; DEFORM_EXACT_BELOW (default 16);
+/// DEFORM_NODE_ROTATION, DEFORM_RECENTRE_EQ11; DEFORM_EXACT_BELOW (default 4096);
 /// DEFORM_CACHE_UP (levels above the leaf), DEFORM_SHADOWS (one shadow ray per hit).
 /// DEFORM_SEQ may also be a mesh file (.off/.obj): the default drop of `Sequence::from_mesh`.
 #[test]
@@ -823,7 +824,7 @@ fn measure() {
             recentred_bound: flag("DEFORM_RECENTRED"),
             node_rotation: flag("DEFORM_NODE_ROTATION"),
             recentre_eq11: flag("DEFORM_RECENTRE_EQ11"),
-            exact_below: env("DEFORM_EXACT_BELOW", "64").parse().unwrap(),
+            exact_below: env("DEFORM_EXACT_BELOW", "4096").parse().unwrap(),
             ..TraceParams::default()
         };
         let mut tr = DeformTracer::new(&seq.scene, mode, params).unwrap();

@@ -62,9 +62,10 @@ pub struct AnimateArgs {
     /// ray by ray. Same images.
     #[arg(long, default_value_t = 8)]
     pub packet: u32,
-    /// Inner nodes over at most this many surfels are bounded exactly from their deformed
-    /// surfels instead of by Eq. 9 (lazy modes; 0 = Eq. 9 everywhere, the paper; at most 64).
-    #[arg(long, default_value_t = 64)]
+    /// Lazy modes: the first visit of an inner node over at most this many surfels bounds it
+    /// and its whole subtree from their deformed surfels (the leaf balls' box centre, the exact
+    /// reach) instead of by Eq. 9 node by node; 0 = Eq. 9 everywhere, the paper (at most 2^24).
+    #[arg(long, default_value_t = 4096)]
     pub exact_below: u32,
     /// Per-ray cache (`--update lazy-cache`, §4.2.2): cache the ancestor this many levels
     /// above the leaf of each ray's closest hit instead of the leaf itself (0, the paper's

@@ -49,7 +49,7 @@ impl Default for SurfelSpec {
             frames: None,
             detail: 1.0,
             shadows: true,
-            exact_below: 64,
+            exact_below: 4096,
             warm: false,
             cache_up: 0,
             ordered: true,
