@@ -909,7 +909,9 @@ impl DeformTracer {
         let topo = self.topo(ii);
         let s1 = self.sphere(ii, n + 1);
         let s2 = self.sphere(ii, topo.right[n] as usize);
-        if ii.naive.is_none() && self.params.eq11 {
+        // A node of a refitted subtree (≤ exact_below surfels) already reaches exactly its
+        // farthest leaf ball: enclosing its children cannot beat that, so Eq. 11 is skipped.
+        if ii.naive.is_none() && self.params.eq11 && topo.count[n] > self.params.exact_below {
             // n was tested before the descent, so it is current; its centre is read only for
             // the paper's Eq. 11 (the re-centred form encloses the two child spheres).
             let c = if self.params.recentre_eq11 { Vec3::NAN } else { self.sphere(ii, n).0 };
