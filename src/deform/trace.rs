@@ -260,6 +260,7 @@ struct RefitScratch {
     r: Vec<f32>,
     lo: Vec<Vec3>,
     hi: Vec<Vec3>,
+    sph: Vec<(Vec3, f32)>,
 }
 
 thread_local! {
@@ -834,7 +835,12 @@ impl DeformTracer {
         let (c, r) = if tree.topo.right[n] == LEAF {
             self.surfel_ball(ii, tree.topo.surfel[n] as usize)
         } else if tree.topo.count[n] <= self.params.exact_below.min(MAX_EXACT_BELOW) {
-            self.refit_subtree(ii, n)
+            match self.refit_subtree(ii, n) {
+                Some(sph) => sph,
+                // Claimed by another thread: Eq. 9, published (Eq. 11 tightens it from the
+                // owner's children later; `child_spheres`).
+                None => tree.update_eq9(n, &ii.field, &ii.obj.nodes.rest, self.params.recentred_bound, self.params.node_rotation),
+            }
         } else {
             tree.update_eq9(n, &ii.field, &ii.obj.nodes.rest, self.params.recentred_bound, self.params.node_rotation)
         };
@@ -846,25 +852,30 @@ impl DeformTracer {
     /// from their deformed surfels, published at once: every leaf ball is made current
     /// (§4.1.2 updates leaves from their surfel), then, bottom up, each inner node is centred
     /// at the middle of its leaf-ball centres' bounding box (the union of its children's)
-    /// with the radius reaching its farthest leaf ball ([`max_reach_x8`]): Eq. 11 taken down
-    /// to the leaves, O(m log m) for m surfels. This deviates from the paper, which uses
-    /// Eq. 9 for every inner node on its first visit: at 512×384 the rays deform 93–100 % of
-    /// the surfels anyway (for the leaf and MLS tests), and with them in hand an exact sphere
-    /// costs less than Eq. 9 over a ≈17-entry node list and is much tighter (module docs,
-    /// "Subtree refit"). Every leaf ball lies inside, so hits are unchanged.
+    /// with the radius reaching its farthest leaf ball ([`max_reach_x8`]) — Eq. 11 taken down
+    /// to the leaves, O(m log m) for m surfels — or takes the sphere around its two children
+    /// (Eq. 11 re-centred, as `tighten`) where that is smaller. This deviates from the
+    /// paper, which uses Eq. 9 for every inner node on its first visit: at 512×384 the rays
+    /// deform 93–100 % of the surfels anyway (for the leaf and MLS tests), and with them in
+    /// hand an exact sphere costs less than Eq. 9 over a ≈17-entry node list and is much
+    /// tighter (module docs, "Subtree refit"). Every leaf ball lies inside, so hits are
+    /// unchanged.
     ///
-    /// A subtree of more than [`REFIT_CLAIM_MIN`] surfels is refitted by one thread: a thread
-    /// that finds it claimed in this frame bounds `n` alone by Eq. 9 (valid, looser) and goes
-    /// on; the owner publishes every node not already current.
-    fn refit_subtree(&self, ii: &Instance, n: usize) -> (Vec3, f32) {
+    /// A subtree of more than [`REFIT_CLAIM_MIN`] surfels is refitted by one thread per
+    /// frame: `None` tells a thread that finds it claimed to bound `n` by Eq. 9 (valid,
+    /// looser; Eq. 11 tightens it once the owner has published the children); the owner
+    /// publishes every node below `n` that is not already current. (Publishing nothing for
+    /// `n` until the owner is done was tried: every packet in the meantime recomputed Eq. 9
+    /// and refitted the small subtrees below again, 2× slower frames.)
+    fn refit_subtree(&self, ii: &Instance, n: usize) -> Option<(Vec3, f32)> {
         let topo = &ii.obj.tree.topo;
         let (s0, cnt) = (topo.start[n] as usize, topo.count[n] as usize);
         if cnt > REFIT_CLAIM_MIN as usize && ii.nodes.slot[n].claim.swap(self.frame, AcqRel) == self.frame {
-            return ii.obj.tree.update_eq9(n, &ii.field, &ii.obj.nodes.rest, self.params.recentred_bound, self.params.node_rotation);
+            return None;
         }
-        REFIT_SCRATCH.with(|cell| {
+        Some(REFIT_SCRATCH.with(|cell| {
             let mut sc = cell.borrow_mut();
-            let RefitScratch { x, y, z, r, lo, hi } = &mut *sc;
+            let RefitScratch { x, y, z, r, lo, hi, sph } = &mut *sc;
             for v in [&mut *x, &mut *y, &mut *z, &mut *r] {
                 v.clear();
             }
@@ -877,12 +888,13 @@ impl DeformTracer {
             lo.resize(m, Vec3::ZERO);
             hi.clear();
             hi.resize(m, Vec3::ZERO);
-            let mut root = (Vec3::ZERO, 0.0);
+            sph.clear();
+            sph.resize(m, (Vec3::ZERO, 0.0));
             // Pre-order: a node's descendants follow it, so descending indices visit every
             // child before its parent.
             for q in (n..n + m).rev() {
                 let (a, k) = (topo.start[q] as usize - s0, topo.count[q] as usize);
-                let sph = if topo.right[q] == LEAF {
+                let b = if topo.right[q] == LEAF {
                     let c = Vec3::new(x[a], y[a], z[a]);
                     (lo[q - n], hi[q - n]) = (c, c);
                     (c, r[a])
@@ -891,16 +903,23 @@ impl DeformTracer {
                     (lo[q - n], hi[q - n]) = (lo[l].min(lo[rr]), hi[l].max(hi[rr]));
                     let c = 0.5 * (lo[q - n] + hi[q - n]);
                     let reach = max_reach_x8(&x[a..a + k], &y[a..a + k], &z[a..a + k], &r[a..a + k], c);
-                    (c, reach * (1.0 + RADIUS_PAD) + RADIUS_PAD * c.abs().max_element())
+                    let exact = (c, reach * (1.0 + RADIUS_PAD) + RADIUS_PAD * c.abs().max_element());
+                    // Eq. 11 (re-centred) on the children just computed: now and never again
+                    // this frame (`child_spheres` skips it inside a refitted subtree).
+                    let enc = enclosing_sphere(sph[l], sph[rr]);
+                    if enc.1 < exact.1 {
+                        enc
+                    } else {
+                        exact
+                    }
                 };
-                if q == n {
-                    root = sph;
-                } else if ii.nodes.slot[q].stamp.load(Relaxed) != self.frame {
-                    ii.nodes.store(q, sph.0, sph.1, self.frame);
+                sph[q - n] = b;
+                if q != n && ii.nodes.slot[q].stamp.load(Relaxed) != self.frame {
+                    ii.nodes.store(q, b.0, b.1, self.frame);
                 }
             }
-            root
-        })
+            sph[0]
+        }))
     }
 
     /// The spheres of inner node n's two children (updating them lazily), and Eq. 11 for n.
@@ -909,9 +928,11 @@ impl DeformTracer {
         let topo = self.topo(ii);
         let s1 = self.sphere(ii, n + 1);
         let s2 = self.sphere(ii, topo.right[n] as usize);
-        // A node of a refitted subtree (≤ exact_below surfels) already reaches exactly its
-        // farthest leaf ball: enclosing its children cannot beat that, so Eq. 11 is skipped.
-        if ii.naive.is_none() && self.params.eq11 && topo.count[n] > self.params.exact_below {
+        // A node inside a refitted subtree took Eq. 11 from its final children when it was
+        // refitted (`refit_subtree`), so it is skipped here. Median splits halve the counts,
+        // so a node of fewer than exact_below/2 surfels is inside one; a subtree's own root
+        // (≥ exact_below/2) may carry the Eq. 9 sphere of a claimed refit and is tightened.
+        if ii.naive.is_none() && self.params.eq11 && 2 * topo.count[n] >= self.params.exact_below {
             // n was tested before the descent, so it is current; its centre is read only for
             // the paper's Eq. 11 (the re-centred form encloses the two child spheres).
             let c = if self.params.recentre_eq11 { Vec3::NAN } else { self.sphere(ii, n).0 };
@@ -2055,8 +2076,9 @@ mod tests {
     }
 
     /// `refit_subtree`: the first visit of a node of ≤ `exact_below` surfels publishes its
-    /// whole subtree, each sphere centred at its leaf balls' box centre and reaching exactly
-    /// the farthest leaf ball (within the padding); a subtree another thread has claimed in
+    /// whole subtree, each sphere holding its leaf balls and no larger (within the padding)
+    /// than the exact reach from their box centre or the sphere around its two children; a
+    /// subtree another thread has claimed in
     /// this frame is bounded by Eq. 9 instead, and either way every surfel stays inside.
     #[test]
     fn subtree_refit_is_exact_and_a_claimed_subtree_falls_back_to_eq9() {
@@ -2083,10 +2105,16 @@ mod tests {
             let (a, k) = (topo.start[q] as usize, topo.count[q] as usize);
             let balls: Vec<(Vec3, f32)> =
                 topo.perm[a..a + k].iter().map(|&s| leaf_sphere(&deform_surfel(&ii.obj, &ii.field, s as usize))).collect();
+            let reach_from = |c: Vec3| balls.iter().map(|(p, rr)| (*p - c).length() + rr).fold(0.0f32, f32::max);
+            assert!(reach_from(c) <= r, "node {q}: a leaf ball reaches {} > {r}", reach_from(c));
+            // No larger than the exact reach from the box centre, nor than the sphere around
+            // the two children (Eq. 11, re-centred).
             let (lo, hi) = balls.iter().fold((Vec3::MAX, Vec3::MIN), |(lo, hi), b| (lo.min(b.0), hi.max(b.0)));
-            assert!((c - 0.5 * (lo + hi)).length() <= 1e-6, "node {q}: centre {c}");
-            let reach = balls.iter().map(|(p, rr)| (*p - c).length() + rr).fold(0.0f32, f32::max);
-            assert!(reach <= r && r <= reach * (1.0 + 1e-4) + 1e-6, "node {q}: radius {r}, reach {reach}");
+            let mut best = reach_from(0.5 * (lo + hi));
+            if topo.right[q] != LEAF {
+                best = best.min(enclosing_sphere(ii.nodes.load(q + 1), ii.nodes.load(topo.right[q] as usize)).1);
+            }
+            assert!(r <= best * (1.0 + 1e-4) + 1e-6, "node {q}: radius {r}, tightest of the two {best}");
         }
         let next = n + 2 * cnt - 1;
         assert!(next < topo.len() && !tr.current(ii, next), "the node after the subtree stays lazy");
