@@ -1197,6 +1197,86 @@ fn stop_38_bad_inputs_are_one_line_exit_2() {
     assert!(keep.join("old.txt").exists() && keep.join("frame_0001.png").is_dir());
 }
 
+/// Stop 42's review of bad input: values that overflowed the shading into +inf pixels, an
+/// output that overwrote a mesh the scene reads, and a time budget that cheap cones outran.
+#[test]
+fn stop_42_bad_inputs_are_one_line_exit_2() {
+    let d = tmp("stop42");
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    std::fs::write(p("quad.off"), "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n").unwrap();
+    let scene = |colour: &str, intensity: &str| {
+        format!(
+            "[camera]\neye = [0.5, 0.5, 3]\nlook = [0.5, 0.5, 0]\nfovy = 45\n[materials.m]\ncolor = {colour}\n\
+             [meshes.q]\nfile = \"quad.off\"\nmaterial = \"m\"\n[[instances]]\ntarget = \"q\"\n\
+             [[lights]]\ntype = \"point\"\npos = [0.5, 0.5, 2]\nintensity = {intensity}\n"
+        )
+    };
+    std::fs::write(p("ok.toml"), scene("0.8", "3")).unwrap();
+    let (code, _, err) = lodtrace(&["render", &p("ok.toml"), "--width", "16", "--height", "12", "--quiet", "--out", &p("ok.png")]);
+    assert_eq!(code, 0, "the valid scene renders: {err}");
+    // A colour of 1e38 lit by 1e38 wrote +inf (Whitted) or black (multires) pixels.
+    for (name, colour, intensity) in [("c", "1e38", "3"), ("i", "0.8", "1e38"), ("s", "[0.8, 2e6, 0]", "3")] {
+        std::fs::write(p(&format!("{name}.toml")), scene(colour, intensity)).unwrap();
+        for method in ["whitted", "multires"] {
+            let out = p(&format!("{name}-{method}.exr"));
+            let (code, _, err) = lodtrace(&[
+                "render",
+                &p(&format!("{name}.toml")),
+                "--method",
+                method,
+                "--width",
+                "16",
+                "--height",
+                "12",
+                "--quiet",
+                "--out",
+                &out,
+            ]);
+            assert_eq!(code, 2, "{name} {method}: {err}");
+            one_error_line(&err);
+            assert!(err.contains("beyond"), "{err}");
+            assert!(!std::path::Path::new(&out).exists());
+        }
+    }
+    // `--stats` or `--json` naming a mesh the TOML scene reads: refused, the mesh kept.
+    let mesh_before = std::fs::read(p("quad.off")).unwrap();
+    for args in [
+        vec!["render", &p("ok.toml") as &str, "--width", "8", "--height", "8", "--quiet", "--out", &p("o.png"), "--stats", &p("quad.off")],
+        vec!["verify", &p("ok.toml"), "--rays", "10", "--json", &p("quad.off")],
+        vec!["render", &p("ok.toml"), "--width", "8", "--height", "8", "--quiet", "--out", &p("quad.off")],
+    ] {
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains("quad.off"), "{err}");
+        assert_eq!(std::fs::read(p("quad.off")).unwrap(), mesh_before, "{args:?} overwrote the mesh");
+    }
+    // A time budget far shorter than the frame stops it even where every cone is cheap
+    // (the check ran only every 1024 traversal steps of one cone).
+    let st = p("tb.json");
+    let (code, _, err) = lodtrace(&[
+        "render",
+        "spheres",
+        "--method",
+        "multires",
+        "--width",
+        "256",
+        "--height",
+        "192",
+        "--time-budget",
+        "0.001",
+        "--quiet",
+        "--out",
+        &p("tb.png"),
+        "--stats",
+        &st,
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("time budget"), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&st).unwrap()).unwrap();
+    assert_eq!(v["finished"], false, "{v}");
+}
+
 /// `render --debug-pixel X,Y` explains one pixel of the cone tracers: its A-buffer as a
 /// table and the pixel's colour, which is the rendered image's; anything else is refused.
 #[test]

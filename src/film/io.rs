@@ -79,16 +79,18 @@ pub fn check_writable_dir(dir: &Path) -> Result<()> {
     }
 }
 
+/// A path with its folder resolved, for comparing paths ([`check_distinct`]).
+fn key(p: &Path) -> std::path::PathBuf {
+    let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    match (std::fs::canonicalize(dir), p.file_name()) {
+        (Ok(d), Some(f)) => d.join(f),
+        _ => std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf()),
+    }
+}
+
 /// Paths must differ: two outputs of one run must not overwrite each other (or an input).
 /// Paths are compared with their folders resolved (`sub/../a.png` is `a.png`).
 pub fn check_distinct(paths: &[&Path]) -> Result<()> {
-    let key = |p: &Path| {
-        let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-        match (std::fs::canonicalize(dir), p.file_name()) {
-            (Ok(d), Some(f)) => d.join(f),
-            _ => std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf()),
-        }
-    };
     for (i, a) in paths.iter().enumerate() {
         if paths[..i].iter().any(|b| key(a) == key(b)) {
             return Err(Error::Usage(format!("{}: given twice (as an output, or as an input and an output)", a.display())));
@@ -98,12 +100,23 @@ pub fn check_distinct(paths: &[&Path]) -> Result<()> {
 }
 
 /// [`check_distinct`] for a command's outputs and its scene argument, when that names a file
-/// (a built-in scene name is no file and cannot be overwritten).
+/// (a built-in scene name is no file and cannot be overwritten), and the mesh files a TOML
+/// scene names.
 pub fn check_outputs_apart_from_scene(scene: &str, outputs: &[&Path]) -> Result<()> {
     let scene = Path::new(scene);
+    let meshes = if scene.is_file() && scene.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml")) {
+        crate::scene::tomlscene::referenced_files(scene)
+    } else {
+        Vec::new()
+    };
     let mut all: Vec<&Path> = if scene.is_file() { vec![scene] } else { Vec::new() };
     all.extend_from_slice(outputs);
-    check_distinct(&all)
+    check_distinct(&all)?;
+    // A scene may name one mesh file twice; only an output must not be one of them.
+    if let Some(o) = outputs.iter().find(|o| meshes.iter().any(|m| key(m) == key(o))) {
+        return Err(Error::Usage(format!("{}: given as an output, but the scene reads it as a mesh", o.display())));
+    }
+    Ok(())
 }
 
 /// The output files of one run, written one after another (each atomically): if the run

@@ -54,10 +54,10 @@ pub fn render(ms: &MultiresScene, tp: &TraceParams, cam: &CameraFrame, opts: &Re
                 |ss, t| {
                     let mut c = Counters::default();
                     let mut out = Vec::with_capacity(((t.x1 - t.x0) * (t.y1 - t.y0)) as usize);
-                    if abort.load(Ordering::Relaxed) {
-                        return (out, c, ConeProfile::default());
-                    }
                     for j in t.y0..t.y1 {
+                        if tracer.past_deadline() {
+                            break;
+                        }
                         for i in t.x0..t.x1 {
                             let cone = Cone::primary(cam, i, j, tp.cone_scale, tp.lens_scale);
                             c.inc(Counter::rays_primary);

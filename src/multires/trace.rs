@@ -1730,7 +1730,10 @@ impl<'s, 'a> Tracer<'s, 'a> {
         }
     }
 
-    fn past_deadline(&self) -> bool {
+    /// Whether the run is over its `--time-budget` (or aborted); sets the abort flag when
+    /// the deadline has passed. Checked every 1024 traversal steps of a cone and before
+    /// every row of a tile (`render`), so cheap cones cannot outrun it.
+    pub(crate) fn past_deadline(&self) -> bool {
         if self.abort.load(Ordering::Relaxed) {
             return true;
         }

@@ -67,6 +67,13 @@ impl Material {
         Material { name: name.into(), color, ..Default::default() }
     }
     pub fn validate(&self) -> Result<()> {
+        let big = [self.color.max_element(), self.kd, self.ks, self.shininess].into_iter().fold(0.0f32, f32::max);
+        if big > MAX_SHADING_VALUE {
+            return Err(Error::Scene(format!(
+                "material '{}': a colour, kd, ks or shininess of {big:e} is beyond {MAX_SHADING_VALUE:e} (the shaded radiance would overflow)",
+                self.name
+            )));
+        }
         let ok = self.color.is_finite()
             && self.color.min_element() >= 0.0
             && [self.kd, self.ks, self.shininess, self.reflect, self.transmit, self.roughness].iter().all(|v| v.is_finite() && *v >= 0.0)
@@ -172,6 +179,13 @@ pub const MAX_DEPTH: u32 = 16;
 /// beyond ±1.8e18 (an assertion that aborts the process), and at such magnitudes f32 has
 /// no precision left for hit offsets anyway.
 pub const MAX_COORD: f32 = 1e15;
+
+/// Upper limit of a material's colour, kd, ks and shininess: with [`MAX_INTENSITY`] the
+/// shaded radiance stays far inside f32 (a colour of 1e38 lit by 1e38 wrote +inf pixels).
+pub const MAX_SHADING_VALUE: f32 = 1e6;
+
+/// Upper limit of a light's intensity and of the background and ambient colours.
+pub const MAX_INTENSITY: f32 = 1e15;
 
 #[derive(Clone, Debug)]
 pub struct Scene {
@@ -338,9 +352,20 @@ impl Scene {
             )));
         }
         self.camera.validate()?;
+        for (what, c) in [("background", self.background), ("ambient", self.ambient)] {
+            if !c.is_finite() || c.abs().max_element() > MAX_INTENSITY {
+                return Err(Error::Scene(format!("{what} {c} is not finite or beyond {MAX_INTENSITY:e}")));
+            }
+        }
         for (i, l) in self.lights.iter().enumerate() {
             if !l.center().is_finite() || !l.intensity().is_finite() {
                 return Err(Error::Scene(format!("light {i} has non-finite values")));
+            }
+            if l.intensity().abs().max_element() > MAX_INTENSITY {
+                return Err(Error::Scene(format!(
+                    "light {i}: intensity {:e} is beyond {MAX_INTENSITY:e} (the shaded radiance would overflow)",
+                    l.intensity().abs().max_element()
+                )));
             }
             if let Light::Ellipse { axis_a, axis_b, .. } = l {
                 // Shadow cones aim at the ellipse's Gaussian (§4.2): zero or parallel axes

@@ -208,6 +208,15 @@ pub fn load(path: &Path) -> Result<Scene> {
     from_str(&text, path)
 }
 
+/// The mesh files a TOML scene names (resolved like [`load`]), so that no output of a run
+/// overwrites one; empty when the file cannot be read or parsed (loading reports that).
+pub fn referenced_files(path: &Path) -> Vec<std::path::PathBuf> {
+    let Ok(text) = std::fs::read_to_string(path) else { return Vec::new() };
+    let Ok(def) = toml::from_str::<FileDef>(&text) else { return Vec::new() };
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    def.meshes.values().filter_map(|m| m.file.as_ref().map(|f| dir.join(f))).collect()
+}
+
 /// Parses TOML scene text as if read from `path` (for messages and relative mesh paths).
 pub fn from_str(text: &str, path: &Path) -> Result<Scene> {
     let def: FileDef = toml::from_str(text).map_err(|e| Error::parse(path, syntax_message(text, &e)))?;
