@@ -1251,6 +1251,16 @@ fn stop_42_bad_inputs_are_one_line_exit_2() {
         assert!(err.contains("quad.off"), "{err}");
         assert_eq!(std::fs::read(p("quad.off")).unwrap(), mesh_before, "{args:?} overwrote the mesh");
     }
+    // Options each in range whose product is absurd: 8.8e12 samples; 4e7 samples per node.
+    for (args, what) in [
+        (vec!["render", "cube", "--width", "16384", "--height", "8192", "--spp", "65536", "--out", &p("big.png") as &str], "samples"),
+        (vec!["render", "complex", "--method", "multires", "--k", "64", "--oversampling", "10000", "--out", &p("k.png")], "per node"),
+    ] {
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(what), "{err}");
+    }
     // A time budget far shorter than the frame stops it even where every cone is cheap
     // (the check ran only every 1024 traversal steps of one cone).
     let st = p("tb.json");

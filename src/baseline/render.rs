@@ -77,6 +77,9 @@ impl Default for RenderOpts {
 /// Upper limit of `--spp`, `--first-pass-spp` and the bench keys `spp=`, `fps=`.
 pub const MAX_SPP: u32 = 65536;
 
+/// Upper limit of width × height × spp for one image (2³⁶ ≈ 6.9·10¹⁰ samples).
+pub const MAX_SAMPLES: u64 = 1 << 36;
+
 /// Upper limit of width × height (the film alone takes tens of bytes per pixel).
 pub const MAX_PIXELS: u64 = 1 << 27;
 
@@ -99,6 +102,15 @@ impl RenderOpts {
         check_pixels(self.width, self.height)?;
         if !(1..=MAX_SPP).contains(&self.spp) {
             return Err(Error::Usage(format!("--spp {} out of range (1..={MAX_SPP})", self.spp)));
+        }
+        let samples = self.width as u64 * self.height as u64 * self.spp.max(self.first_pass_spp) as u64;
+        if samples > MAX_SAMPLES {
+            return Err(Error::Usage(format!(
+                "{}x{} at {} spp is {samples} samples, beyond {MAX_SAMPLES} (a 4K reference at 4096 spp is 3.4e10)",
+                self.width,
+                self.height,
+                self.spp.max(self.first_pass_spp)
+            )));
         }
         if self.packet != 1 && self.packet != 8 {
             return Err(Error::Usage(format!("--packet {} must be 1 or 8", self.packet)));

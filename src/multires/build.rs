@@ -80,6 +80,9 @@ impl Default for BuildParams {
     }
 }
 
+/// Upper limit of k²·c, the surface samples per node face (default 4²·100 = 1600).
+pub const MAX_SAMPLES_PER_FACE: f64 = (1u64 << 20) as f64;
+
 impl BuildParams {
     pub fn validate(&self) -> Result<()> {
         if !(2..=64).contains(&self.k) {
@@ -87,6 +90,16 @@ impl BuildParams {
         }
         if !(self.c.is_finite() && (1.0..=10000.0).contains(&self.c)) {
             return Err(Error::Usage(format!("--oversampling {} out of range (1..=10000)", self.c)));
+        }
+        // Samples per node grow like c·k² (density c/h², h = side/k): k = 64 with c = 10⁴ put
+        // 4·10⁷ samples into every node and never finished.
+        if (self.k as f64).powi(2) * self.c as f64 > MAX_SAMPLES_PER_FACE {
+            return Err(Error::Usage(format!(
+                "--k {} with --oversampling {} samples {:e} per node face, beyond {MAX_SAMPLES_PER_FACE:e} (lower k or c)",
+                self.k,
+                self.c,
+                (self.k as f64).powi(2) * self.c as f64
+            )));
         }
         if self.stay_reps == 0 || self.stay_reps > 1000 {
             return Err(Error::Usage(format!("--stay-reps {} out of range (1..=1000)", self.stay_reps)));
