@@ -81,9 +81,10 @@
 //! instead of by Eq. 9 node by node; 0 restores the paper's rule. Up to stop 41 this applied
 //! node by node to nodes of ≤ 64 surfels (centre the mean); a subtree at once costs
 //! O(m log m) and at 512×384 the rays deform 93–100 % of the surfels anyway. Sphere tests
-//! per frame (lazy-cache, 16 frames, bench mean): `armadillo-ball` 9.37 M → 8.08 M,
-//! `elastic-balls` 19.3 M → 15.3 M (root ratio 1.75 → 1.30); frame time −5 %, −12 %
-//! (`heads` −3 %, `bend` within noise; README, "Subtree refit").
+//! per frame (lazy-cache, 16 frames, bench mean): `armadillo-ball` 9.35 M → 8.05 M, `bend`
+//! 2.22 M → 1.87 M, `elastic-balls` 19.2 M → 15.3 M (root ratio 1.75 → 1.30); lazy-cache ÷
+//! naive in one run 1.57 / 1.47 / 1.36 / 1.41× → 1.66 / 1.77 / 1.61 / 1.47× (`armadillo-ball`,
+//! `bend`, `heads`, `elastic-balls`; README, "Subtree refit").
 
 use super::displace::{deform_point, DeformField, DeformedSurfel};
 use super::miniball::miniball;
