@@ -2048,16 +2048,23 @@ mod tests {
     /// min(R', R'')): children whose enclosing sphere is larger than the node's current one,
     /// including one that passes the cheap pre-check (a child larger than the node, at its
     /// centre), leave the node as it is; a smaller enclosing sphere is taken.
-    #[test]
-    fn eq11_never_grows_a_radius() {
+    /// A unit ball of `n` surfels with simulation nodes inside it: (rest node positions,
+    /// one-instance scene).
+    fn ball_scene(n: usize) -> (Vec<Vec3>, DeformScene) {
         use super::super::object::ObjectParams;
         use super::super::sequences::nodes_inside;
         use super::super::surfel::{sphere_surfels, SurfelModel};
-        let s = sphere_surfels(Vec3::ZERO, 1.0, 400);
+        let s = sphere_surfels(Vec3::ZERO, 1.0, n);
         let (nd, _) = nodes_inside(&|p: Vec3| p.length() <= 0.9, Vec3::splat(-1.0), Vec3::splat(1.0), 30);
         let m = vec![1.0; nd.len()];
         let obj = SurfelObject::build(SurfelModel::single("ball", s, [1.0; 3]), nd.clone(), m, &ObjectParams::default()).unwrap();
-        let scene = DeformScene { objects: vec![obj.clone()], instances: vec![0] };
+        (nd, DeformScene { objects: vec![obj], instances: vec![0] })
+    }
+
+    #[test]
+    fn eq11_never_grows_a_radius() {
+        let (_, scene) = ball_scene(400);
+        let obj = scene.objects[0].clone();
         for recentre_eq11 in [true, false] {
             let mut tr = DeformTracer::new(&scene, UpdateMode::Lazy, TraceParams { recentre_eq11, ..TraceParams::default() }).unwrap();
             tr.begin_frame(&[obj.nodes.rest.clone()]).unwrap();
@@ -2083,14 +2090,7 @@ mod tests {
     /// this frame is bounded by Eq. 9 instead, and either way every surfel stays inside.
     #[test]
     fn subtree_refit_is_exact_and_a_claimed_subtree_falls_back_to_eq9() {
-        use super::super::object::ObjectParams;
-        use super::super::sequences::nodes_inside;
-        use super::super::surfel::{sphere_surfels, SurfelModel};
-        let s = sphere_surfels(Vec3::ZERO, 1.0, 600);
-        let (nd, _) = nodes_inside(&|p: Vec3| p.length() <= 0.9, Vec3::splat(-1.0), Vec3::splat(1.0), 30);
-        let m = vec![1.0; nd.len()];
-        let obj = SurfelObject::build(SurfelModel::single("ball", s, [1.0; 3]), nd.clone(), m, &ObjectParams::default()).unwrap();
-        let scene = DeformScene { objects: vec![obj.clone()], instances: vec![0] };
+        let (nd, scene) = ball_scene(600);
         // A bend: node positions moved smoothly, so the rest spheres no longer fit.
         let bent: Vec<Vec3> = nd.iter().map(|p| *p + Vec3::new(0.3 * p.y * p.y, 0.1 * p.x, 0.0)).collect();
         let mut tr = DeformTracer::new(&scene, UpdateMode::Lazy, TraceParams { exact_below: 256, ..TraceParams::default() }).unwrap();
