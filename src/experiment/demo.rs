@@ -209,7 +209,7 @@ fn deform_section(a: &DemoArgs) -> Result<String> {
 }
 
 /// Where the rays' work goes in `elastic-balls`' last frame, rebuilt tree against lazy tree:
-/// `animate --cost` maps on one scale (the lazy tree's loose upper spheres show as halos).
+/// `animate --cost` maps on one scale (loose upper spheres show as halos).
 fn cost_section(a: &DemoArgs, dir: &Path, (w, h, frames, detail): (u32, u32, u32, f32)) -> Result<String> {
     let mut maps = Vec::new();
     for update in ["naive", "lazy"] {
@@ -228,7 +228,7 @@ fn cost_section(a: &DemoArgs, dir: &Path, (w, h, frames, detail): (u32, u32, u32
         maps.push((update, crate::cli::animate::animate(&args)?.last_cost));
     }
     let max = maps.iter().flat_map(|(_, v)| v.iter().copied()).max().unwrap_or(0);
-    let mut out = String::from("<h3>Where the rays' work goes (elastic-balls, last frame)</h3><p>Bounding-volume and ray–surfel tests per pixel, primary and shadow rays, each 4×2 packet's mean (<code>lodtrace animate elastic-balls --update naive|lazy --out D --cost</code>), both maps on one log scale (magma: black none, pale yellow the most of either). Around every ball the lazy tree's map has a halo of rays that enter its loose upper spheres and miss; the rebuilt tree's spheres are tight.</p>");
+    let mut out = String::from("<h3>Where the rays' work goes (elastic-balls, last frame)</h3><p>Bounding-volume and ray–surfel tests per pixel, primary and shadow rays, each 4×2 packet's mean (<code>lodtrace animate elastic-balls --update naive|lazy --out D --cost</code>), both maps on one log scale (magma: black none, pale yellow the most of either). Rays that enter a ball's bounding spheres and miss show as a halo around it; the lazy tree keeps the rest pose's topology and bounds its levels above the refitted subtrees by Eq. 9, so its halo can only be wider than the rebuilt tree's (the captions give the mean tests per pixel).</p>");
     for (update, v) in &maps {
         let name = format!("elastic-balls-cost-{update}.png");
         let img = crate::film::metrics::cost_map_to(v, w, h, max)?;
