@@ -501,14 +501,18 @@ fn deterministic_in(name: &str) {
     let rec = seq.record(20).unwrap();
     let frame = &rec.frames[19];
     let mut imgs = Vec::new();
-    for threads in [1, 2] {
+    // Threads race for the subtree refits (`exact_below`: the default, and 128 for many
+    // small claimed subtrees); whoever wins, every published sphere must hold its surfels.
+    for (threads, exact_below) in [(1, 4096), (2, 4096), (4, 128)] {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        let mut tr = DeformTracer::new(&seq.scene, UpdateMode::LazyCache, TraceParams::default()).unwrap();
+        let mut tr = DeformTracer::new(&seq.scene, UpdateMode::LazyCache, TraceParams { exact_below, ..TraceParams::default() }).unwrap();
         tr.set_cache_slots(48 * 36);
         tr.begin_frame(frame).unwrap();
         imgs.push(pool.install(|| render_par(&tr, &seq.camera, 48, 36)));
+        tr.check_containment().unwrap_or_else(|e| panic!("{name}, {threads} threads, exact_below {exact_below}: {e}"));
     }
     same_hits(&imgs[0], &imgs[1]).unwrap();
+    same_hits(&imgs[0], &imgs[2]).unwrap();
     // Shadow rays from the hits towards a light: same answers in all modes.
     let light = Vec3::new(2.0, 4.0, 3.0);
     let mut answers = Vec::new();
