@@ -835,15 +835,13 @@ impl DeformTracer {
         let tree = &ii.obj.tree;
         let (c, r) = if tree.topo.right[n] == LEAF {
             self.surfel_ball(ii, tree.topo.surfel[n] as usize)
-        } else if tree.topo.count[n] <= self.params.exact_below.min(MAX_EXACT_BELOW) {
-            match self.refit_subtree(ii, n) {
-                Some(sph) => sph,
-                // Claimed by another thread: Eq. 9, published (Eq. 11 tightens it from the
-                // owner's children later; `child_spheres`).
-                None => tree.update_eq9(n, &ii.field, &ii.obj.nodes.rest, self.params.recentred_bound, self.params.node_rotation),
-            }
         } else {
-            tree.update_eq9(n, &ii.field, &ii.obj.nodes.rest, self.params.recentred_bound, self.params.node_rotation)
+            // Eq. 9 above the refitted subtrees, and for a subtree another thread has claimed
+            // (published; Eq. 11 tightens it from the owner's children later, `child_spheres`).
+            let refit = tree.topo.count[n] <= self.params.exact_below.min(MAX_EXACT_BELOW);
+            (if refit { self.refit_subtree(ii, n) } else { None }).unwrap_or_else(|| {
+                tree.update_eq9(n, &ii.field, &ii.obj.nodes.rest, self.params.recentred_bound, self.params.node_rotation)
+            })
         };
         ii.nodes.store(n, c, r, self.frame);
         (c, r)
