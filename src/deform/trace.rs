@@ -264,6 +264,29 @@ struct RefitScratch {
     sph: Vec<(Vec3, f32)>,
 }
 
+/// Per-thread buffers of the packet traversals (`intersect_x8`, `occluded_x8`): the
+/// instances a packet reaches and the traversal stacks, kept across packets so that a packet
+/// allocates nothing (taken out while in use; a nested use would just allocate).
+#[derive(Default)]
+struct PacketScratch {
+    roots: Vec<(f32, usize, u8, f32x8)>,
+    stack: Vec<(u32, u8, f32x8)>,
+    any: Vec<(u32, u8)>,
+}
+
+thread_local! {
+    static PACKET_SCRATCH: std::cell::Cell<PacketScratch> = std::cell::Cell::new(PacketScratch::default());
+}
+
+/// Takes this thread's [`PacketScratch`] (its vectors cleared) for one packet.
+fn take_scratch() -> PacketScratch {
+    let mut sc = PACKET_SCRATCH.take();
+    sc.roots.clear();
+    sc.stack.clear();
+    sc.any.clear();
+    sc
+}
+
 thread_local! {
     static REFIT_SCRATCH: std::cell::RefCell<RefitScratch> = std::cell::RefCell::new(RefitScratch::default());
 }
@@ -1416,6 +1439,7 @@ impl DeformTracer {
             }
         }
         let (mut active, mut first) = (valid, true);
+        let mut sc = take_scratch();
         loop {
             // §4.2.2: each ray's cached node first, as in `intersect_ex`.
             let mut skip = [(u32::MAX, u32::MAX); 8];
@@ -1425,8 +1449,9 @@ impl DeformTracer {
                 }
             }
             let pk = packet(rays, active);
-            for (_, k, m, e) in self.root_hits_x8(&pk, active, best_t(&best), dc, ctr) {
-                self.closest_in_x8(k, rays, &pk, m, e, &mut best, &skip, dc, ctr);
+            self.root_hits_x8(&pk, active, best_t(&best), dc, ctr, &mut sc.roots);
+            for &(_, k, m, e) in &sc.roots {
+                self.closest_in_x8(k, rays, &pk, m, e, &mut best, &skip, dc, ctr, &mut sc.stack);
             }
             let mut again = 0u8;
             for i in lanes(active) {
@@ -1441,6 +1466,7 @@ impl DeformTracer {
             active = again;
             first = false;
         }
+        PACKET_SCRATCH.set(sc);
         for i in lanes(valid) {
             if let Some(sl) = slot[i] {
                 self.store_cache(sl, best[i].hit);
@@ -1460,8 +1486,9 @@ impl DeformTracer {
         tfar: f32x8,
         dc: &mut DeformCounters,
         ctr: &mut Counters,
-    ) -> Vec<(f32, usize, u8, f32x8)> {
-        let mut roots = Vec::new();
+        roots: &mut Vec<(f32, usize, u8, f32x8)>,
+    ) {
+        roots.clear();
         let mut root_tests = 0;
         let top_tests = self.top.candidates_x8(pk, valid, tfar, |k, lm| {
             let k = k as usize;
@@ -1476,7 +1503,6 @@ impl DeformTracer {
         dc.sphere_tests += top_tests + root_tests;
         ctr.add(Counter::node_tests, top_tests + root_tests);
         roots.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        roots
     }
 
     /// Packet form of [`closest_in`](Self::closest_in) from the root of instance `k`.
@@ -1492,13 +1518,14 @@ impl DeformTracer {
         skip: &[(u32, u32); 8],
         dc: &mut DeformCounters,
         ctr: &mut Counters,
+        stack: &mut Vec<(u32, u8, f32x8)>,
     ) {
         let ii = &self.inst[k];
         let topo = self.topo(ii);
         let skipn: [u32; 8] = std::array::from_fn(|i| if skip[i].0 == k as u32 { skip[i].1 } else { u32::MAX });
         let any_skip = skipn.iter().any(|&s| s != u32::MAX);
         let mut tb = best_t(best);
-        let mut stack: Vec<(u32, u8, f32x8)> = Vec::with_capacity(64);
+        stack.clear();
         stack.push((0, mask, entry));
         while let Some((n, m, te)) = stack.pop() {
             let mut m = m & te.simd_le(tb).to_bitmask() as u8;
@@ -1568,9 +1595,29 @@ impl DeformTracer {
         }
         let pk = packet(rays, valid);
         let tfar = f32x8::from(std::array::from_fn::<f32, 8, _>(|i| if valid & (1 << i) != 0 { rays[i].tfar } else { f32::NEG_INFINITY }));
+        let mut sc = take_scratch();
+        self.root_hits_x8(&pk, valid, tfar, dc, ctr, &mut sc.roots);
+        let stack = &mut sc.any;
+        let done = self.occluded_roots_x8(rays, &pk, valid, tfar, &sc.roots, stack, dc, ctr);
+        PACKET_SCRATCH.set(sc);
+        done
+    }
+
+    /// The traversal of [`occluded_x8`](Self::occluded_x8) below the instances `roots` hit.
+    #[allow(clippy::too_many_arguments)]
+    fn occluded_roots_x8(
+        &self,
+        rays: &[Ray],
+        pk: &RayPacketX8,
+        valid: u8,
+        tfar: f32x8,
+        roots: &[(f32, usize, u8, f32x8)],
+        stack: &mut Vec<(u32, u8)>,
+        dc: &mut DeformCounters,
+        ctr: &mut Counters,
+    ) -> u8 {
         let mut done = 0u8;
-        let mut stack: Vec<(u32, u8)> = Vec::with_capacity(64);
-        for (_, k, m, _) in self.root_hits_x8(&pk, valid, tfar, dc, ctr) {
+        for &(_, k, m, _) in roots {
             let m = m & !done;
             if m == 0 {
                 continue;
@@ -1596,7 +1643,7 @@ impl DeformTracer {
                 }
             };
             stack.clear();
-            push_children(&mut stack, 0, m);
+            push_children(stack, 0, m);
             while let Some((n, m)) = stack.pop() {
                 let m = m & !done;
                 if m == 0 {
@@ -1621,7 +1668,7 @@ impl DeformTracer {
                         return done;
                     }
                 } else {
-                    push_children(&mut stack, n, m);
+                    push_children(stack, n, m);
                 }
             }
         }
