@@ -12,6 +12,10 @@
 //! [`RayPacketX8::test`] (the packet built once, as in `intersect_x8`); throughput in
 //! ray–sphere tests.
 //!
+//! `packet_ellipse`: what the packet traversal does per leaf — 512 packets of 8 rays, each
+//! meeting 16 surfel ellipses: `mls::ellipse_hit` ray by ray against
+//! [`RayPacketX8::ellipse`]; throughput in ray–ellipse tests.
+//!
 //! `mls`: the MLS iteration (§4.2.1) from a surfel-ellipse start on 1024 noisy 16-surfel
 //! neighbourhoods of a sphere — [`mls_intersect`] vs [`mls_intersect_x8`]; throughput in
 //! intersections.
@@ -19,7 +23,7 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::Vec3;
 use lodtrace::core::rng::Sampler;
-use lodtrace::deform::mls::{mls_intersect, mls_intersect_x8, MlsNbr, MlsParams};
+use lodtrace::deform::mls::{ellipse_hit, mls_intersect, mls_intersect_x8, MlsNbr, MlsParams};
 use lodtrace::deform::tree::{sphere_test_1, sphere_test_x8_rays, sphere_test_x8_spheres, RayPacketX8};
 use std::hint::black_box;
 use wide::f32x8;
@@ -134,6 +138,50 @@ fn packet_nodes(cr: &mut Criterion) {
     g.finish();
 }
 
+fn packet_ellipse(cr: &mut Criterion) {
+    const P: usize = N / 8;
+    const S: usize = 16;
+    let inp = inputs();
+    let mut s = Sampler::new(6, 0, 0);
+    let mut axis = || Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * 0.6;
+    let axes: Vec<(Vec3, Vec3)> = (0..N).map(|_| (axis(), axis())).collect();
+    let soa = |f: &dyn Fn(usize) -> f32| -> Vec<[f32; 8]> { (0..P).map(|k| std::array::from_fn(|l| f(8 * k + l))).collect() };
+    let (ox, oy, oz) = (soa(&|i| inp.o[i].x), soa(&|i| inp.o[i].y), soa(&|i| inp.o[i].z));
+    let (dx, dy, dz) = (soa(&|i| inp.d[i].x), soa(&|i| inp.d[i].y), soa(&|i| inp.d[i].z));
+    let mut g = cr.benchmark_group("packet_ellipse");
+    g.throughput(Throughput::Elements((P * S * 8) as u64));
+    g.bench_function("scalar", |b| {
+        b.iter(|| {
+            let mut hits = 0u32;
+            for k in 0..P {
+                for j in 0..S {
+                    let (c, (u, v)) = (inp.c[(k * S + j) % N], axes[(k * S + j) % N]);
+                    for l in 0..8 {
+                        let i = 8 * k + l;
+                        hits += ellipse_hit(inp.o[i], inp.d[i], c, u, v, 0.0, 100.0).is_some() as u32;
+                    }
+                }
+            }
+            black_box(hits)
+        })
+    });
+    g.bench_function("x8", |b| {
+        b.iter(|| {
+            let mut hits = 0u32;
+            let tf = f32x8::splat(100.0);
+            for k in 0..P {
+                let pk = RayPacketX8::new(&[ox[k], oy[k], oz[k]], &[dx[k], dy[k], dz[k]], &[0.0; 8]);
+                for j in 0..S {
+                    let (c, (u, v)) = (inp.c[(k * S + j) % N], axes[(k * S + j) % N]);
+                    hits += pk.ellipse(c, u, v, tf).0.count_ones();
+                }
+            }
+            black_box(hits)
+        })
+    });
+    g.finish();
+}
+
 fn mls(cr: &mut Criterion) {
     const M: usize = 1024;
     let mut s = Sampler::new(9, 0, 0);
@@ -174,5 +222,5 @@ fn mls(cr: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench, packet_nodes, mls);
+criterion_group!(benches, bench, packet_nodes, packet_ellipse, mls);
 criterion_main!(benches);
