@@ -1024,7 +1024,17 @@ impl DeformTracer {
     /// [`leaf`](Self::leaf) for the lanes `m` of a packet (one x8 ellipse test): the mask of
     /// lanes with an accepted hit.
     #[allow(clippy::too_many_arguments)]
-    fn leaf_x8(&self, k: usize, n: usize, rays: &[Ray], pk: &RayPacketX8, m: u8, tfar: f32x8, dc: &mut DeformCounters, ctr: &mut Counters) -> u8 {
+    fn leaf_x8(
+        &self,
+        k: usize,
+        n: usize,
+        rays: &[Ray],
+        pk: &RayPacketX8,
+        m: u8,
+        tfar: f32x8,
+        dc: &mut DeformCounters,
+        ctr: &mut Counters,
+    ) -> u8 {
         let ii = &self.inst[k];
         let (s, node) = (self.topo(ii).surfel[n] as usize, leaf_node(ii, n));
         let (ds, hit, t, x) = self.ellipse_x8(k, s, pk, m, tfar, dc, ctr);
@@ -1067,7 +1077,17 @@ impl DeformTracer {
     /// [`visit`](Self::visit) after the ray has hit surfel `s`'s ellipse at `(t0, x0)`.
     #[allow(clippy::too_many_arguments)]
     #[inline]
-    fn visit_hit(&self, k: usize, s: usize, node: u32, ray: &Ray, best: &mut Best, ds: &DeformedSurfel, (t0, x0): (f32, Vec3), dc: &mut DeformCounters) {
+    fn visit_hit(
+        &self,
+        k: usize,
+        s: usize,
+        node: u32,
+        ray: &Ray,
+        best: &mut Best,
+        ds: &DeformedSurfel,
+        (t0, x0): (f32, Vec3),
+        dc: &mut DeformCounters,
+    ) {
         let ii = &self.inst[k];
         if best.rule == Rule::EveryMls || clipped_surfel(ii, s) {
             if let Some(h) = self.iterate(k, s, node, ray, ds, (t0, x0), dc) {
@@ -1091,7 +1111,16 @@ impl DeformTracer {
     /// per lane, as `ellipse` does.
     #[allow(clippy::too_many_arguments)]
     #[inline]
-    fn ellipse_x8(&self, k: usize, s: usize, pk: &RayPacketX8, m: u8, tfar: f32x8, dc: &mut DeformCounters, ctr: &mut Counters) -> (DeformedSurfel, u8, [f32; 8], [[f32; 8]; 3]) {
+    fn ellipse_x8(
+        &self,
+        k: usize,
+        s: usize,
+        pk: &RayPacketX8,
+        m: u8,
+        tfar: f32x8,
+        dc: &mut DeformCounters,
+        ctr: &mut Counters,
+    ) -> (DeformedSurfel, u8, [f32; 8], [[f32; 8]; 3]) {
         let ds = self.surfel(&self.inst[k], s);
         let cnt = m.count_ones() as u64;
         dc.leaf_tests += cnt;

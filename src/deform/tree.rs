@@ -571,11 +571,7 @@ impl RayPacketX8 {
         let qv = qx * sp(v.x) + qy * sp(v.y) + qz * sp(v.z);
         let al = (sp(cc) * qu - sp(b) * qv) / sp(det);
         let be = (sp(a) * qv - sp(b) * qu) / sp(det);
-        let ok = den.simd_ne(zero)
-            & den.is_finite()
-            & t.simd_ge(self.tnear)
-            & t.simd_le(tfar)
-            & (al * al + be * be).simd_le(sp(1.0));
+        let ok = den.simd_ne(zero) & den.is_finite() & t.simd_ge(self.tnear) & t.simd_le(tfar) & (al * al + be * be).simd_le(sp(1.0));
         (ok.to_bitmask() as u8, t, x)
     }
 }

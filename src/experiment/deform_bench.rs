@@ -103,7 +103,8 @@ pub struct DeformRow {
     pub image: Option<String>,
 }
 
-/// Runs every spec on every sequence (best of `repeat` runs by total time).
+/// Runs every spec on every sequence (best of `repeat` runs by total time, the repeats
+/// interleaved across the specs).
 #[allow(clippy::too_many_arguments)]
 pub fn run(
     seqs: &[String],
@@ -119,33 +120,44 @@ pub fn run(
     for seq in seqs {
         let mut first: Option<(f64, Vec<[f32; 3]>)> = None;
         let mut seq_rows: Vec<DeformRow> = Vec::new();
-        for spec in specs {
-            let s = &spec.surfel;
-            let args = AnimateArgs {
-                frames: s.frames,
-                update: s.update.clone(),
-                width,
-                height,
-                detail: s.detail,
-                no_shadows: !s.shadows,
-                threads: spec.threads.unwrap_or(threads),
-                packet: spec.packet,
-                exact_below: s.exact_below,
-                cache_up: s.cache_up,
-                unordered: !s.ordered,
-                no_instance_tree: !s.top,
-                nearest: if s.nearest_ellipse { crate::cli::animate::Nearest::Ellipse } else { crate::cli::animate::Nearest::Mls },
-                warm_pass: s.warm,
-                quiet,
-                ..AnimateArgs::new(seq)
-            };
-            let mut best: Option<crate::cli::animate::AnimateStats> = None;
-            for _ in 0..repeat.max(1) {
-                let st = animate(&args)?;
+        let argv: Vec<AnimateArgs> = specs
+            .iter()
+            .map(|spec| {
+                let s = &spec.surfel;
+                AnimateArgs {
+                    frames: s.frames,
+                    update: s.update.clone(),
+                    width,
+                    height,
+                    detail: s.detail,
+                    no_shadows: !s.shadows,
+                    threads: spec.threads.unwrap_or(threads),
+                    packet: spec.packet,
+                    exact_below: s.exact_below,
+                    cache_up: s.cache_up,
+                    unordered: !s.ordered,
+                    no_instance_tree: !s.top,
+                    nearest: if s.nearest_ellipse { crate::cli::animate::Nearest::Ellipse } else { crate::cli::animate::Nearest::Mls },
+                    warm_pass: s.warm,
+                    quiet,
+                    ..AnimateArgs::new(seq)
+                }
+            })
+            .collect();
+        // Best of `repeat` by total time, the repeats taken round the specs (1, 2, …, 1, 2, …):
+        // this VM's speed drifts by ±10–20 % over tens of seconds, and a slow phase should hit
+        // every method of the comparison alike, not all the runs of one.
+        let mut bests: Vec<Option<crate::cli::animate::AnimateStats>> = specs.iter().map(|_| None).collect();
+        for _ in 0..repeat.max(1) {
+            for (args, best) in argv.iter().zip(bests.iter_mut()) {
+                let st = animate(args)?;
                 if best.as_ref().is_none_or(|b| st.render_seconds < b.render_seconds) {
-                    best = Some(st);
+                    *best = Some(st);
                 }
             }
+        }
+        for (spec, best) in specs.iter().zip(bests) {
+            let s = &spec.surfel;
             let st = best.expect("at least one run");
             let n = st.frames.max(1) as f64;
             let ms = 1e3 * st.render_seconds / n;
