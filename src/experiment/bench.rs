@@ -60,7 +60,8 @@ pub struct BenchArgs {
     /// Default thread count for methods that don't set `threads=` (0 = all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
-    /// Repeat each render this many times and keep the fastest (rendering only).
+    /// Repeat each render this many times and keep the fastest (rendering only; for deforming
+    /// sequences the repeats go round the methods, so a slow phase of the machine hits all alike).
     #[arg(long, default_value_t = 1)]
     pub repeat: u32,
     /// Equal-time comparison: render this stochastic spec (e.g. `distributed:embree`) at
