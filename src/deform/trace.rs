@@ -1061,13 +1061,6 @@ impl DeformTracer {
     #[allow(clippy::too_many_arguments)]
     #[inline]
     fn visit(&self, k: usize, s: usize, node: u32, ray: &Ray, best: &mut Best, dc: &mut DeformCounters, ctr: &mut Counters) {
-        let ii = &self.inst[k];
-        if best.rule == Rule::EveryMls || clipped_surfel(ii, s) {
-            if let Some(h) = self.leaf_surfel(k, s, node, ray, dc, ctr) {
-                best.offer(h, h.t);
-            }
-            return;
-        }
         let Some((ds, t0, x0)) = self.ellipse(k, s, ray, dc, ctr) else {
             return;
         };
