@@ -96,14 +96,20 @@ fn bench(cr: &mut Criterion) {
     g.finish();
 }
 
+/// The rays `8k .. 8k + 8` of `inp` in struct-of-arrays form (origins, directions) for
+/// packet k < `p`; the benches build each `RayPacketX8` in the timed loop, as `intersect_x8`
+/// builds one per packet.
+fn packets(inp: &Input, p: usize) -> Vec<([[f32; 8]; 3], [[f32; 8]; 3])> {
+    let soa = |v: &[Vec3]| -> [[f32; 8]; 3] { std::array::from_fn(|a| std::array::from_fn(|l| v[l][a])) };
+    (0..p).map(|k| (soa(&inp.o[8 * k..8 * k + 8]), soa(&inp.d[8 * k..8 * k + 8]))).collect()
+}
+
 fn packet_nodes(cr: &mut Criterion) {
     const P: usize = 512;
     const S: usize = 16;
     let inp = inputs();
     let tfar: Vec<[f32; 8]> = (0..P).map(|k| std::array::from_fn(|l| 4.0 + ((k * 8 + l) % 7) as f32)).collect();
-    let soa = |f: &dyn Fn(usize) -> f32| -> Vec<[f32; 8]> { (0..P).map(|k| std::array::from_fn(|l| f(8 * k + l))).collect() };
-    let (ox, oy, oz) = (soa(&|i| inp.o[i].x), soa(&|i| inp.o[i].y), soa(&|i| inp.o[i].z));
-    let (dx, dy, dz) = (soa(&|i| inp.d[i].x), soa(&|i| inp.d[i].y), soa(&|i| inp.d[i].z));
+    let pks = packets(&inp, P);
     let mut g = cr.benchmark_group("packet_nodes");
     g.throughput(Throughput::Elements((P * S * 8) as u64));
     g.bench_function("scalar", |b| {
@@ -125,7 +131,7 @@ fn packet_nodes(cr: &mut Criterion) {
         b.iter(|| {
             let mut hits = 0u32;
             for k in 0..P {
-                let pk = RayPacketX8::new(&[ox[k], oy[k], oz[k]], &[dx[k], dy[k], dz[k]], &[0.0; 8]);
+                let pk = RayPacketX8::new(&pks[k].0, &pks[k].1, &[0.0; 8]);
                 let tf = f32x8::from(tfar[k]);
                 for j in 0..S {
                     let (m, _) = pk.test(inp.c[(k * S + j) % N], inp.r[(k * S + j) % N], tf);
@@ -145,9 +151,7 @@ fn packet_ellipse(cr: &mut Criterion) {
     let mut s = Sampler::new(6, 0, 0);
     let mut axis = || Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * 0.6;
     let axes: Vec<(Vec3, Vec3)> = (0..N).map(|_| (axis(), axis())).collect();
-    let soa = |f: &dyn Fn(usize) -> f32| -> Vec<[f32; 8]> { (0..P).map(|k| std::array::from_fn(|l| f(8 * k + l))).collect() };
-    let (ox, oy, oz) = (soa(&|i| inp.o[i].x), soa(&|i| inp.o[i].y), soa(&|i| inp.o[i].z));
-    let (dx, dy, dz) = (soa(&|i| inp.d[i].x), soa(&|i| inp.d[i].y), soa(&|i| inp.d[i].z));
+    let pks = packets(&inp, P);
     let mut g = cr.benchmark_group("packet_ellipse");
     g.throughput(Throughput::Elements((P * S * 8) as u64));
     g.bench_function("scalar", |b| {
@@ -170,7 +174,7 @@ fn packet_ellipse(cr: &mut Criterion) {
             let mut hits = 0u32;
             let tf = f32x8::splat(100.0);
             for k in 0..P {
-                let pk = RayPacketX8::new(&[ox[k], oy[k], oz[k]], &[dx[k], dy[k], dz[k]], &[0.0; 8]);
+                let pk = RayPacketX8::new(&pks[k].0, &pks[k].1, &[0.0; 8]);
                 for j in 0..S {
                     let (c, (u, v)) = (inp.c[(k * S + j) % N], axes[(k * S + j) % N]);
                     hits += pk.ellipse(c, u, v, tf).0.count_ones();
