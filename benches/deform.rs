@@ -104,23 +104,30 @@ fn packets(inp: &Input, p: usize) -> Vec<([[f32; 8]; 3], [[f32; 8]; 3])> {
     (0..p).map(|k| (soa(&inp.o[8 * k..8 * k + 8]), soa(&inp.d[8 * k..8 * k + 8]))).collect()
 }
 
-fn packet_nodes(cr: &mut Criterion) {
-    const P: usize = 512;
-    const S: usize = 16;
-    let inp = inputs();
-    let tfar: Vec<[f32; 8]> = (0..P).map(|k| std::array::from_fn(|l| 4.0 + ((k * 8 + l) % 7) as f32)).collect();
-    let pks = packets(&inp, P);
-    let mut g = cr.benchmark_group("packet_nodes");
+/// Packets per run and node (or surfel) visits per packet of the packet benches.
+const P: usize = N / 8;
+const S: usize = 16;
+
+/// A packet bench: for each of the `P` packets of `inp` and each of its `S` visits `j`,
+/// `scalar(k, j, i, l)` tests ray i (lane l) alone and `x8(pk, k, j)` the whole packet (built
+/// in the timed loop, once per packet as in `intersect_x8`), returning the hits.
+fn packet_group(
+    cr: &mut Criterion,
+    name: &str,
+    inp: &Input,
+    scalar: impl Fn(usize, usize, usize, usize) -> bool,
+    x8: impl Fn(&RayPacketX8, usize, usize) -> u32,
+) {
+    let pks = packets(inp, P);
+    let mut g = cr.benchmark_group(name);
     g.throughput(Throughput::Elements((P * S * 8) as u64));
     g.bench_function("scalar", |b| {
         b.iter(|| {
             let mut hits = 0u32;
             for k in 0..P {
                 for j in 0..S {
-                    let (c, r) = (inp.c[(k * S + j) % N], inp.r[(k * S + j) % N]);
                     for l in 0..8 {
-                        let i = 8 * k + l;
-                        hits += sphere_test_1(inp.o[i], inp.d[i], c, r, 0.0, tfar[k][l]).is_some() as u32;
+                        hits += scalar(k, j, 8 * k + l, l) as u32;
                     }
                 }
             }
@@ -132,10 +139,8 @@ fn packet_nodes(cr: &mut Criterion) {
             let mut hits = 0u32;
             for k in 0..P {
                 let pk = RayPacketX8::new(&pks[k].0, &pks[k].1, &[0.0; 8]);
-                let tf = f32x8::from(tfar[k]);
                 for j in 0..S {
-                    let (m, _) = pk.test(inp.c[(k * S + j) % N], inp.r[(k * S + j) % N], tf);
-                    hits += m.count_ones();
+                    hits += x8(&pk, k, j);
                 }
             }
             black_box(hits)
@@ -144,46 +149,46 @@ fn packet_nodes(cr: &mut Criterion) {
     g.finish();
 }
 
+fn packet_nodes(cr: &mut Criterion) {
+    let inp = inputs();
+    let tfar: Vec<[f32; 8]> = (0..P).map(|k| std::array::from_fn(|l| 4.0 + ((k * 8 + l) % 7) as f32)).collect();
+    let tf8: Vec<f32x8> = tfar.iter().map(|t| f32x8::from(*t)).collect();
+    let sphere = |k: usize, j: usize| (inp.c[(k * S + j) % N], inp.r[(k * S + j) % N]);
+    packet_group(
+        cr,
+        "packet_nodes",
+        &inp,
+        |k, j, i, l| {
+            let (c, r) = sphere(k, j);
+            sphere_test_1(inp.o[i], inp.d[i], c, r, 0.0, tfar[k][l]).is_some()
+        },
+        |pk, k, j| {
+            let (c, r) = sphere(k, j);
+            pk.test(c, r, tf8[k]).0.count_ones()
+        },
+    );
+}
+
 fn packet_ellipse(cr: &mut Criterion) {
-    const P: usize = N / 8;
-    const S: usize = 16;
     let inp = inputs();
     let mut s = Sampler::new(6, 0, 0);
     let mut axis = || Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * 0.6;
     let axes: Vec<(Vec3, Vec3)> = (0..N).map(|_| (axis(), axis())).collect();
-    let pks = packets(&inp, P);
-    let mut g = cr.benchmark_group("packet_ellipse");
-    g.throughput(Throughput::Elements((P * S * 8) as u64));
-    g.bench_function("scalar", |b| {
-        b.iter(|| {
-            let mut hits = 0u32;
-            for k in 0..P {
-                for j in 0..S {
-                    let (c, (u, v)) = (inp.c[(k * S + j) % N], axes[(k * S + j) % N]);
-                    for l in 0..8 {
-                        let i = 8 * k + l;
-                        hits += ellipse_hit(inp.o[i], inp.d[i], c, u, v, 0.0, 100.0).is_some() as u32;
-                    }
-                }
-            }
-            black_box(hits)
-        })
-    });
-    g.bench_function("x8", |b| {
-        b.iter(|| {
-            let mut hits = 0u32;
-            let tf = f32x8::splat(100.0);
-            for k in 0..P {
-                let pk = RayPacketX8::new(&pks[k].0, &pks[k].1, &[0.0; 8]);
-                for j in 0..S {
-                    let (c, (u, v)) = (inp.c[(k * S + j) % N], axes[(k * S + j) % N]);
-                    hits += pk.ellipse(c, u, v, tf).0.count_ones();
-                }
-            }
-            black_box(hits)
-        })
-    });
-    g.finish();
+    let surfel = |k: usize, j: usize| (inp.c[(k * S + j) % N], axes[(k * S + j) % N]);
+    let tf = f32x8::splat(100.0);
+    packet_group(
+        cr,
+        "packet_ellipse",
+        &inp,
+        |k, j, i, _| {
+            let (c, (u, v)) = surfel(k, j);
+            ellipse_hit(inp.o[i], inp.d[i], c, u, v, 0.0, 100.0).is_some()
+        },
+        |pk, k, j| {
+            let (c, (u, v)) = surfel(k, j);
+            pk.ellipse(c, u, v, tf).0.count_ones()
+        },
+    );
 }
 
 fn mls(cr: &mut Criterion) {
