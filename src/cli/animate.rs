@@ -139,6 +139,10 @@ pub struct FrameRow {
     /// `--warm-pass`: the same frame's rays again, with its hierarchy already updated.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub warm_seconds: Option<f64>,
+    /// Sphere tests of the warm pass (`--warm-pass`): against `sphere_tests`, what the first
+    /// visits' looser spheres cost in tests.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub warm_sphere_tests: Option<u64>,
 }
 
 #[derive(Serialize, Debug, Clone)]
@@ -342,11 +346,12 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         render_seconds += secs;
         total.merge(&c);
         let fs = tracer.frame_stats();
-        let warm_seconds = a.warm_pass.then(|| {
+        let warm = a.warm_pass.then(|| {
             let t = Instant::now();
-            let _ = render_frame(&tracer, &cam, &sc, a.width, a.height, a.packet, false);
-            t.elapsed().as_secs_f64()
+            let (_, _, wdc, _) = render_frame(&tracer, &cam, &sc, a.width, a.height, a.packet, false);
+            (t.elapsed().as_secs_f64(), wdc.sphere_tests)
         });
+        let (warm_seconds, warm_sphere_tests) = (warm.map(|w| w.0), warm.map(|w| w.1));
         rows.push(FrameRow {
             frame: f as u32,
             mode: fs.mode.clone(),
@@ -363,6 +368,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
             cache_hits: dc.cache_hits,
             clipped: dc.clipped,
             warm_seconds,
+            warm_sphere_tests,
         });
         if let Some(d) = &a.out {
             io::write_png(&d.join(format!("frame_{f:04}.png")), &film)?;
