@@ -935,16 +935,21 @@ impl DeformTracer {
                 } else {
                     let (l, rr) = (q + 1 - n, topo.right[q] as usize - n);
                     (lo[q - n], hi[q - n]) = (lo[l].min(lo[rr]), hi[l].max(hi[rr]));
-                    let c = 0.5 * (lo[q - n] + hi[q - n]);
-                    let reach = max_reach_x8(&x[a..a + k], &y[a..a + k], &z[a..a + k], &r[a..a + k], c);
-                    let exact = (c, reach * (1.0 + RADIUS_PAD) + RADIUS_PAD * c.abs().max_element());
                     // Eq. 11 (re-centred) on the children just computed: now and never again
-                    // this frame (`child_spheres` skips it inside a refitted subtree).
+                    // this frame (`child_spheres` skips it inside a refitted subtree). Around
+                    // two leaf balls it is the smallest sphere: no reach to compute.
                     let enc = enclosing_sphere(sph[l], sph[rr]);
-                    if enc.1 < exact.1 {
+                    if k == 2 {
                         enc
                     } else {
-                        exact
+                        let c = 0.5 * (lo[q - n] + hi[q - n]);
+                        let reach = max_reach_x8(&x[a..a + k], &y[a..a + k], &z[a..a + k], &r[a..a + k], c);
+                        let exact = (c, reach * (1.0 + RADIUS_PAD) + RADIUS_PAD * c.abs().max_element());
+                        if enc.1 < exact.1 {
+                            enc
+                        } else {
+                            exact
+                        }
                     }
                 };
                 sph[q - n] = b;

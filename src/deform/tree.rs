@@ -667,8 +667,14 @@ pub fn max_reach_x8(x: &[f32], y: &[f32], z: &[f32], r: &[f32], c: Vec3) -> f32 
         let (dx, dy, dz) = (ld(x, i) - cx, ld(y, i) - cy, ld(z, i) - cz);
         m8 = m8.max((dx * dx + dy * dy + dz * dz).sqrt() + ld(r, i));
     }
-    let tail = max_reach_1(&x[body..], &y[body..], &z[body..], &r[body..], c);
-    m8.to_array().into_iter().fold(tail, f32::max)
+    if body < n {
+        // The last 1–7 balls as one more step, padded with zero-reach balls at c (the scalar
+        // reference starts from 0, so the maximum is unchanged).
+        let pad = |a: &[f32], v: f32| f32x8::from(std::array::from_fn::<f32, 8, _>(|i| a.get(body + i).copied().unwrap_or(v)));
+        let (dx, dy, dz) = (pad(x, c.x) - cx, pad(y, c.y) - cy, pad(z, c.z) - cz);
+        m8 = m8.max((dx * dx + dy * dy + dz * dz).sqrt() + pad(r, 0.0));
+    }
+    m8.to_array().into_iter().fold(0.0, f32::max)
 }
 
 #[cfg(test)]
