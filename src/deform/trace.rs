@@ -110,7 +110,7 @@ use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering::*};
 use std::sync::Arc;
 use std::time::Instant;
-use wide::f32x8;
+use wide::{f32x8, u32x8};
 
 /// How the hierarchy follows the deformation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -1393,6 +1393,14 @@ impl DeformTracer {
     ) {
         let ii = &self.inst[k];
         let topo = self.topo(ii);
+        // A leaf (the per-ray cache's node, `cache_up` 0) needs no stack: no allocation per
+        // cached ray.
+        if topo.right[start as usize] == LEAF {
+            if !(entry > best.t) && start != skip {
+                self.visit(k, topo.surfel[start as usize] as usize, leaf_node(ii, start as usize), ray, best, dc, ctr);
+            }
+            return;
+        }
         let mut stack: Vec<(u32, f32)> = Vec::with_capacity(64);
         stack.push((start, entry));
         let (o, d) = (ray.org, ray.dir);
@@ -1611,17 +1619,15 @@ impl DeformTracer {
         let topo = self.topo(ii);
         let skipn: [u32; 8] = std::array::from_fn(|i| if skip[i].0 == k as u32 { skip[i].1 } else { u32::MAX });
         let any_skip = skipn.iter().any(|&s| s != u32::MAX);
+        let skip8 = u32x8::from(skipn);
         let mut tb = best_t(best);
         stack.clear();
         stack.push((0, mask, entry));
         while let Some((n, m, te)) = stack.pop() {
             let mut m = m & te.simd_le(tb).to_bitmask() as u8;
             if any_skip {
-                for i in lanes(m) {
-                    if skipn[i] == n {
-                        m &= !(1 << i);
-                    }
-                }
+                // The lanes whose cached node (searched already) this is, in one compare.
+                m &= !(skip8.simd_eq(u32x8::splat(n)).to_bitmask() as u8);
             }
             if m == 0 {
                 continue;
