@@ -2263,6 +2263,32 @@ mod tests {
         tr.check_containment().unwrap();
     }
 
+    /// An object of at most 2·`exact_below` surfels is refitted whole when `begin_frame`
+    /// makes its root current (the root exact, every node published); a larger one keeps an
+    /// Eq. 9 root and leaves its subtrees lazy.
+    #[test]
+    fn a_small_object_is_refitted_whole_at_its_root() {
+        let (nd, scene) = ball_scene(600);
+        let bent: Vec<Vec3> = nd.iter().map(|p| *p + Vec3::new(0.3 * p.y * p.y, 0.1 * p.x, 0.0)).collect();
+        for (exact_below, whole) in [(300, true), (299, false), (0, false)] {
+            let mut tr = DeformTracer::new(&scene, UpdateMode::Lazy, TraceParams { exact_below, ..TraceParams::default() }).unwrap();
+            tr.begin_frame(std::slice::from_ref(&bent)).unwrap();
+            let ii = &tr.inst[0];
+            let topo = &ii.obj.tree.topo;
+            assert!(tr.current(ii, 0), "exact_below {exact_below}: the root is current after begin_frame");
+            let all = (0..topo.len()).all(|q| tr.current(ii, q));
+            assert_eq!(all, whole, "exact_below {exact_below}: every node published");
+            let (c, r) = ii.nodes.load(0);
+            let balls: Vec<(Vec3, f32)> = (0..ii.obj.surfel_count()).map(|s| leaf_sphere(&deform_surfel(&ii.obj, &ii.field, s))).collect();
+            let reach = |c: Vec3| balls.iter().map(|(p, rr)| (*p - c).length() + rr).fold(0.0f32, f32::max);
+            assert!(reach(c) <= r, "exact_below {exact_below}: a leaf ball leaves the root");
+            let (lo, hi) = balls.iter().fold((Vec3::MAX, Vec3::MIN), |(lo, hi), b| (lo.min(b.0), hi.max(b.0)));
+            let tight = r <= reach(0.5 * (lo + hi)) * (1.0 + 1e-4) + 1e-6;
+            assert_eq!(tight, whole, "exact_below {exact_below}: root radius {r} against the exact reach {}", reach(0.5 * (lo + hi)));
+            tr.check_containment().unwrap();
+        }
+    }
+
     /// `Auto` tries both modes, then keeps the cheaper one and probes the other after
     /// PROBE·r² frames; a change in cost flips it; without reports it stays lazy.
     #[test]
