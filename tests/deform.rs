@@ -980,3 +980,38 @@ fn dropped_mesh_keeps_its_shape() {
     let low = rec.frames.last().unwrap().iter().flatten().map(|p| p.y).fold(f32::INFINITY, f32::min);
     assert!((-1e-3..0.2).contains(&low), "lowest node at {low}");
 }
+
+/// `DeformCounters::level_tests` splits `sphere_tests` by tree level: in a scene of one object
+/// (no instance tree) the levels sum to it, for single rays and packets, closest and any hit,
+/// with and without the per-ray cache; the roots and the leaves are both counted.
+#[test]
+fn level_tests_sum_to_the_sphere_tests() {
+    let obj = shared_ball();
+    let scene = scene1(obj);
+    let rest = obj.nodes.rest.clone();
+    let moved: Vec<Vec3> = rest.iter().map(|p| *p + Vec3::new(0.01, 0.0, 0.02) + *p * 0.02).collect();
+    let rays = random_rays(7, 96, Vec3::ZERO, 4.0, 1.5);
+    let depth = obj.tree.topo.depth();
+    for m in [UpdateMode::Naive, UpdateMode::Lazy, UpdateMode::LazyCache] {
+        let mut tr = DeformTracer::new(&scene, m, TraceParams::default()).unwrap();
+        tr.set_cache_slots(rays.len());
+        for nodes in [&rest, &moved] {
+            tr.begin_frame(std::slice::from_ref(nodes)).unwrap();
+            let (mut ctr, mut dc) = (Counters::default(), DeformCounters::default());
+            for (i, r) in rays.iter().enumerate() {
+                tr.intersect_ex(r, Some(i as u32), &mut ctr, &mut dc);
+                tr.occluded_ex(r, &mut ctr, &mut dc);
+            }
+            for (c, chunk) in rays.chunks(8).enumerate() {
+                let slots: Vec<Option<u32>> = (0..chunk.len()).map(|k| Some((c * 8 + k) as u32)).collect();
+                tr.intersect_x8(chunk, &slots, &mut ctr, &mut dc);
+                tr.occluded_x8(chunk, 0xff, &mut ctr, &mut dc);
+            }
+            let sum: u64 = dc.level_tests.iter().sum();
+            assert_eq!(sum, dc.sphere_tests, "{}: levels {:?}", m.name(), &dc.level_tests[..depth]);
+            assert!(dc.level_tests[0] > 0, "{}: no root tests", m.name());
+            assert!(dc.level_tests[depth - 1] > 0, "{}: no leaf tests at level {}", m.name(), depth - 1);
+            assert!(dc.level_tests[depth..].iter().all(|&t| t == 0), "{}: tests below the leaves", m.name());
+        }
+    }
+}

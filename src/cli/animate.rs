@@ -167,6 +167,9 @@ pub struct AnimateStats {
     pub per_frame: Vec<FrameRow>,
     /// Updated radius / tightest radius per level after the last frame (Fig. 3).
     pub radius_ratios: Vec<crate::deform::LevelRatio>,
+    /// Sphere tests per frame by tree level, root first (mean over the frames; the objects'
+    /// trees only: `DeformCounters::level_tests`). Where a hierarchy spends its tests.
+    pub level_tests_per_frame: Vec<f64>,
     pub counters: std::collections::BTreeMap<String, u64>,
     /// The last frame rendered (for image comparisons across update modes).
     #[serde(skip)]
@@ -333,6 +336,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     };
     let mut rows = Vec::new();
     let mut total = Counters::default();
+    let mut dtotal = DeformCounters::default();
     let mut render_seconds = 0.0;
     let mut last_frame = Film::new(a.width, a.height);
     let mut last_cost = Vec::new();
@@ -345,6 +349,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         tracer.end_frame(secs);
         render_seconds += secs;
         total.merge(&c);
+        dtotal.merge(&dc);
         let fs = tracer.frame_stats();
         let warm = a.warm_pass.then(|| {
             let t = Instant::now();
@@ -399,6 +404,10 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         render_seconds,
         per_frame: rows,
         radius_ratios: tracer.radius_ratios(64),
+        level_tests_per_frame: {
+            let used = dtotal.level_tests.iter().rposition(|&t| t > 0).map_or(0, |i| i + 1);
+            dtotal.level_tests[..used].iter().map(|&t| t as f64 / frames.max(1) as f64).collect()
+        },
         counters: total.to_map(),
         last_frame,
         last_cost,

@@ -371,7 +371,16 @@ pub struct DeformCounters {
     /// The cached node gave a hit (under the nearest-ellipse rule: the first pass's candidate,
     /// which may still be rejected).
     pub cache_hits: u64,
+    /// `sphere_tests` inside the objects' sphere trees by the tested node's level (0: the
+    /// roots; deeper than [`LEVELS`] − 1 counts in the last). The instance tree's tests and
+    /// the `refit` mode's box tests are not included, so in a scene of one object the levels
+    /// sum to `sphere_tests`. Shows where one hierarchy tests more than another (README,
+    /// "Whole sequences").
+    pub level_tests: [u64; LEVELS],
 }
+
+/// Levels of [`DeformCounters::level_tests`].
+pub const LEVELS: usize = 32;
 
 impl DeformCounters {
     pub fn merge(&mut self, o: &DeformCounters) {
@@ -384,6 +393,14 @@ impl DeformCounters {
         self.clipped += o.clipped;
         self.cache_lookups += o.cache_lookups;
         self.cache_hits += o.cache_hits;
+        for (a, b) in self.level_tests.iter_mut().zip(&o.level_tests) {
+            *a += b;
+        }
+    }
+    /// Counts `n` sphere tests of nodes at `level`.
+    #[inline(always)]
+    fn tests_at(&mut self, level: u8, n: u64) {
+        self.level_tests[(level as usize).min(LEVELS - 1)] += n;
     }
     /// Mean MLS iterations of converged hits and rejections together.
     pub fn mean_mls_iterations(&self) -> f64 {
@@ -1317,6 +1334,7 @@ impl DeformTracer {
         dc.cache_lookups += first as u64;
         let (c, r) = self.sphere(&self.inst[k], n);
         dc.sphere_tests += 1;
+        dc.tests_at(self.inst[k].obj.tree.topo.level[n], 1);
         ctr.inc(Counter::node_tests);
         if let Some(te) = sphere_test_1(ray.org, ray.dir, c, r, ray.tnear, best.t) {
             self.closest_in(k, ray, n as u32, te, best, u32::MAX, dc, ctr);
@@ -1366,6 +1384,7 @@ impl DeformTracer {
             }
             let (mask, entry) = sphere_test_spheres(ray.org, ray.dir, &cx, &cy, &cz, &r, ray.tnear, tfar);
             dc.sphere_tests += m as u64;
+            dc.tests_at(0, m as u64);
             ctr.add(Counter::node_tests, m as u64);
             for (j, &k) in chunk.iter().enumerate() {
                 if mask & (1 << j) != 0 && r[j] >= 0.0 {
@@ -1419,6 +1438,7 @@ impl DeformTracer {
             let (l, r) = (n + 1, topo.right[n] as usize);
             let (s1, s2) = self.child_spheres(ii, n);
             dc.sphere_tests += 2;
+            dc.tests_at(topo.level[l], 2);
             ctr.add(Counter::node_tests, 2);
             let e1 = sphere_test_1(o, d, s1.0, s1.1, ray.tnear, best.t);
             let e2 = sphere_test_1(o, d, s2.0, s2.1, ray.tnear, best.t);
@@ -1482,6 +1502,7 @@ impl DeformTracer {
                 let n = n as usize;
                 let (c, r) = self.sphere(ii, n);
                 dc.sphere_tests += 1;
+                dc.tests_at(topo.level[n], 1);
                 ctr.inc(Counter::node_tests);
                 if sphere_test_1(ray.org, ray.dir, c, r, ray.tnear, ray.tfar).is_none() {
                     continue;
@@ -1595,6 +1616,7 @@ impl DeformTracer {
             }
         });
         dc.sphere_tests += top_tests + root_tests;
+        dc.tests_at(0, root_tests);
         ctr.add(Counter::node_tests, top_tests + root_tests);
         roots.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     }
@@ -1647,6 +1669,7 @@ impl DeformTracer {
             let (s1, s2) = self.child_spheres(ii, n);
             let cnt = 2 * m.count_ones() as u64;
             dc.sphere_tests += cnt;
+            dc.tests_at(topo.level[l], cnt);
             ctr.add(Counter::node_tests, cnt);
             let (m1, e1) = pk.test(s1.0, s1.1, tb);
             let (m2, e2) = pk.test(s2.0, s2.1, tb);
@@ -1744,6 +1767,7 @@ impl DeformTracer {
                 let (c, r) = self.sphere(ii, n);
                 let cnt = m.count_ones() as u64;
                 dc.sphere_tests += cnt;
+                dc.tests_at(topo.level[n], cnt);
                 ctr.add(Counter::node_tests, cnt);
                 let m = m & pk.test(c, r, tfar).0;
                 if m == 0 {
