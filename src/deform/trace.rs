@@ -279,8 +279,8 @@ struct RefitScratch {
 #[derive(Default)]
 struct PacketScratch {
     roots: Vec<(f32, usize, u8, f32x8)>,
-    stack: Vec<(u32, u8, f32x8)>,
-    any: Vec<(u32, u8)>,
+    stack: Vec<(u32, u8, u8, f32x8)>,
+    any: Vec<(u32, u8, u8)>,
 }
 
 thread_local! {
@@ -1634,7 +1634,7 @@ impl DeformTracer {
         skip: &[(u32, u32); 8],
         dc: &mut DeformCounters,
         ctr: &mut Counters,
-        stack: &mut Vec<(u32, u8, f32x8)>,
+        stack: &mut Vec<(u32, u8, u8, f32x8)>,
         tfar: f32x8,
     ) {
         let ii = &self.inst[k];
@@ -1644,8 +1644,10 @@ impl DeformTracer {
         let skip8 = u32x8::from(skipn);
         let mut tb = best_t(best);
         stack.clear();
-        stack.push((0, mask, entry));
-        while let Some((n, m, te)) = stack.pop() {
+        // (node, its level, lanes, entries): the level rides on the stack for `level_tests`
+        // rather than costing a load per node.
+        stack.push((0, 0, mask, entry));
+        while let Some((n, lv, m, te)) = stack.pop() {
             let mut m = m & te.simd_le(tb).to_bitmask() as u8;
             if any_skip {
                 // The lanes whose cached node (searched already) this is, in one compare.
@@ -1669,7 +1671,7 @@ impl DeformTracer {
             let (s1, s2) = self.child_spheres(ii, n);
             let cnt = 2 * m.count_ones() as u64;
             dc.sphere_tests += cnt;
-            dc.tests_at(topo.level[l], cnt);
+            dc.tests_at(lv + 1, cnt);
             ctr.add(Counter::node_tests, cnt);
             let (m1, e1) = pk.test(s1.0, s1.1, tb);
             let (m2, e2) = pk.test(s2.0, s2.1, tb);
@@ -1677,15 +1679,15 @@ impl DeformTracer {
             match (m1 != 0, m2 != 0) {
                 (true, true) => {
                     if !self.params.ordered || hmin(e1, m1) <= hmin(e2, m2) {
-                        stack.push((r as u32, m2, e2));
-                        stack.push((l as u32, m1, e1));
+                        stack.push((r as u32, lv + 1, m2, e2));
+                        stack.push((l as u32, lv + 1, m1, e1));
                     } else {
-                        stack.push((l as u32, m1, e1));
-                        stack.push((r as u32, m2, e2));
+                        stack.push((l as u32, lv + 1, m1, e1));
+                        stack.push((r as u32, lv + 1, m2, e2));
                     }
                 }
-                (true, false) => stack.push((l as u32, m1, e1)),
-                (false, true) => stack.push((r as u32, m2, e2)),
+                (true, false) => stack.push((l as u32, lv + 1, m1, e1)),
+                (false, true) => stack.push((r as u32, lv + 1, m2, e2)),
                 (false, false) => {}
             }
         }
@@ -1730,7 +1732,7 @@ impl DeformTracer {
         valid: u8,
         tfar: f32x8,
         roots: &[(f32, usize, u8, f32x8)],
-        stack: &mut Vec<(u32, u8)>,
+        stack: &mut Vec<(u32, u8, u8)>,
         dc: &mut DeformCounters,
         ctr: &mut Counters,
     ) -> u8 {
@@ -1746,19 +1748,19 @@ impl DeformTracer {
                 done |= self.leaf_x8(k, 0, rays, pk, m, tfar, dc, ctr);
                 continue;
             }
-            let push_children = |stack: &mut Vec<(u32, u8)>, n: usize, m: u8| {
+            let push_children = |stack: &mut Vec<(u32, u8, u8)>, n: usize, lv: u8, m: u8| {
                 let (l, r) = (n + 1, topo.right[n] as usize);
                 if self.left_first(ii, l, r) {
-                    stack.push((r as u32, m));
-                    stack.push((l as u32, m));
+                    stack.push((r as u32, lv + 1, m));
+                    stack.push((l as u32, lv + 1, m));
                 } else {
-                    stack.push((l as u32, m));
-                    stack.push((r as u32, m));
+                    stack.push((l as u32, lv + 1, m));
+                    stack.push((r as u32, lv + 1, m));
                 }
             };
             stack.clear();
-            push_children(stack, 0, m);
-            while let Some((n, m)) = stack.pop() {
+            push_children(stack, 0, 0, m);
+            while let Some((n, lv, m)) = stack.pop() {
                 let m = m & !done;
                 if m == 0 {
                     continue;
@@ -1767,7 +1769,7 @@ impl DeformTracer {
                 let (c, r) = self.sphere(ii, n);
                 let cnt = m.count_ones() as u64;
                 dc.sphere_tests += cnt;
-                dc.tests_at(topo.level[n], cnt);
+                dc.tests_at(lv, cnt);
                 ctr.add(Counter::node_tests, cnt);
                 let m = m & pk.test(c, r, tfar).0;
                 if m == 0 {
@@ -1779,7 +1781,7 @@ impl DeformTracer {
                         return done;
                     }
                 } else {
-                    push_children(stack, n, m);
+                    push_children(stack, n, lv, m);
                 }
             }
         }
