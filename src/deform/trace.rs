@@ -141,8 +141,8 @@ impl UpdateMode {
 
 /// `UpdateMode::Auto`'s choice between a rebuild (naive) and the lazy update, frame by frame
 /// (not in the paper, which names the question in §6). The rebuild's cost does not depend on
-/// the rays, the lazy frame's extra ray cost does (README, "Speed-up against the image
-/// size"), so which one wins depends on the image and the motion: each is tried once, then
+/// the rays, the lazy frame's extra ray cost does (BENCHMARKS.md, "Speed-up against
+/// the image size", stop 37), so which one wins depends on the image and the motion: each is tried once, then
 /// the one whose last frame (as reported by [`DeformTracer::end_frame`]) was cheaper is used,
 /// and the other is tried again so that a changing deformation can flip the choice: after
 /// [`AutoPick::PROBE`]·r² frames, where r ≥ 1 is the loser's cost over the winner's (at

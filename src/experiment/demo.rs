@@ -150,7 +150,7 @@ fn deform_section(a: &DemoArgs) -> Result<String> {
     let (w, h, frames, detail) = if a.quick { (192, 144, 8, 0.15) } else { (384, 288, 16, 0.4) };
     // The last two: the paper's unordered descent without and with the per-ray cache (of an
     // ancestor 8 levels above the hit leaf; the leaf itself misses under this motion), where
-    // the cache cuts the tests as in §4.2.2 (README, "Caching (stop 34)").
+    // the cache cuts the tests as in §4.2.2 (BENCHMARKS.md, "Caching (stop 34)").
     let specs: Vec<super::bench::MethodSpec> =
         ["naive", "lazy", "lazy-cache", "refit", "lazy:ordered=0", "lazy-cache:ordered=0:cache_up=8"]
             .iter()
