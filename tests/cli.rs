@@ -371,7 +371,10 @@ fn render_no_shadows_lights_everything() {
     for method in ["whitted", "multires"] {
         let img = |extra: &[&str], name: &str| {
             let p = d.join(format!("{method}-{name}.exr"));
-            let mut args = vec!["render", "spheres", "--method", method, "--accel", "bvh", "--width", "48", "--height", "48", "--quiet"];
+            let mut args = vec!["render", "spheres", "--method", method, "--width", "48", "--height", "48", "--quiet"];
+            if method == "whitted" {
+                args.extend_from_slice(&["--accel", "bvh"]);
+            }
             args.extend_from_slice(extra);
             args.extend_from_slice(&["--out", p.to_str().unwrap()]);
             let (code, _, err) = lodtrace(&args);
@@ -531,6 +534,28 @@ fn animate_writes_frames_and_per_frame_stats() {
     assert!((total - v["render_seconds"].as_f64().unwrap()).abs() < 1e-9);
     assert!(v["per_frame"][0]["sphere_tests"].as_u64().unwrap() > 0);
     assert!(v["per_frame"][0].get("warm_seconds").is_none(), "warm_seconds only with --warm-pass");
+}
+
+/// Every built-in sequence is lit: a frame with shadow rays keeps the direct light on most
+/// pixels (with and without shadows, at least half the pixels are the same bytes). Until
+/// stop 46 the light of `heads` and `elastic-balls` stood outside their hollow box, whose
+/// walls shadowed everything inside: 0–3 % of the pixels were the same.
+#[test]
+fn animate_sequences_are_lit_inside_their_walls() {
+    for seq in ["armadillo-ball", "bend", "heads", "elastic-balls"] {
+        let lit = tmp(&format!("animatelit-{seq}"));
+        let flat = tmp(&format!("animateflat-{seq}"));
+        let args = ["--frames", "1", "--detail", "0.05", "--update", "lazy"];
+        small_animate(&lit, seq, &args);
+        let mut no = args.to_vec();
+        no.push("--no-shadows");
+        small_animate(&flat, seq, &no);
+        let a = image::open(lit.join("frame_0000.png")).unwrap().to_rgb8();
+        let b = image::open(flat.join("frame_0000.png")).unwrap().to_rgb8();
+        let same = a.pixels().zip(b.pixels()).filter(|(x, y)| x == y).count();
+        let n = (a.width() * a.height()) as usize;
+        assert!(2 * same >= n, "{seq}: only {same} of {n} pixels keep their direct light under shadow rays");
+    }
 }
 
 /// `--cost` writes each frame's work per pixel beside it (magma, log scale): the frames are
@@ -1118,6 +1143,8 @@ fn ignored_options_and_meaningless_values_are_refused() {
         (vec!["render", "spheres", "--method", "whitted", "--time-budget", "nan"], "--time-budget"),
         (vec!["render", "spheres", "--method", "lod", "--lod-scale", "3"], "--lod-scale"),
         (vec!["render", "spheres", "--method", "multires", "--lod-f", "3"], "--lod-f"),
+        (vec!["render", "spheres", "--method", "multires", "--accel", "bvh"], "--accel"),
+        (vec!["render", "spheres", "--method", "cone", "--accel", "octree"], "--accel"),
         (vec!["render", "spheres", "--method", "whitted", "--variance-threshold", "0.1"], "--variance-threshold"),
         (vec!["render", "armadillo-ball", "--method", "surfel", "--eye", "1,2,3"], "--eye"),
         (vec!["render", &parallel], "non-parallel"),
@@ -1127,6 +1154,7 @@ fn ignored_options_and_meaningless_values_are_refused() {
         (vec!["bench", "spheres", "--methods", "whitted:budget=5"], "budget"),
         (vec!["bench", "spheres", "--methods", "whitted:embree:k=8"], "k is a key"),
         (vec!["bench", "spheres", "--methods", "multires:f=12"], "f is a key"),
+        (vec!["bench", "spheres", "--methods", "cone:octree"], "accel is a key"),
         (vec!["bench", "spheres", "--methods", "lod:frames=3"], "frames"),
         (vec!["bench", "bend", "--methods", "surfel:spp=4"], "spp"),
     ] {
@@ -1165,6 +1193,44 @@ fn stop_38_bad_inputs_are_one_line_exit_2() {
     assert_eq!(code, 2, "{err}");
     one_error_line(&err);
     assert!(err.contains("Kd"), "{err}");
+    // Colour statements with fewer than three values made tobj panic (stop 46's sweep): one
+    // value is a grey, none or two a malformed MTL (a warning, the default material).
+    for (kd, code_wanted, warns) in [("Kd 0.5", 0, false), ("Kd 0.5 0.5", 0, true), ("Ka", 0, true), ("Kd nan", 2, false)] {
+        std::fs::write(p("short.mtl"), format!("newmtl red\n{kd}\n")).unwrap();
+        std::fs::write(p("short.obj"), format!("mtllib short.mtl\nusemtl red\n{quad}")).unwrap();
+        let (code, _, err) = lodtrace(&["render", &p("short.obj"), "--width", "16", "--height", "12", "--quiet", "--out", &p("s.png")]);
+        assert_eq!(code, code_wanted, "{kd}: {err}");
+        assert!(!err.contains("panicked"), "{kd}: {err}");
+        assert_eq!(err.contains("materials not loaded"), warns, "{kd}: {err}");
+    }
+    // Models too small for f32 or for the ray offsets, and too large for the automatic light,
+    // are refused with one line (stop 46's sweep: a cow at 1e-5 vanished and a PLY sphere of
+    // radius 1e-30 gave NaN radius ratios, both exit 0; a mesh at 1e7 blamed a light the
+    // user never gave).
+    let tet = |s: f64| format!("OFF\n4 4 0\n0 0 0\n{s} 0 0\n0 {s} 0\n0 0 {s}\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n");
+    for (scale, says) in [(1e-5, "too small for the ray offsets"), (1e7, "automatic light")] {
+        std::fs::write(p("tet.off"), tet(scale)).unwrap();
+        let (code, _, err) = lodtrace(&["render", &p("tet.off"), "--width", "16", "--height", "12", "--quiet", "--out", &p("t.png")]);
+        assert_eq!(code, 2, "{scale}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(says), "{scale}: {err}");
+    }
+    std::fs::write(p("tet.off"), tet(1.0)).unwrap();
+    let (code, _, err) = lodtrace(&["render", &p("tet.off"), "--width", "16", "--height", "12", "--quiet", "--out", &p("t.png")]);
+    assert_eq!(code, 0, "{err}");
+    let mut ply = String::from("ply\nformat ascii 1.0\nelement vertex 64\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nend_header\n");
+    for i in 0..64 {
+        let (a, b) = (i as f64 * 0.7, i as f64 * 1.3);
+        let n = [a.cos() * b.sin(), a.sin() * b.sin(), b.cos()];
+        ply.push_str(&format!("{:e} {:e} {:e} {} {} {}\n", n[0] * 1e-30, n[1] * 1e-30, n[2] * 1e-30, n[0], n[1], n[2]));
+    }
+    std::fs::write(p("tiny.ply"), ply).unwrap();
+    let (code, _, err) =
+        lodtrace(&["animate", &p("tiny.ply"), "--frames", "1", "--width", "16", "--height", "12", "--quiet", "--stats", &p("tiny.json")]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains("too small for f32"), "{err}");
+    assert!(!std::path::Path::new(&p("tiny.json")).exists());
     // 1e38 overflowed the surfel sampler's cell size (index out of bounds, exit 101).
     std::fs::write(p("huge.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1e38 1e38 1\nf 1 2 3\nf 2 3 4\n").unwrap();
     let out = p("an");

@@ -674,6 +674,12 @@ fn simulation_energy_bounded() {
         let e = seq.world.energy().total();
         assert!(e <= e0 * 1.05 + 1e-3, "energy grew: {e} vs {e0}");
     }
+    // Every built-in light is on the free side of every wall and floor (the walls of a
+    // hollow box shadow what is inside them).
+    for name in Sequence::BUILTIN {
+        let seq = Sequence::builtin(name, &SequenceOptions { detail: 0.02, ..Default::default() }).unwrap();
+        assert!(seq.light_is_free(), "{name}: light {} behind a wall", seq.light);
+    }
     // Deterministic: replay gives the same frames.
     let a = Sequence::builtin("elastic-balls", &SequenceOptions { detail: 0.02, ..Default::default() }).unwrap().record(10).unwrap();
     let b = Sequence::builtin("elastic-balls", &SequenceOptions { detail: 0.02, ..Default::default() }).unwrap().record(10).unwrap();

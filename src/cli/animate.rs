@@ -9,6 +9,9 @@
 //! Shading: Phong-diffuse surfels in their collection colour, one point light with shadow
 //! rays (the §4.4 shadow-ray path), the simulation's static planes and boxes rendered
 //! analytically (planes only from their free side, so a hollow box shows as a cut-away).
+//! The light is the sequence's (`Sequence::light`): for the hollow boxes of `heads` and
+//! `elastic-balls` it hangs above the open top, since the walls shadow what is inside them
+//! (until stop 46 it stood outside the front wall and the insides had no direct light).
 //! `render_seconds` in `--stats` is the total over all frames.
 
 use crate::baseline::accel::Ray;
@@ -320,7 +323,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     let build_seconds = t0.elapsed().as_secs_f64();
     let surfels: u64 = tracer.frame_stats().surfels_total;
     let cam = seq.camera.frame(a.width, a.height);
-    let light = light_position(&seq);
+    let light = seq.light;
     let colliders = seq.world.colliders.clone();
     let colors: Vec<Vec<Vec3>> =
         seq.scene.objects.iter().map(|o| o.model.collections.iter().map(|c| Vec3::from(c.color)).collect()).collect();
@@ -491,14 +494,6 @@ fn render_frame(
         cost.extend(pcost);
     }
     (film, c, dc, cost)
-}
-
-/// A light above and a little behind the camera's right shoulder.
-fn light_position(seq: &Sequence) -> Vec3 {
-    let c = &seq.camera;
-    let d = c.look - c.eye;
-    let right = d.cross(c.up).normalize_or_zero();
-    c.eye + d * 0.3 + c.up.normalize_or_zero() * d.length() * 0.8 + right * d.length() * 0.4
 }
 
 /// Nearest static collider along the ray: (t, normal).

@@ -53,8 +53,19 @@ pub fn opts_from(a: &RenderArgs) -> RenderOpts {
         variance_threshold: a.variance_threshold,
         aov: !a.aov.is_empty(),
         quiet: a.quiet,
-        label: format!("{} {}", a.method.name(), a.accel.name()),
+        label: format!("{} {}", a.method.name(), accel_name(a.method, a.accel)),
         ..Default::default()
+    }
+}
+
+/// The hierarchy a method traces, as reported in labels and stats: the cone tracers trace
+/// their own octree and the surfel tracer its sphere tree, whatever `--accel` says.
+pub fn accel_name(m: crate::cli::Method, a: crate::baseline::accel::AccelKind) -> &'static str {
+    use crate::cli::Method::*;
+    match m {
+        Multires | Cone => "octree",
+        Surfel => "sphere-tree",
+        _ => a.name(),
     }
 }
 
@@ -77,6 +88,11 @@ pub fn check_method_options(a: &RenderArgs) -> Result<()> {
     }
     if m != Lod {
         wrong.extend(a.lod.changed().into_iter().map(|o| (o, "--method lod")));
+    }
+    // The cone tracers trace their own octree, surfel its sphere tree: only the default
+    // (which they do not use) passes unremarked.
+    if matches!(m, Multires | Cone | Surfel) && a.accel != AccelKind::Embree {
+        wrong.push(("--accel", "the triangle tracers (whitted, distributed, lod)"));
     }
     let d = crate::baseline::render::RenderOpts::default();
     if m != Distributed && a.first_pass_spp != d.first_pass_spp {

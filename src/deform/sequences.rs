@@ -79,9 +79,23 @@ pub struct Sequence {
     pub frames: u32,
     /// Suggested camera.
     pub camera: Camera,
+    /// The point light (`lodtrace animate` shading). It lies on the free side of every plane
+    /// collider: the walls of a hollow box are seen through from outside (a cut-away), but
+    /// they do shadow, so a light outside them would leave the inside unlit
+    /// ([`Sequence::light_is_free`]).
+    pub light: Vec3,
 }
 
 impl Sequence {
+    /// Whether the light lies on the free side of every plane collider (strictly), so that
+    /// no wall of the scene stands between it and the whole inside.
+    pub fn light_is_free(&self) -> bool {
+        self.world.colliders.iter().all(|c| match *c {
+            Collider::Plane { n, d } => self.light.dot(n) > d,
+            _ => true,
+        })
+    }
+
     pub const BUILTIN: [&'static str; 4] = ["armadillo-ball", "bend", "heads", "elastic-balls"];
 
     /// One of [`Sequence::BUILTIN`].
@@ -131,6 +145,7 @@ impl Sequence {
             frame: 0,
             frames: 60,
             camera: cam(Vec3::new(0.0, 0.9, 3.2), Vec3::new(0.0, 0.5, 0.0), 40.0),
+            light: shoulder_light(Vec3::new(0.0, 0.9, 3.2), Vec3::new(0.0, 0.5, 0.0)),
         }
     }
 
@@ -157,6 +172,14 @@ impl Sequence {
         }
         Ok(Recording { name: self.name.clone(), dt: self.world.dt, frames: v })
     }
+}
+
+/// A light above and a little behind the right shoulder of a camera at `eye` looking at `look`
+/// (up +y).
+fn shoulder_light(eye: Vec3, look: Vec3) -> Vec3 {
+    let d = look - eye;
+    let right = d.cross(Vec3::Y).normalize_or_zero();
+    eye + d * 0.3 + Vec3::Y * d.length() * 0.8 + right * d.length() * 0.4
 }
 
 fn cam(eye: Vec3, look: Vec3, fovy: f32) -> Camera {
@@ -263,6 +286,16 @@ fn surfel_object(
     // Scale so the larger of (height, half the longest side) becomes `height`: tall objects
     // get exactly this height, flat ones are not blown up.
     let ext = hi - lo;
+    // The model is rescaled below, but its surfel radii and neighbourhoods were measured in
+    // its own units, where squared distances of a 1e-30-sized model underflow f32 (stop 46's
+    // sweep: NaN radius ratios and a garbage frame, exit 0).
+    let far = lo.abs().max(hi.abs()).max_element();
+    let size = ext.max_element();
+    if !(size >= 1e-6 * (1.0 + far)) {
+        return Err(DeformError::Invalid(format!(
+            "'{name}' spans only {size:.3e} units at coordinates up to {far:.3e}: too small for f32 (at least 1e-6 × (1 + its largest coordinate)); scale it up"
+        )));
+    }
     let sc = height / ext.y.max(0.5 * ext.max_element()).max(1e-20);
     let shift = base - Vec3::new(0.5 * (lo.x + hi.x), lo.y, 0.5 * (lo.z + hi.z)) * sc;
     for i in 0..s.len() {
@@ -325,6 +358,7 @@ fn armadillo_ball(opts: &SequenceOptions) -> Result<Sequence, DeformError> {
         frame: 0,
         frames: 90,
         camera: cam(Vec3::new(2.6, 1.3, 3.0), Vec3::new(0.0, 0.8, 0.0), 40.0),
+        light: shoulder_light(Vec3::new(2.6, 1.3, 3.0), Vec3::new(0.0, 0.8, 0.0)),
     })
 }
 
@@ -395,6 +429,7 @@ fn bend(opts: &SequenceOptions) -> Result<Sequence, DeformError> {
         frame: 0,
         frames: 90,
         camera: cam(Vec3::new(4.5, 2.0, 0.0), Vec3::new(0.0, 1.6, 0.0), 50.0),
+        light: shoulder_light(Vec3::new(4.5, 2.0, 0.0), Vec3::new(0.0, 1.6, 0.0)),
     })
 }
 
@@ -435,6 +470,9 @@ fn heads(opts: &SequenceOptions) -> Result<Sequence, DeformError> {
         frame: 0,
         frames: 90,
         camera: cam(Vec3::new(0.0, 1.3, 3.6), Vec3::new(0.0, 0.6, 0.0), 45.0),
+        // Above the open top of the box, towards the camera: inside the walls' x and z range, so
+        // no wall lies between it and anything inside.
+        light: Vec3::new(0.8, 5.5, 0.9),
     })
 }
 
@@ -460,6 +498,8 @@ fn elastic_balls(opts: &SequenceOptions) -> Result<Sequence, DeformError> {
         frame: 0,
         frames: 90,
         camera: cam(Vec3::new(0.0, 3.2, 4.2), Vec3::new(0.0, 0.8, 0.0), 45.0),
+        // Above the open top of the box, towards the camera (as for `heads`).
+        light: Vec3::new(0.6, 4.6, 0.8),
     })
 }
 

@@ -296,6 +296,8 @@ impl MethodSpec {
                 }
                 "fps" | "vt" if method != Method::Distributed => "distributed",
                 "spp" | "depth" | "accel" if method == Method::Surfel => "the scene-file methods",
+                // The cone tracers trace their own octree.
+                "accel" if cone => "the triangle tracers (whitted, distributed, lod)",
                 _ => continue,
             };
             return Err(bad(format!("{key} is a key of {of}; {} would ignore it", method.name())));
@@ -390,6 +392,9 @@ pub struct EqualTime {
     pub sweep_seconds_to_match: Option<f64>,
     /// The sweep's time ÷ this row's time at equal error (> 1: this method is faster).
     pub time_ratio_at_equal_error: Option<f64>,
+    /// The sweep's first (1-spp) point already has a lower FLIP than this row: the two
+    /// figures above are upper bounds (its 1-spp time), not interpolated.
+    pub sweep_match_at_most: bool,
     pub sweep_max_seconds: f64,
     /// The same comparison inside each `--region`: the sweep's curve of that region's mean
     /// FLIP against this row's. A method can win one part of the image at equal time (the
@@ -407,6 +412,8 @@ pub struct RegionEqualTime {
     pub sweep_flip_at_equal_time: Option<f64>,
     pub sweep_seconds_to_match: Option<f64>,
     pub time_ratio_at_equal_error: Option<f64>,
+    /// As [`EqualTime::sweep_match_at_most`].
+    pub sweep_match_at_most: bool,
 }
 
 /// Interpolates the sweep curve (`(seconds, spp, flip)`, sorted by spp) for a method at
@@ -432,9 +439,11 @@ pub fn equal_time(sweep: &[(f64, f64, f64)], t: f64, flip: f64, name: &str) -> E
         }
     }
     let mut to_match = None;
+    let mut at_most = false;
     if let Some(&(t0, _, f0)) = sweep.first() {
         if f0 <= flip {
             to_match = Some(t0);
+            at_most = f0 < flip;
         }
     }
     if to_match.is_none() {
@@ -453,6 +462,7 @@ pub fn equal_time(sweep: &[(f64, f64, f64)], t: f64, flip: f64, name: &str) -> E
         sweep_spp_at_equal_time: at_t.map(|x| x.1),
         sweep_seconds_to_match: to_match,
         time_ratio_at_equal_error: to_match.map(|m| m / t.max(1e-12)),
+        sweep_match_at_most: at_most,
         regions: Vec::new(),
         sweep_max_seconds: sweep.iter().map(|x| x.0).fold(0.0, f64::max),
     }
@@ -843,6 +853,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                             sweep_flip_at_equal_time: ge.sweep_flip_at_equal_time,
                             sweep_seconds_to_match: ge.sweep_seconds_to_match,
                             time_ratio_at_equal_error: ge.time_ratio_at_equal_error,
+                            sweep_match_at_most: ge.sweep_match_at_most,
                         });
                     }
                     r.equal_time.push(e);
@@ -943,7 +954,7 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
             scenes.push(&r.scene);
         }
     }
-    let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    let mut scatter: Vec<(String, String, f64, f64)> = Vec::new();
     for sc in &scenes {
         let rows = report.rows.iter().filter(|r| r.scene == *sc && r.flip.is_some());
         if report.rows.iter().any(|r| r.scene == *sc && r.sweep.is_some()) {
@@ -976,20 +987,17 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
                 &super::plot::fmt_axis,
             )?;
         } else {
-            let mut v: Vec<(f64, f64)> = rows.map(|r| (r.stats.render_seconds, r.flip.unwrap_or(0.0))).collect();
-            if !v.is_empty() {
-                v.sort_by(|a, b| a.0.total_cmp(&b.0));
-                series.push((sc.to_string(), v));
-            }
+            scatter.extend(rows.filter_map(|r| r.flip.map(|f| (sc.to_string(), r.spec.clone(), r.stats.render_seconds, f))));
         }
     }
-    if !series.is_empty() {
-        super::plot::line_chart(
+    if !scatter.is_empty() {
+        // One point per (scene, method): measurements, not a curve.
+        super::plot::scatter_chart(
             &out.join("bench-error.png"),
             "Error against the reference vs render time",
             "render time (s)",
             "mean FLIP",
-            &series,
+            &scatter,
         )?;
     }
     Ok(())
@@ -1085,6 +1093,7 @@ pub fn table_string(report: &BenchReport) -> String {
                 _ => "faster than 1 spp".into(),
             };
             let (m, q) = match (e.sweep_seconds_to_match, e.time_ratio_at_equal_error) {
+                (Some(m), Some(q)) if e.sweep_match_at_most => (format!("≤ {m:.3} s (1 spp is better)"), format!("≤ {q:.2}x")),
                 (Some(m), Some(q)) => (format!("{m:.3} s"), format!("{q:.2}x")),
                 _ => (
                     format!("> {:.3} s (not reached)", e.sweep_max_seconds),
@@ -1113,7 +1122,7 @@ pub fn table_string(report: &BenchReport) -> String {
                     let at = g.sweep_flip_at_equal_time.map_or("-".into(), |f| format!("{f:.4}"));
                     let q = g.time_ratio_at_equal_error.map_or_else(
                         || format!("> {:.2}x", e.sweep_max_seconds / r.stats.render_seconds.max(1e-12)),
-                        |q| format!("{q:.2}x"),
+                        |q| if g.sweep_match_at_most { format!("≤ {q:.2}x") } else { format!("{q:.2}x") },
                     );
                     s.push_str(&format!(" {:.4} / {at} ({q}) |", g.flip));
                 }
@@ -1124,7 +1133,7 @@ pub fn table_string(report: &BenchReport) -> String {
     let cones: Vec<&BenchRow> = report.rows.iter().filter(|r| r.stats.cone_profile.is_some()).collect();
     if !cones.is_empty() {
         s.push_str(
-            "\nWhere the cone tracers' traversal work goes, by cone kind (traversal CPU seconds summed over threads, \
+            "\nWhere the cone tracers' traversal work goes, by cone kind (traversal thread-seconds: wall-clock time on each thread, summed over the threads; \
              tests per cone, share of the frame's tests; tests = instance, node, triangle-bound, triangle and surfel \
              tests), and over the pixels:\n\n",
         );
@@ -1245,10 +1254,14 @@ mod tests {
         assert_eq!(e.sweep_seconds_to_match, None);
         assert_eq!(e.sweep_flip_at_equal_time, Some(0.1));
         assert_eq!(e.sweep_max_seconds, 4.0);
-        // Faster than 1 spp: no equal-time point; worse than 1 spp: matched by its time.
+        // Faster than 1 spp: no equal-time point; worse than 1 spp: matched by its time, at
+        // most (an upper bound, flagged).
         let e = equal_time(&c, 0.5, 0.5, "d");
         assert_eq!(e.sweep_flip_at_equal_time, None);
         assert_eq!(e.sweep_seconds_to_match, Some(1.0));
         assert!((e.time_ratio_at_equal_error.unwrap() - 2.0).abs() < 1e-9);
+        assert!(e.sweep_match_at_most);
+        assert!(!equal_time(&c, 2.0, 0.25, "d").sweep_match_at_most);
+        assert!(!equal_time(&c, 0.5, 0.4, "d").sweep_match_at_most, "exactly 1 spp's error is matched, not bounded");
     }
 }

@@ -311,7 +311,7 @@ fn esc(s: &str) -> String {
 fn index_html(sections: &[(Job, BenchReport)]) -> String {
     let mut h = String::new();
     h.push_str("<!doctype html><html><head><meta charset=\"utf-8\"><title>lodtrace demo</title><style>body{font-family:sans-serif;margin:2em;max-width:1400px}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}td:nth-child(2),th:nth-child(2){text-align:left}figure{display:inline-block;margin:4px}figcaption{font-size:80%;max-width:320px}img{max-width:320px;image-rendering:pixelated}</style></head><body>");
-    h.push_str("<h1>lodtrace demo</h1><p>Every method on the built-in paper scenes, rendered one after the other in one process on this machine. Speed-up is the first method's render time divided by each method's. Errors are against the high-sample distributed reference (RMSE and PSNR on display values, mean FLIP).</p>");
+    h.push_str("<h1>lodtrace demo</h1><p>Every method on the built-in paper scenes, rendered one after the other in one process on this machine. Speed-up is the first method's render time divided by each method's. Errors are against the high-sample distributed reference (RMSE and PSNR on the linear, unclamped radiance; mean FLIP on the sRGB display images).</p>");
     for (job, r) in sections {
         let _ = write!(h, "<h2>{} ({}×{})</h2><table><tr><th>method</th><th>spec</th><th>threads</th><th>build s</th><th>render s</th><th>Mrays/s</th><th>speed-up</th><th>RMSE</th><th>PSNR dB</th><th>mean FLIP</th></tr>", esc(job.scene), job.width, job.height);
         for row in &r.rows {
@@ -410,8 +410,16 @@ fn index_html(sections: &[(Job, BenchReport)]) -> String {
                     o(row.flip, 4),
                     o(e.sweep_flip_at_equal_time, 4),
                     o(e.sweep_spp_at_equal_time, 1),
-                    e.sweep_seconds_to_match.map(|v| format!("{v:.3} s")).unwrap_or_else(|| format!("&gt; {:.3} s", e.sweep_max_seconds)),
-                    o(e.time_ratio_at_equal_error, 2)
+                    match e.sweep_seconds_to_match {
+                        Some(v) if e.sweep_match_at_most => format!("&le; {v:.3} s (1 spp is better)"),
+                        Some(v) => format!("{v:.3} s"),
+                        None => format!("&gt; {:.3} s", e.sweep_max_seconds),
+                    },
+                    if e.sweep_match_at_most {
+                        format!("&le; {}", o(e.time_ratio_at_equal_error, 2))
+                    } else {
+                        o(e.time_ratio_at_equal_error, 2)
+                    }
                 );
             }
             h.push_str("</table>");
@@ -457,7 +465,7 @@ fn index_html(sections: &[(Job, BenchReport)]) -> String {
         }
         let prof: Vec<_> = r.rows.iter().filter_map(|row| row.stats.cone_profile.as_ref().map(|p| (row, p))).collect();
         if !prof.is_empty() {
-            h.push_str("<h3>Where the cone tracer's work goes</h3><p>Per cone kind: traversal CPU seconds (summed over threads, shading excluded), tests per cone (instance, node, triangle-bound, triangle and surfel tests) and the kind's share of the frame's tests. The heat maps show the tests per pixel, every cone a pixel spawned included (log scale, magma: black none, pale yellow the most).</p><table><tr><th>method</th><th>primary</th><th>shadow of primary</th><th>reflected / refracted</th><th>shadow of secondary</th><th>tests per pixel: median / p95 / max</th><th>top 5 % pixels' share</th></tr>");
+            h.push_str("<h3>Where the cone tracer's work goes</h3><p>Per cone kind: traversal thread-seconds (wall-clock time on each thread, summed over the threads; shading excluded), tests per cone (instance, node, triangle-bound, triangle and surfel tests) and the kind's share of the frame's tests. The heat maps show the tests per pixel, every cone a pixel spawned included (log scale, magma: black none, pale yellow the most).</p><table><tr><th>method</th><th>primary</th><th>shadow of primary</th><th>reflected / refracted</th><th>shadow of secondary</th><th>tests per pixel: median / p95 / max</th><th>top 5 % pixels' share</th></tr>");
             for (row, p) in &prof {
                 let _ = write!(h, "<tr><td>{}</td>", esc(&row.spec));
                 for cell in p.cells() {

@@ -1,7 +1,9 @@
-//! Plots (PNG) for bench results: a bar chart (one value per method, the value printed above
-//! each bar) and a line chart (one line per series, e.g. time against resolution).
+//! Plots (PNG) for bench results: a horizontal bar chart (one value per method, the value
+//! printed at each bar's end) and a line chart (one line per series, e.g. time against
+//! resolution).
 //!
-//! Drawn with `plotters`' bitmap backend into an RGB buffer of 800x500 pixels, then saved
+//! Drawn with `plotters`' bitmap backend into an RGB buffer (800x500 pixels; bar charts as
+//! large as their labels need), then saved
 //! with `image` through `film::io::write_atomic`, so a failed run leaves no half-written file.
 //! Text uses `plotters`' pure-Rust `ab_glyph` renderer rather than its `ttf` feature, which
 //! links fontconfig and freetype: the font is a TrueType file loaded once at run time —
@@ -55,17 +57,26 @@ fn ensure_font() -> Result<()> {
 
 /// Draws into an 800x500 RGB buffer with `draw`, then writes it to `path` as PNG, atomically.
 fn render(path: &Path, draw: impl FnOnce(&DrawingArea<BitMapBackend<'_>, Shift>) -> std::result::Result<(), String>) -> Result<()> {
+    render_sized(path, (WIDTH, HEIGHT), draw)
+}
+
+/// [`render`] into a buffer of `size` pixels.
+fn render_sized(
+    path: &Path,
+    (w, h): (u32, u32),
+    draw: impl FnOnce(&DrawingArea<BitMapBackend<'_>, Shift>) -> std::result::Result<(), String>,
+) -> Result<()> {
     ensure_font()?;
-    let mut buf = vec![0u8; (WIDTH * HEIGHT * 3) as usize];
+    let mut buf = vec![0u8; (w * h * 3) as usize];
     {
-        let root = BitMapBackend::with_buffer(&mut buf, (WIDTH, HEIGHT)).into_drawing_area();
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE)
             .map_err(|e| e.to_string())
             .and_then(|_| draw(&root))
             .and_then(|_| root.present().map_err(|e| e.to_string()))
             .map_err(|e| Error::Image(format!("{}: plot: {e}", path.display())))?;
     }
-    let img = image::RgbImage::from_raw(WIDTH, HEIGHT, buf).ok_or_else(|| Error::Image("plot: buffer size".into()))?;
+    let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| Error::Image("plot: buffer size".into()))?;
     io::write_rgb8_png(path, &img)
 }
 
@@ -104,9 +115,12 @@ pub fn fmt_axis(v: f64) -> String {
     }
 }
 
-/// A bar chart, one bar per `(label, value)`, the value printed above each bar.
-/// Non-finite values get no bar and the label "n/a".
-pub fn bar_chart(path: &Path, title: &str, ylabel: &str, bars: &[(String, f64)]) -> Result<()> {
+/// A horizontal bar chart, one bar per `(label, value)` from top to bottom, the label left
+/// of its bar and the value at its end; the value axis is titled `xlabel`. The image is as
+/// tall as the bars need (26 pixels each) and as wide as the longest label needs, so that
+/// long method specs stay readable (a vertical chart's labels ran into each other).
+/// Non-finite values get no bar and the value "n/a".
+pub fn bar_chart(path: &Path, title: &str, xlabel: &str, bars: &[(String, f64)]) -> Result<()> {
     if bars.is_empty() {
         return Err(Error::Usage(format!("{}: bar chart needs at least one bar", path.display())));
     }
@@ -114,43 +128,40 @@ pub fn bar_chart(path: &Path, title: &str, ylabel: &str, bars: &[(String, f64)])
     let lo = finite.clone().fold(0.0f64, f64::min);
     let hi = finite.fold(0.0f64, f64::max);
     let (lo, hi) = if lo == hi { (0.0, 1.0) } else { (lo, hi) };
-    // Head room for the value labels.
+    // Room for the value labels at the bars' ends.
     let span = hi - lo;
-    let (y0, y1) = (if lo < 0.0 { lo - 0.12 * span } else { 0.0 }, if hi > 0.0 { hi + 0.12 * span } else { 0.0 });
-    let n = bars.len() as u32;
-    let label_px = if n > 12 {
-        11
-    } else if n > 6 {
-        14
-    } else {
-        16
-    };
-    render(path, |root| {
+    let (x0, x1) = (if lo < 0.0 { lo - 0.15 * span } else { 0.0 }, if hi > 0.0 { hi + 0.15 * span } else { 0.0 });
+    let n = bars.len();
+    const ROW: u32 = 26;
+    // 13-pixel DejaVu Sans averages about 7.5 pixels a character.
+    let longest = bars.iter().map(|b| b.0.chars().count()).max().unwrap_or(1) as u32;
+    let label_w = (longest * 15 / 2 + 16).clamp(80, 1200);
+    let size = (label_w + 560, (100 + ROW * n as u32).max(220));
+    render_sized(path, size, |root| {
         let e = |e: &dyn std::fmt::Display| e.to_string();
-        // Bar i is centred on x = i. Asking for n ticks over the span n makes plotters' 1-2-5
-        // tick search settle on step 1, i.e. exactly the bar centres, which get the names.
-        // (plotters' segmented/slice coordinates are degenerate for a single bar.)
+        // Bar i is centred on y = n-1-i (the first bar on top); asking for n ticks over the
+        // span n makes plotters' 1-2-5 tick search settle on step 1, i.e. the bar centres.
         let mut chart = ChartBuilder::on(root)
-            .caption(title, (FAMILY, 24))
-            .margin(15)
-            .x_label_area_size(40)
-            .y_label_area_size(70)
-            .build_cartesian_2d(-0.5..n as f64 - 0.5, y0..y1)
+            .caption(title, (FAMILY, 22))
+            .margin(12)
+            .x_label_area_size(42)
+            .y_label_area_size(label_w)
+            .build_cartesian_2d(x0..x1, -0.5..n as f64 - 0.5)
             .map_err(|x| e(&x))?;
         chart
             .configure_mesh()
-            .disable_x_mesh()
-            .y_max_light_lines(2)
-            .y_desc(ylabel)
-            .y_label_formatter(&|v| fmt_axis(*v))
-            .x_labels(n as usize)
-            .x_label_style((FAMILY, label_px))
-            .y_label_style((FAMILY, 14))
-            .axis_desc_style((FAMILY, 16))
-            .x_label_formatter(&|v| {
+            .disable_y_mesh()
+            .x_max_light_lines(2)
+            .x_desc(xlabel)
+            .x_label_formatter(&|v| fmt_axis(*v))
+            .y_labels(n)
+            .y_label_style((FAMILY, 13))
+            .x_label_style((FAMILY, 13))
+            .axis_desc_style((FAMILY, 15))
+            .y_label_formatter(&|v| {
                 let i = v.round();
-                if i >= 0.0 && (v - i).abs() < 1e-6 {
-                    bars.get(i as usize).map(|b| b.0.clone()).unwrap_or_default()
+                if i >= 0.0 && (v - i).abs() < 1e-6 && (i as usize) < n {
+                    bars[n - 1 - i as usize].0.clone()
                 } else {
                     String::new()
                 }
@@ -158,22 +169,119 @@ pub fn bar_chart(path: &Path, title: &str, ylabel: &str, bars: &[(String, f64)])
             .draw()
             .map_err(|x| e(&x))?;
         let fill = RGBColor(70, 110, 180).filled();
+        let y = |i: usize| (n - 1 - i) as f64;
         chart
             .draw_series(
                 bars.iter()
                     .enumerate()
                     .filter(|(_, b)| b.1.is_finite())
-                    .map(|(i, b)| Rectangle::new([(i as f64 - 0.4, 0.0), (i as f64 + 0.4, b.1)], fill)),
+                    .map(|(i, b)| Rectangle::new([(0.0, y(i) - 0.36), (b.1, y(i) + 0.36)], fill)),
             )
             .map_err(|x| e(&x))?;
         chart
             .draw_series(bars.iter().enumerate().map(|(i, b)| {
                 let v = if b.1.is_finite() { b.1 } else { 0.0 };
-                let (dy, vpos) = if v < 0.0 { (4, VPos::Top) } else { (-4, VPos::Bottom) };
-                let style = TextStyle::from((FAMILY, 15).into_font()).pos(Pos::new(HPos::Center, vpos));
-                EmptyElement::at((i as f64, v)) + Text::new(fmt_value(b.1), (0, dy), style)
+                let (dx, hpos) = if v < 0.0 { (-5, HPos::Right) } else { (5, HPos::Left) };
+                let style = TextStyle::from((FAMILY, 13).into_font()).pos(Pos::new(hpos, VPos::Center));
+                EmptyElement::at((v, y(i))) + Text::new(fmt_value(b.1), (dx, 0), style)
             }))
             .map_err(|x| e(&x))?;
+        Ok(())
+    })
+}
+
+/// A scatter chart of labelled points `(group, label, x, y)`: one colour per group (as named
+/// in the legend, outside the plot area, below it), each point's label beside it. For
+/// measurements that are not a curve (one point per method): joining them by lines would
+/// suggest a trade-off that is not there. Non-finite points are skipped.
+pub fn scatter_chart(path: &Path, title: &str, xlabel: &str, ylabel: &str, points: &[(String, String, f64, f64)]) -> Result<()> {
+    let pts: Vec<&(String, String, f64, f64)> = points.iter().filter(|p| p.2.is_finite() && p.3.is_finite()).collect();
+    if pts.is_empty() {
+        return Err(Error::Usage(format!("{}: scatter chart needs at least one finite point", path.display())));
+    }
+    let mut groups: Vec<&str> = Vec::new();
+    for p in &pts {
+        if !groups.contains(&p.0.as_str()) {
+            groups.push(&p.0);
+        }
+    }
+    let lohi = |f: &dyn Fn(&(String, String, f64, f64)) -> f64| {
+        (pts.iter().map(|p| f(p)).fold(f64::INFINITY, f64::min), pts.iter().map(|p| f(p)).fold(f64::NEG_INFINITY, f64::max))
+    };
+    let ((xl, xh), (yl, yh)) = (lohi(&|p| p.2), lohi(&|p| p.3));
+    let pad = |lo: f64, hi: f64, left: f64, right: f64| {
+        let span = if hi > lo { hi - lo } else { lo.abs().max(1.0) };
+        (lo - left * span, hi + right * span)
+    };
+    // Times spanning more than a decade go on a log axis (fast methods would otherwise
+    // crowd at the left edge); the right margin leaves room for the labels.
+    let log_x = xl > 0.0 && xh / xl > 8.0;
+    let (x0, x1) = if log_x {
+        let (a, b) = pad(xl.ln(), xh.ln(), 0.06, 0.5);
+        (a.exp(), b.exp())
+    } else {
+        pad(xl, xh, 0.06, 0.45)
+    };
+    let (y0, y1) = pad(yl, yh, 0.06, 0.08);
+    let rows = groups.len().div_ceil(4) as u32;
+    render_sized(path, (WIDTH, HEIGHT + 22 * rows), |root| {
+        let e = |e: &dyn std::fmt::Display| e.to_string();
+        let (plot, legend) = root.split_vertically(HEIGHT);
+        let mut builder = ChartBuilder::on(&plot);
+        builder.caption(title, (FAMILY, 22)).margin(15).x_label_area_size(50).y_label_area_size(70);
+        // Pixel positions of the points, for placing their labels apart.
+        let px: Vec<(i32, i32)>;
+        macro_rules! draw {
+            ($chart:expr) => {{
+                let mut chart = $chart;
+                chart
+                    .configure_mesh()
+                    .max_light_lines(2)
+                    .x_desc(if log_x { format!("{xlabel}, log scale") } else { xlabel.to_string() })
+                    .y_desc(ylabel)
+                    .x_label_formatter(&|v| fmt_axis(*v))
+                    .y_label_formatter(&|v| fmt_axis(*v))
+                    .label_style((FAMILY, 14))
+                    .axis_desc_style((FAMILY, 16))
+                    .draw()
+                    .map_err(|x| e(&x))?;
+                for (k, g) in groups.iter().enumerate() {
+                    let color = Palette99::pick(k).to_rgba();
+                    chart
+                        .draw_series(pts.iter().filter(|p| p.0 == *g).map(|p| Circle::new((p.2, p.3), 4, color.filled())))
+                        .map_err(|x| e(&x))?;
+                }
+                px = pts.iter().map(|p| chart.backend_coord(&(p.2, p.3))).collect();
+            }};
+        }
+        if log_x {
+            draw!(builder.build_cartesian_2d((x0..x1).log_scale(), y0..y1).map_err(|x| e(&x))?);
+        } else {
+            draw!(builder.build_cartesian_2d(x0..x1, y0..y1).map_err(|x| e(&x))?);
+        }
+        // Labels right of their points, top to bottom; one that would overlap a label
+        // already placed moves down a line.
+        let mut order: Vec<usize> = (0..pts.len()).collect();
+        order.sort_by_key(|&i| (px[i].1, px[i].0));
+        let mut placed: Vec<(i32, i32, i32)> = Vec::new(); // (x0, x1, y) of placed labels
+        for i in order {
+            let (x, mut y) = (px[i].0 + 7, px[i].1);
+            let w = 7 * pts[i].1.chars().count() as i32;
+            while placed.iter().any(|&(a, b, py)| (py - y).abs() < 13 && a < x + w && x < b) {
+                y += 13;
+            }
+            placed.push((x, x + w, y));
+            let k = groups.iter().position(|g| *g == pts[i].0).unwrap_or(0);
+            let color = Palette99::pick(k).to_rgba();
+            let style = TextStyle::from((FAMILY, 12).into_font()).color(&color).pos(Pos::new(HPos::Left, VPos::Center));
+            plot.draw(&Text::new(pts[i].1.clone(), (x, y), style)).map_err(|x| e(&x))?;
+        }
+        for (k, g) in groups.iter().enumerate() {
+            let color = Palette99::pick(k).to_rgba();
+            let (cx, cy) = (80 + 180 * (k % 4) as i32, 8 + 22 * (k / 4) as i32);
+            legend.draw(&Circle::new((cx, cy + 6), 5, color.filled())).map_err(|x| e(&x))?;
+            legend.draw(&Text::new(g.to_string(), (cx + 10, cy), TextStyle::from((FAMILY, 14).into_font()))).map_err(|x| e(&x))?;
+        }
         Ok(())
     })
 }

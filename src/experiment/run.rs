@@ -44,6 +44,9 @@ pub struct ConeReport {
 #[derive(Serialize, Debug, Clone)]
 pub struct ConeKindStats {
     pub cones: u64,
+    /// Wall-clock seconds each thread spent traversing this kind's cones, summed over the
+    /// threads: the CPU time when nothing else runs on the cores, more when something does
+    /// (the name predates this note; the stats JSON keeps it).
     pub traversal_cpu_seconds: f64,
     /// Share of the frame's bounding-volume and primitive tests (instance, node,
     /// triangle-bound, triangle, surfel).
@@ -428,7 +431,7 @@ impl RunResult {
         Stats {
             scene: scene.name.clone(),
             method: method.name().into(),
-            accel: accel_kind.name().into(),
+            accel: crate::cli::render::accel_name(method, accel_kind).into(),
             width: opts.width,
             height: opts.height,
             spp: opts.spp,

@@ -159,6 +159,32 @@ fn finish_mesh(path: &Path, mut mesh: Mesh) -> Result<Mesh> {
     Ok(mesh)
 }
 
+/// An MTL file's text with every colour statement (`Ka`, `Kd`, `Ks`, `Ke`) made to hold
+/// three values, as tobj 4.0.5 requires: it panics on fewer (an `unwrap` in its
+/// `parse_float3`). One value is the MTL form for a grey (`Kd 0.5` is `Kd 0.5 0.5 0.5`) and is
+/// expanded; none or two are a parse error (the caller warns and uses the default
+/// material, as for any malformed MTL).
+fn mtl_colours_complete(text: &[u8]) -> std::result::Result<Vec<u8>, tobj::LoadError> {
+    let text = String::from_utf8_lossy(text);
+    let mut out = String::with_capacity(text.len() + 64);
+    for line in text.lines() {
+        let mut w = line.split_whitespace();
+        match w.next() {
+            Some(k @ ("Ka" | "Kd" | "Ks" | "Ke")) => {
+                let v: Vec<&str> = w.collect();
+                match v.len() {
+                    1 => out.push_str(&format!("{k} {0} {0} {0}", v[0])),
+                    n if n >= 3 => out.push_str(line),
+                    _ => return Err(tobj::LoadError::MaterialParseError),
+                }
+            }
+            _ => out.push_str(line),
+        }
+        out.push('\n');
+    }
+    Ok(out.into_bytes())
+}
+
 /// OBJ via tobj (triangulated, single index). Returns the mesh and the MTL materials it uses;
 /// triangle materials are `mat` + the MTL material index (or `mat` when there is no MTL).
 pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
@@ -174,8 +200,8 @@ pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
         if std::fs::metadata(&full).map_or(true, |m| m.len() > MAX_MTL_BYTES) {
             return Err(tobj::LoadError::ReadError);
         }
-        let f = std::fs::File::open(&full).map_err(|_| tobj::LoadError::OpenFileFailed)?;
-        tobj::load_mtl_buf(&mut std::io::BufReader::new(f))
+        let text = std::fs::read(&full).map_err(|_| tobj::LoadError::ReadError)?;
+        tobj::load_mtl_buf(&mut std::io::Cursor::new(mtl_colours_complete(&text)?))
     };
     let (models, mtls) = tobj::load_obj_buf(&mut std::io::BufReader::new(file), &opts, load_mtl).map_err(|e| match obj_bad_line(path) {
         Some(line) => Error::parse(path, format!("line {line}: {e}")),
@@ -272,6 +298,17 @@ pub fn bare_mesh_scene(mesh: Mesh) -> Result<Scene> {
     if !lo.is_finite() || !hi.is_finite() {
         return Err(Error::Scene("mesh bounds are not finite".into()));
     }
+    // Hit points are offset by 1e-4 × (1 + |p|) before secondary rays: a model of less than ten
+    // such offsets shadows itself wrongly or not at all (stop 46's sweep: a cow scaled
+    // by 1e-5 vanished, exit 0).
+    let far = lo.abs().max(hi.abs()).max_element();
+    let size = (hi - lo).length();
+    if !(size >= 1e-3 * (1.0 + far)) {
+        return Err(Error::Scene(format!(
+            "mesh '{}' spans only {size:.3e} units at coordinates up to {far:.3e}: too small for the ray offsets (at least 1e-3 × (1 + its largest coordinate)); scale it up",
+            s.name
+        )));
+    }
     s.camera = frame_bounds(lo, hi, 40.0);
     let r = (hi - lo).length().max(1e-6);
     let eye = s.camera.eye;
@@ -280,6 +317,14 @@ pub fn bare_mesh_scene(mesh: Mesh) -> Result<Scene> {
         + (eye - s.camera.look).normalize() * 0.2 * r
         + s.camera.look.cross(Vec3::Y).normalize_or_zero() * 0.3 * r;
     let d2 = (light_pos - (lo + hi) * 0.5).length_squared();
+    if d2 * 3.0 > crate::scene::MAX_INTENSITY {
+        return Err(Error::Scene(format!(
+            "mesh '{}' spans {size:.3e} units: its automatic light would need an intensity of {:.3e}, beyond {:e}; scale it down or light it in a scene file",
+            s.name,
+            d2 * 3.0,
+            crate::scene::MAX_INTENSITY
+        )));
+    }
     s.lights.push(Light::Point { pos: light_pos, intensity: Vec3::splat(d2 * 3.0) });
     s.ambient = Vec3::splat(0.05);
     Ok(s)
