@@ -1231,6 +1231,52 @@ fn stop_38_bad_inputs_are_one_line_exit_2() {
     one_error_line(&err);
     assert!(err.contains("too small for f32"), "{err}");
     assert!(!std::path::Path::new(&p("tiny.json")).exists());
+    // Names and outputs that would write where they should not (stop 46's sweep): a scene
+    // named "../x" (bench names its files after it), two scenes of one stem, `--stats` over
+    // an OBJ's material file.
+    std::fs::write(p("esc.toml"), "name = \"../../ESCAPED\"\n[meshes.t]\nfile = \"tet.off\"\n[[instances]]\ntarget = \"t\"\n")
+        .unwrap();
+    let (code, _, err) =
+        lodtrace(&["bench", &p("esc.toml"), "--methods", "whitted", "--width", "8", "--height", "8", "--quiet", "--out", &p("bo")]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains("plain file name"), "{err}");
+    std::fs::create_dir_all(p("two")).unwrap();
+    std::fs::write(p("two/tet.off"), tet(1.0)).unwrap();
+    let (code, _, err) = lodtrace(&[
+        "bench",
+        &p("tet.off"),
+        &p("two/tet.off"),
+        "--methods",
+        "whitted",
+        "--width",
+        "8",
+        "--height",
+        "8",
+        "--quiet",
+        "--out",
+        &p("bt"),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains("share the name"), "{err}");
+    assert!(!std::path::Path::new(&p("bt")).exists());
+    let (code, _, err) = lodtrace(&[
+        "render",
+        &p("short.obj"),
+        "--width",
+        "8",
+        "--height",
+        "8",
+        "--quiet",
+        "--out",
+        &p("s.png"),
+        "--stats",
+        &p("short.mtl"),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(std::fs::read_to_string(p("short.mtl")).unwrap().starts_with("newmtl"), "the material file was overwritten");
     // 1e38 overflowed the surfel sampler's cell size (index out of bounds, exit 101).
     std::fs::write(p("huge.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1e38 1e38 1\nf 1 2 3\nf 2 3 4\n").unwrap();
     let out = p("an");

@@ -26,10 +26,10 @@ pub struct CompareArgs {
     #[arg(long)]
     pub diff: Option<PathBuf>,
     /// Fail (exit 1) if the mean FLIP error is above this value.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub max_flip: Option<f64>,
     /// Fail (exit 1) if the PSNR in dB is below this value.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub min_psnr: Option<f64>,
     /// Print one JSON object instead of the table.
     #[arg(long)]

@@ -135,7 +135,7 @@ pub struct RenderArgs {
     /// Explain one pixel instead of rendering (--method multires, cone): its primary cone's
     /// A-buffer, front to back (depth interval, weights, mesh, alpha, share of the pixel,
     /// colour), and the tests it took. X,Y from the top left; writes no image.
-    #[arg(long, value_parser = parse_pixel)]
+    #[arg(long, value_parser = parse_pixel, allow_hyphen_values = true)]
     pub debug_pixel: Option<(u32, u32)>,
     #[command(flatten)]
     pub multires: crate::multires::MultiresArgs,

@@ -35,23 +35,63 @@ fn one_line(msg: &str) -> String {
     head.replace("Couln't", "Could not").split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
-/// An ASCII PLY body must hold exactly the rows its header declares: ply-rs reads the
-/// declared counts and silently drops what follows (a wrong count, or two files run
-/// together). Binary files are left to the parser.
-fn ascii_rows_match_header(buf: &[u8]) -> Result<(), String> {
-    let text = String::from_utf8_lossy(buf);
-    let Some((head, body)) = text.split_once("end_header") else { return Ok(()) };
-    if !head.lines().any(|l| l.trim_start().starts_with("format ascii")) {
-        return Ok(());
+/// A PLY body must hold exactly what its header declares: ply-rs reads the declared counts
+/// and silently drops what follows (a wrong count, or two files run together). ASCII rows
+/// are counted; a binary body whose properties are all fixed-size scalars must be exactly
+/// as long as the counts say (with lists its length is not known before parsing). Counts
+/// that are not whole numbers (`-1`, 10^20) are named as such.
+fn body_matches_header(buf: &[u8]) -> Result<(), String> {
+    let Some(end) = buf.windows(10).position(|w| w == b"end_header") else { return Ok(()) };
+    let head = String::from_utf8_lossy(&buf[..end]);
+    let mut body = &buf[end + 10..];
+    // The header's last line ends with \n (or \r\n).
+    if body.first() == Some(&b'\r') {
+        body = &body[1..];
     }
-    let declared: u64 = head
-        .lines()
-        .filter_map(|l| l.trim().strip_prefix("element "))
-        .filter_map(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
-        .sum();
-    let rows = body.lines().filter(|l| !l.trim().is_empty()).count() as u64;
-    if rows > declared {
-        return Err(format!("the header declares {declared} rows, the file holds {rows}"));
+    if body.first() == Some(&b'\n') {
+        body = &body[1..];
+    }
+    let (mut declared, mut row_bytes, mut fixed) = (0u64, Vec::<u64>::new(), true);
+    for l in head.lines().map(str::trim) {
+        let w: Vec<&str> = l.split_whitespace().collect();
+        match w.as_slice() {
+            ["element", name, count, ..] => {
+                let c = count.parse::<u64>().map_err(|_| format!("element '{name}': bad count '{count}' in the header"))?;
+                declared += c;
+                row_bytes.push(0);
+                // Row sizes accumulate per element below; the count multiplies them.
+                row_bytes.push(c);
+            }
+            ["property", "list", ..] => fixed = false,
+            ["property", ty, _] => {
+                let size = match *ty {
+                    "char" | "uchar" | "int8" | "uint8" => 1,
+                    "short" | "ushort" | "int16" | "uint16" => 2,
+                    "int" | "uint" | "float" | "int32" | "uint32" | "float32" => 4,
+                    "double" | "float64" => 8,
+                    _ => {
+                        fixed = false;
+                        0
+                    }
+                };
+                if let Some(n) = row_bytes.len().checked_sub(2) {
+                    row_bytes[n] += size;
+                }
+            }
+            _ => {}
+        }
+    }
+    if head.lines().any(|l| l.trim_start().starts_with("format ascii")) {
+        let text = String::from_utf8_lossy(body);
+        let rows = text.lines().filter(|l| !l.trim().is_empty()).count() as u64;
+        if rows > declared {
+            return Err(format!("the header declares {declared} rows, the file holds {rows}"));
+        }
+    } else if fixed {
+        let want: u64 = row_bytes.chunks(2).map(|c| c[0].saturating_mul(c[1])).fold(0u64, u64::saturating_add);
+        if body.len() as u64 > want {
+            return Err(format!("the header declares {declared} rows ({want} bytes), the body holds {} bytes", body.len()));
+        }
     }
     Ok(())
 }
@@ -70,7 +110,7 @@ pub fn read_ply<R: std::io::BufRead>(r: &mut R, path: &Path) -> Result<SurfelMod
     let err = |msg: String| DeformError::Ply { path: path.to_path_buf(), msg };
     let mut buf = Vec::new();
     r.read_to_end(&mut buf).map_err(|e| err(e.to_string()))?;
-    ascii_rows_match_header(&buf).map_err(err)?;
+    body_matches_header(&buf).map_err(err)?;
     let parser = Parser::<DefaultElement>::new();
     let ply = parser.read_ply(&mut buf.as_slice()).map_err(|e| err(format!("parse error: {}", one_line(&e.to_string()))))?;
     let verts = ply.payload.get("vertex").ok_or_else(|| err("no 'vertex' element".into()))?;
@@ -161,5 +201,37 @@ mod tests {
         let e = read_ply(&mut t.as_bytes(), Path::new("t.ply"));
         assert!(matches!(e, Err(DeformError::Ply { .. })), "{:?}", e.map(|m| m.len()));
         assert!(load_ply(Path::new("/nonexistent/x.ply")).is_err());
+        // Counts that are not whole numbers are named (stop 46: "declares 0 rows").
+        for bad in ["-1", "99999999999999999999"] {
+            let t = ply_text(&rows()).replace("element vertex 20", &format!("element vertex {bad}"));
+            match read_ply(&mut t.as_bytes(), Path::new("t.ply")) {
+                Err(DeformError::Ply { msg, .. }) => assert!(msg.contains("bad count"), "{msg}"),
+                e => panic!("{bad}: {:?}", e.map(|m| m.len())),
+            }
+        }
+        // Binary: exactly the declared bytes load; more are refused (they were dropped).
+        let bin = |rows: &[[f32; 6]], declared: usize| {
+            let mut b = format!(
+                "ply\nformat binary_little_endian 1.0\nelement vertex {declared}\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nend_header\n"
+            )
+            .into_bytes();
+            for r in rows {
+                for v in r {
+                    b.extend_from_slice(&v.to_le_bytes());
+                }
+            }
+            b
+        };
+        assert_eq!(read_ply(&mut bin(&rows(), 20).as_slice(), Path::new("b.ply")).unwrap().len(), 20);
+        match read_ply(&mut bin(&rows(), 10).as_slice(), Path::new("b.ply")) {
+            Err(DeformError::Ply { msg, .. }) => assert!(msg.contains("body holds"), "{msg}"),
+            e => panic!("{:?}", e.map(|m| m.len())),
+        }
+        // A normal whose length overflows f32 is still a direction.
+        let mut r = rows();
+        r[3][3..].copy_from_slice(&[1e30, 1e30, 0.0]);
+        let m = read_ply(&mut ply_text(&r).as_bytes(), Path::new("t.ply")).unwrap();
+        let n = m.surfels.normal(3);
+        assert!((n - Vec3::new(1.0, 1.0, 0.0).normalize()).length() < 1e-6, "{n}");
     }
 }

@@ -89,10 +89,17 @@ impl SurfelSoa {
                     msg: format!("position {p} beyond ±{:e}: scale the model down", crate::scene::MAX_COORD),
                 });
             }
-            let n = self.normal(i);
+            // Scaled to its largest component first: (1e30, 1e30, 0) is a fine direction whose
+            // length overflows f32.
+            let n0 = self.normal(i);
+            let big = n0.abs().max_element();
+            if !(big.is_finite() && big > 0.0) {
+                return Err(DeformError::BadSurfel { index: i, msg: format!("zero or non-finite normal {n0}") });
+            }
+            let n = n0 / big;
             let l = n.length();
             if !(l.is_finite() && l > 1e-12) {
-                return Err(DeformError::BadSurfel { index: i, msg: format!("zero or non-finite normal {n}") });
+                return Err(DeformError::BadSurfel { index: i, msg: format!("zero or non-finite normal {n0}") });
             }
             let n = n / l;
             self.nx[i] = n.x;

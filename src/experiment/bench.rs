@@ -86,7 +86,7 @@ pub struct BenchArgs {
     /// sizes instead of `--width`×`--height`, e.g. `128x96,256x192,512x384,1024x768`. Adds a
     /// table and a plot (`speedup-vs-size.png`) of each method's speed-up over the first
     /// against the rays per frame; each size's images and per-frame plots go to `OUT/WxH/`.
-    #[arg(long, value_name = "WxH,...")]
+    #[arg(long, value_name = "WxH,...", allow_hyphen_values = true)]
     pub sizes: Option<String>,
     #[arg(long)]
     pub quiet: bool,
@@ -626,6 +626,17 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
     if a.repeat == 0 || a.repeat > 1000 {
         return Err(Error::Usage(format!("--repeat {} out of range [1, 1000]", a.repeat)));
     }
+    // Outputs are named after the scenes: two files with one stem (`a/x.obj b/x.off`) would
+    // overwrite each other's images (stop 46's sweep).
+    let stem = |s: &str| std::path::Path::new(s).file_stem().map_or(s.to_string(), |x| x.to_string_lossy().to_string());
+    for (i, s) in a.scenes.iter().enumerate() {
+        if let Some(t) = a.scenes[..i].iter().find(|t| stem(t) == stem(s)) {
+            return Err(Error::Usage(format!(
+                "scenes '{t}' and '{s}' share the name '{}': their outputs would overwrite each other",
+                stem(s)
+            )));
+        }
+    }
     // A failed bench removes the output folder again if it created it.
     crate::film::io::discard_dir_on_error(a.out.as_deref(), || bench_in(a))
 }
@@ -718,6 +729,14 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
         s.opts(a.width, a.height, a.threads, true).validate()?;
     }
     let scenes: Vec<Scene> = a.scenes.iter().map(|s| crate::scene::load::load_scene(s)).collect::<Result<_>>()?;
+    for (i, s) in scenes.iter().enumerate() {
+        if let Some(t) = scenes[..i].iter().position(|t| t.name == s.name) {
+            return Err(Error::Usage(format!(
+                "scenes '{}' and '{}' are both named '{}': their outputs would overwrite each other",
+                a.scenes[t], a.scenes[i], s.name
+            )));
+        }
+    }
     if let Some(out) = &a.out {
         crate::film::io::create_out_dir(out)?;
         crate::film::io::check_writable_dir(out)?;

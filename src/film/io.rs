@@ -112,6 +112,15 @@ pub fn check_outputs_apart_from_scene(scene: &str, outputs: &[&Path]) -> Result<
     let mut all: Vec<&Path> = if scene.is_file() { vec![scene] } else { Vec::new() };
     all.extend_from_slice(outputs);
     check_distinct(&all)?;
+    // An OBJ's material file is found only while loading; no output may be a scene, mesh or
+    // material file at all (stop 46's sweep: `--stats` over the OBJ's own .mtl replaced it).
+    const INPUTS: [&str; 5] = ["obj", "off", "ply", "mtl", "toml"];
+    if let Some(o) = outputs.iter().find(|o| o.extension().is_some_and(|e| INPUTS.iter().any(|x| e.eq_ignore_ascii_case(x)))) {
+        return Err(Error::Usage(format!(
+            "{}: an output may not be a scene, mesh or material file (.obj, .off, .ply, .mtl, .toml)",
+            o.display()
+        )));
+    }
     // A scene may name one mesh file twice; only an output must not be one of them.
     if let Some(o) = outputs.iter().find(|o| meshes.iter().any(|m| key(m) == key(o))) {
         return Err(Error::Usage(format!("{}: given as an output, but the scene reads it as a mesh", o.display())));

@@ -294,6 +294,11 @@ impl Builder<'_> {
             .name
             .clone()
             .unwrap_or_else(|| self.path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "scene".into()));
+        // `bench` and `demo` name their files after the scene: "../x" wrote outside `--out`,
+        // a newline split the summary line (stop 46's sweep).
+        if name.is_empty() || name == "." || name == ".." || name.chars().any(|c| c == '/' || c == '\\' || c.is_control()) {
+            return Err(self.err(format!("name {name:?} must be a plain file name (no '/', '\\', control characters, '.' or '..')")));
+        }
         let mut s = Scene::empty(&name);
         if let Some(v) = def.background {
             s.background = self.colour(v, "background")?;
