@@ -534,6 +534,10 @@ fn animate_writes_frames_and_per_frame_stats() {
     assert!((total - v["render_seconds"].as_f64().unwrap()).abs() < 1e-9);
     assert!(v["per_frame"][0]["sphere_tests"].as_u64().unwrap() > 0);
     assert!(v["per_frame"][0].get("warm_seconds").is_none(), "warm_seconds only with --warm-pass");
+    // Every pixel's primary ray is counted (stop 46: the counters were all 0), shadow rays
+    // where a lit-side point had one.
+    assert_eq!(v["counters"]["rays_primary"].as_u64(), Some(3 * 48 * 36));
+    assert!(v["counters"]["rays_shadow"].as_u64().unwrap() > 0);
 }
 
 /// Every built-in sequence is lit: a frame with shadow rays keeps the direct light on most
@@ -1234,8 +1238,7 @@ fn stop_38_bad_inputs_are_one_line_exit_2() {
     // Names and outputs that would write where they should not (stop 46's sweep): a scene
     // named "../x" (bench names its files after it), two scenes of one stem, `--stats` over
     // an OBJ's material file.
-    std::fs::write(p("esc.toml"), "name = \"../../ESCAPED\"\n[meshes.t]\nfile = \"tet.off\"\n[[instances]]\ntarget = \"t\"\n")
-        .unwrap();
+    std::fs::write(p("esc.toml"), "name = \"../../ESCAPED\"\n[meshes.t]\nfile = \"tet.off\"\n[[instances]]\ntarget = \"t\"\n").unwrap();
     let (code, _, err) =
         lodtrace(&["bench", &p("esc.toml"), "--methods", "whitted", "--width", "8", "--height", "8", "--quiet", "--out", &p("bo")]);
     assert_eq!(code, 2, "{err}");

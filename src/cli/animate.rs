@@ -15,7 +15,7 @@
 //! `render_seconds` in `--stats` is the total over all frames.
 
 use crate::baseline::accel::Ray;
-use crate::core::stats::Counters;
+use crate::core::stats::{Counter, Counters};
 use crate::deform::{Collider, DeformCounters, DeformError, DeformTracer, Sequence, SequenceOptions, TraceParams, UpdateMode};
 use crate::error::{Error, Result};
 use crate::film::{io, Film};
@@ -416,7 +416,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         last_cost,
     };
     if let Some(p) = &a.stats {
-        let json = serde_json::to_string_pretty(&stats).expect("stats serialise");
+        let json = serde_json::to_string_pretty(&stats).expect("stats serialise") + "\n";
         io::write_atomic(p, |tmp| std::fs::write(tmp, json.as_bytes()).map_err(|e| Error::io(p, e)))?;
     }
     Ok(stats)
@@ -589,12 +589,16 @@ fn shadow_ray(p: Vec3, n: Vec3, light: Vec3) -> Option<(Ray, f32)> {
 }
 
 fn shade(tr: &DeformTracer, ray: &Ray, slot: Option<u32>, sc: &ShadeCtx, c: &mut Counters, dc: &mut DeformCounters) -> Vec3 {
+    c.add(Counter::rays_primary, 1);
     let hit = tr.intersect_ex(ray, slot, c, dc);
     let Some((p, n, albedo)) = surface(ray, hit, sc) else {
         return BACKGROUND;
     };
     let mut l = albedo * 0.2;
     if let Some((sray, cos)) = shadow_ray(p, n, sc.light) {
+        if sc.shadows {
+            c.add(Counter::rays_shadow, 1);
+        }
         let blocked = sc.shadows && (tr.occluded_ex(&sray, c, dc) || hit_colliders(&sray, sc.colliders, sray.tfar).is_some());
         if !blocked {
             l += albedo * cos;
@@ -606,6 +610,7 @@ fn shade(tr: &DeformTracer, ray: &Ray, slot: Option<u32>, sc: &ShadeCtx, c: &mut
 /// [`shade`] for a packet of up to eight primary rays: their closest hits, then their shadow
 /// rays, each as one packet. Same colours as `shade` ray by ray.
 fn shade_x8(tr: &DeformTracer, rays: &[Ray], slots: &[Option<u32>], sc: &ShadeCtx, c: &mut Counters, dc: &mut DeformCounters) -> [Vec3; 8] {
+    c.add(Counter::rays_primary, rays.len() as u64);
     let hits = tr.intersect_x8(rays, slots, c, dc);
     let mut out = [BACKGROUND; 8];
     let mut srays = [Ray::new(Vec3::ZERO, Vec3::X); 8];
@@ -627,6 +632,7 @@ fn shade_x8(tr: &DeformTracer, rays: &[Ray], slots: &[Option<u32>], sc: &ShadeCt
         }
     }
     if smask != 0 {
+        c.add(Counter::rays_shadow, smask.count_ones() as u64);
         let occluded = tr.occluded_x8(&srays[..rays.len()], smask, c, dc);
         for (i, sray) in srays.iter().enumerate().take(rays.len()) {
             if smask & (1 << i) != 0 && occluded & (1 << i) == 0 && hit_colliders(sray, sc.colliders, sray.tfar).is_none() {

@@ -219,7 +219,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     }
     let stats = r.stats(&scene, a.method, a.accel, &opts);
     if let Some(p) = &a.stats {
-        let json = serde_json::to_string_pretty(&stats).expect("stats serialise");
+        let json = serde_json::to_string_pretty(&stats).expect("stats serialise") + "\n";
         outs.wrote(p, io::write_atomic(p, |tmp| std::fs::write(tmp, json.as_bytes()).map_err(|e| Error::io(p, e))))?;
     }
     outs.keep();

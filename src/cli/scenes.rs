@@ -1,5 +1,7 @@
-//! `lodtrace scenes`: the built-in scenes with their triangle counts. A scene whose assets
-//! are missing (run `tools/setup`) is listed as unavailable instead of failing the listing.
+//! `lodtrace scenes`: the built-in scenes with their triangle counts, then the deforming
+//! sequences of `lodtrace animate` (named only: building one samples its surfels). A scene
+//! whose assets are missing (run `tools/setup`) is listed as unavailable instead of failing
+//! the listing.
 use crate::error::Result;
 use crate::scene::builtin::BUILTINS;
 
@@ -18,5 +20,7 @@ pub fn run() -> Result<()> {
             return Ok(());
         }
     }
+    let seqs = crate::deform::Sequence::BUILTIN.join(", ");
+    line(format!("\ndeforming sequences (lodtrace animate SEQ; lodtrace bench SEQ --methods surfel:...): {seqs}"))?;
     Ok(())
 }

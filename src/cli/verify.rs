@@ -41,7 +41,7 @@ pub fn run(a: &VerifyArgs) -> Result<i32> {
         t0.elapsed().as_secs_f64()
     ))?;
     if let Some(p) = &a.json {
-        let text = serde_json::to_string_pretty(&rep).map_err(|e| Error::Usage(e.to_string()))?;
+        let text = serde_json::to_string_pretty(&rep).map_err(|e| Error::Usage(e.to_string()))? + "\n";
         crate::film::io::write_atomic(p, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::io(p, e)))?;
     }
     Ok(if rep.mismatches() == 0 { 0 } else { 1 })

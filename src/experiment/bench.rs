@@ -952,7 +952,7 @@ fn finish_row(
 }
 
 fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
-    let json = serde_json::to_string_pretty(report).expect("report serialises");
+    let json = serde_json::to_string_pretty(report).expect("report serialises") + "\n";
     let p = out.join("bench.json");
     crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, json).map_err(|e| Error::io(&p, e)))?;
     let p = out.join("bench.md");
