@@ -1280,6 +1280,14 @@ fn stop_38_bad_inputs_are_one_line_exit_2() {
     assert_eq!(code, 2, "{err}");
     one_error_line(&err);
     assert!(std::fs::read_to_string(p("short.mtl")).unwrap().starts_with("newmtl"), "the material file was overwritten");
+    // Exact copies of a triangle are dropped with a warning (20,000 copies made obvhs' PLOC
+    // build take 35 s); the opposite winding and a rotation's other winding stay.
+    let copies = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 2 3 1\nf 3 1 2\nf 1 2 3\nf 1 3 2\n";
+    std::fs::write(p("copies.obj"), copies).unwrap();
+    let (code, _, err) =
+        lodtrace(&["render", &p("copies.obj"), "--accel", "bvh", "--width", "16", "--height", "12", "--quiet", "--out", &p("c.png")]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("skipped 3 duplicate triangles"), "{err}");
     // 1e38 overflowed the surfel sampler's cell size (index out of bounds, exit 101).
     std::fs::write(p("huge.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1e38 1e38 1\nf 1 2 3\nf 2 3 4\n").unwrap();
     let out = p("an");

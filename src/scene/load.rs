@@ -153,6 +153,10 @@ fn finish_mesh(path: &Path, mut mesh: Mesh) -> Result<Mesh> {
     if bad > 0 {
         crate::error::warn(format!("{}: skipped {bad} degenerate or non-finite triangles", path.display()));
     }
+    let dup = mesh.remove_duplicates();
+    if dup > 0 {
+        crate::error::warn(format!("{}: skipped {dup} duplicate triangles (same vertices, winding and material)", path.display()));
+    }
     if !mesh.has_normals() || !(0..mesh.vertex_count() as u32).all(|i| mesh.normal(i).is_finite()) {
         mesh.compute_normals();
     }

@@ -127,6 +127,30 @@ impl Mesh {
         self.mat = keep_m;
         before - self.tris.len()
     }
+    /// Removes triangles that repeat an earlier one exactly: the same three vertex positions
+    /// in the same winding (any rotation of the three) and the same material; returns how
+    /// many were removed. A copy adds nothing to an image (its hits tie with the original's),
+    /// but coincident primitives make obvhs' PLOC build quadratic (stop 46's sweep: 20,000
+    /// copies of one triangle took 35 s). The opposite winding is kept (a back face).
+    pub fn remove_duplicates(&mut self) -> usize {
+        let before = self.tris.len();
+        let mut seen = std::collections::HashSet::with_capacity(before);
+        let mut keep_t = Vec::with_capacity(before);
+        let mut keep_m = Vec::with_capacity(before);
+        for t in 0..before {
+            let v = self.tri_verts(t).map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]);
+            // The rotation that starts at the smallest vertex: one key per winding.
+            let r = (0..3).min_by_key(|&i| v[i]).unwrap_or(0);
+            let key = ([v[r], v[(r + 1) % 3], v[(r + 2) % 3]], self.mat[t]);
+            if seen.insert(key) {
+                keep_t.push(self.tris[t]);
+                keep_m.push(self.mat[t]);
+            }
+        }
+        self.tris = keep_t;
+        self.mat = keep_m;
+        before - self.tris.len()
+    }
     /// Axis-aligned bounds over the vertices that triangles use (min, max).
     pub fn bounds(&self) -> (Vec3, Vec3) {
         let mut lo = Vec3::splat(f32::INFINITY);
