@@ -1033,10 +1033,17 @@ fn table_header(fixed: &[&str], extra: &[String]) -> String {
 /// The table as Markdown (printed to stdout and written to bench.md).
 pub fn table_string(report: &BenchReport) -> String {
     let mut s = String::new();
+    // A `--sizes` bench names every size, not only the first.
+    let mut sizes: Vec<(u32, u32)> = vec![(report.width, report.height)];
+    for r in &report.deform {
+        if !sizes.contains(&(r.width, r.height)) {
+            sizes.push((r.width, r.height));
+        }
+    }
+    let sizes: Vec<String> = sizes.iter().map(|(w, h)| format!("{w}x{h}")).collect();
     s.push_str(&format!(
-        "{}x{}, SIMD {}{}\n\n",
-        report.width,
-        report.height,
+        "{}, SIMD {}{}\n\n",
+        sizes.join(", "),
         report.simd,
         report.reference.as_ref().map(|r| format!(", errors against {r}")).unwrap_or_default()
     ));
