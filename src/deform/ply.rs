@@ -51,16 +51,15 @@ fn body_matches_header(buf: &[u8]) -> Result<(), String> {
     if body.first() == Some(&b'\n') {
         body = &body[1..];
     }
-    let (mut declared, mut row_bytes, mut fixed) = (0u64, Vec::<u64>::new(), true);
+    // Per element: (bytes of one row, rows).
+    let (mut declared, mut elements, mut fixed) = (0u64, Vec::<(u64, u64)>::new(), true);
     for l in head.lines().map(str::trim) {
         let w: Vec<&str> = l.split_whitespace().collect();
         match w.as_slice() {
             ["element", name, count, ..] => {
                 let c = count.parse::<u64>().map_err(|_| format!("element '{name}': bad count '{count}' in the header"))?;
                 declared += c;
-                row_bytes.push(0);
-                // Row sizes accumulate per element below; the count multiplies them.
-                row_bytes.push(c);
+                elements.push((0, c));
             }
             ["property", "list", ..] => fixed = false,
             ["property", ty, _] => {
@@ -74,8 +73,8 @@ fn body_matches_header(buf: &[u8]) -> Result<(), String> {
                         0
                     }
                 };
-                if let Some(n) = row_bytes.len().checked_sub(2) {
-                    row_bytes[n] += size;
+                if let Some(e) = elements.last_mut() {
+                    e.0 += size;
                 }
             }
             _ => {}
@@ -88,7 +87,7 @@ fn body_matches_header(buf: &[u8]) -> Result<(), String> {
             return Err(format!("the header declares {declared} rows, the file holds {rows}"));
         }
     } else if fixed {
-        let want: u64 = row_bytes.chunks(2).map(|c| c[0].saturating_mul(c[1])).fold(0u64, u64::saturating_add);
+        let want: u64 = elements.iter().map(|&(b, n)| b.saturating_mul(n)).fold(0u64, u64::saturating_add);
         if body.len() as u64 > want {
             return Err(format!("the header declares {declared} rows ({want} bytes), the body holds {} bytes", body.len()));
         }
@@ -192,6 +191,12 @@ mod tests {
         let mut r = rows();
         r[5][3..6].copy_from_slice(&[0.0, 0.0, 0.0]);
         assert!(matches!(read_ply(&mut ply_text(&r).as_bytes(), Path::new("t.ply")), Err(DeformError::BadSurfel { index: 5, .. })));
+        // One NaN component among finite ones (ply-rs refuses "nan" there; other sources reach
+        // the check, where max_element would ignore it).
+        let mut soa = SurfelSoa::default();
+        soa.push(Vec3::ZERO, Vec3::Y, 1.0);
+        soa.push(Vec3::X, Vec3::new(f32::NAN, 1.0, 0.0), 1.0);
+        assert!(matches!(soa.validate_values(), Err(DeformError::BadSurfel { index: 1, .. })));
         let mut r = rows();
         r[9] = r[2];
         assert!(matches!(read_ply(&mut ply_text(&r).as_bytes(), Path::new("t.ply")), Err(DeformError::DuplicatePoint { .. })));

@@ -93,15 +93,11 @@ impl SurfelSoa {
             // length overflows f32.
             let n0 = self.normal(i);
             let big = n0.abs().max_element();
-            if !(big.is_finite() && big > 0.0) {
+            if !(n0.is_finite() && big > 0.0) {
                 return Err(DeformError::BadSurfel { index: i, msg: format!("zero or non-finite normal {n0}") });
             }
-            let n = n0 / big;
-            let l = n.length();
-            if !(l.is_finite() && l > 1e-12) {
-                return Err(DeformError::BadSurfel { index: i, msg: format!("zero or non-finite normal {n0}") });
-            }
-            let n = n / l;
+            // The largest component is now ±1, so the length lies in [1, √3].
+            let n = (n0 / big).normalize();
             self.nx[i] = n.x;
             self.ny[i] = n.y;
             self.nz[i] = n.z;
