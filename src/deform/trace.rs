@@ -1748,40 +1748,67 @@ impl DeformTracer {
                 done |= self.leaf_x8(k, 0, rays, pk, m, tfar, dc, ctr);
                 continue;
             }
-            let push_children = |stack: &mut Vec<(u32, u8, u8)>, n: usize, lv: u8, m: u8| {
+            // Stack entries are (node, level | UNTESTED, lanes): a node whose sphere was
+            // tested already, together with its sibling, when both were current (one load of
+            // each and two independent tests, so the two misses overlap), or one still to test
+            // (the paper's shadow-ray order: the current child first, and the other updated
+            // only if the ray still needs it, §4.4).
+            const UNTESTED: u8 = 0x80;
+            let expand = |stack: &mut Vec<(u32, u8, u8)>, n: usize, lv: u8, m: u8, dc: &mut DeformCounters, ctr: &mut Counters| {
                 let (l, r) = (n + 1, topo.right[n] as usize);
-                if self.left_first(ii, l, r) {
-                    stack.push((r as u32, lv + 1, m));
-                    stack.push((l as u32, lv + 1, m));
+                // Levels past 126 share the counters' last level anyway (`LEVELS`).
+                let lv = lv.min(UNTESTED - 2);
+                if self.current(ii, l) && self.current(ii, r) {
+                    let ((cl, rl), (cr, rr)) = (self.sphere(ii, l), self.sphere(ii, r));
+                    let cnt = 2 * m.count_ones() as u64;
+                    dc.sphere_tests += cnt;
+                    dc.tests_at(lv + 1, cnt);
+                    ctr.add(Counter::node_tests, cnt);
+                    let (ml, mr) = (m & pk.test_any(cl, rl, tfar), m & pk.test_any(cr, rr, tfar));
+                    if mr != 0 {
+                        stack.push((r as u32, lv + 1, mr));
+                    }
+                    if ml != 0 {
+                        stack.push((l as u32, lv + 1, ml));
+                    }
+                } else if self.left_first(ii, l, r) {
+                    stack.push((r as u32, (lv + 1) | UNTESTED, m));
+                    stack.push((l as u32, (lv + 1) | UNTESTED, m));
                 } else {
-                    stack.push((l as u32, lv + 1, m));
-                    stack.push((r as u32, lv + 1, m));
+                    stack.push((l as u32, (lv + 1) | UNTESTED, m));
+                    stack.push((r as u32, (lv + 1) | UNTESTED, m));
                 }
             };
             stack.clear();
-            push_children(stack, 0, 0, m);
+            expand(stack, 0, 0, m, dc, ctr);
             while let Some((n, lv, m)) = stack.pop() {
-                let m = m & !done;
+                let mut m = m & !done;
                 if m == 0 {
                     continue;
                 }
                 let n = n as usize;
-                let (c, r) = self.sphere(ii, n);
-                let cnt = m.count_ones() as u64;
-                dc.sphere_tests += cnt;
-                dc.tests_at(lv, cnt);
-                ctr.add(Counter::node_tests, cnt);
-                let m = m & pk.test(c, r, tfar).0;
-                if m == 0 {
-                    continue;
-                }
+                let lv = if lv & UNTESTED != 0 {
+                    let lv = lv & !UNTESTED;
+                    let (c, r) = self.sphere(ii, n);
+                    let cnt = m.count_ones() as u64;
+                    dc.sphere_tests += cnt;
+                    dc.tests_at(lv, cnt);
+                    ctr.add(Counter::node_tests, cnt);
+                    m &= pk.test_any(c, r, tfar);
+                    if m == 0 {
+                        continue;
+                    }
+                    lv
+                } else {
+                    lv
+                };
                 if topo.right[n] == LEAF {
                     done |= self.leaf_x8(k, n, rays, pk, m, tfar, dc, ctr);
                     if done == valid {
                         return done;
                     }
                 } else {
-                    push_children(stack, n, lv, m);
+                    expand(stack, n, lv, m, dc, ctr);
                 }
             }
         }

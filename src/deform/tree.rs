@@ -540,6 +540,15 @@ impl RayPacketX8 {
             tfar,
         )
     }
+
+    /// Hit mask only, for any-hit (shadow) traversal: the segment [tnear, tfar] of each ray
+    /// against the sphere by the distance from `c` to the segment's nearest point, with no
+    /// square root and no entry distance. Conservative like [`Self::test`] (see
+    /// [`any_kernel`]): a sphere the segment truly meets is never missed.
+    #[inline(always)]
+    pub fn test_any(&self, c: Vec3, r: f32, tfar: f32x8) -> u8 {
+        any_kernel(self.o, self.d, self.inv, [f32x8::splat(c.x), f32x8::splat(c.y), f32x8::splat(c.z)], f32x8::splat(r), self.tnear, tfar)
+    }
 }
 
 impl RayPacketX8 {
@@ -602,6 +611,30 @@ fn kernel_pre(o: [f32x8; 3], d: [f32x8; 3], a: f32x8, inv: f32x8, c: [f32x8; 3],
     let t1 = (b + sq + slack) * inv;
     let hit = disc.simd_ge(zero) & t1.simd_ge(tnear) & t0.simd_le(tfar);
     (hit.to_bitmask() as u8, t0.max(tnear))
+}
+
+/// The any-hit sphere test: the segment's point nearest `c` is at tc = clamp(b/a, tnear,
+/// tfar), and the sphere is hit if ‖(c−o) − d·tc‖ ≤ r widened. Rounding: tc's error moves
+/// the point along the segment, which changes the distance only to second order where tc is
+/// interior (and not at all at a clamped end); each component of q = (c−o) − d·tc is rounded
+/// by ≤ u(|c_i−o_i| + |d_i·tc| + |q_i|) (u = ε/2; the first term is c − o's own rounding),
+/// so ‖q‖ by ≤ √3·u·(m + |tc|·max|d_i|) + √3·u·‖q‖ with m = max|c_i−o_i|, and ‖q‖² by a
+/// further 3u relative. The slack η = (CONS_TOL/4)·√3·(m + |tc|·max|d_i|) is eight times the
+/// first part, and r² is widened by the factor 1 + CONS_TOL (32u) as in [`kernel_pre`],
+/// which covers the parts relative to ‖q‖ ≈ r: every true hit is reported. The two kernels'
+/// slacks differ, so at a rim one may report a sphere the other does not; both are
+/// conservative, which is all a traversal needs. A NaN lane (an invalid ray) compares false.
+#[inline(always)]
+fn any_kernel(o: [f32x8; 3], d: [f32x8; 3], inv: f32x8, c: [f32x8; 3], r: f32x8, tnear: f32x8, tfar: f32x8) -> u8 {
+    let (ocx, ocy, ocz) = (c[0] - o[0], c[1] - o[1], c[2] - o[2]);
+    let b = ocx * d[0] + ocy * d[1] + ocz * d[2];
+    let tc = (b * inv).max(tnear).min(tfar);
+    let (qx, qy, qz) = (ocx - d[0] * tc, ocy - d[1] * tc, ocz - d[2] * tc);
+    let m = ocx.abs().max(ocy.abs()).max(ocz.abs());
+    let dm = d[0].abs().max(d[1].abs()).max(d[2].abs());
+    let re = r + f32x8::splat(CONS_TOL * 0.25 * SQRT3_UP) * (m + tc.abs() * dm);
+    let hit = (qx * qx + qy * qy + qz * qz).simd_le((re * re) * f32x8::splat(1.0 + CONS_TOL)) & tc.simd_ge(tnear);
+    hit.to_bitmask() as u8
 }
 
 /// Chooses the scalar reference when the `scalar` feature is on.
@@ -681,6 +714,7 @@ pub fn max_reach_x8(x: &[f32], y: &[f32], z: &[f32], r: &[f32], c: Vec3) -> f32 
 mod tests {
     use super::*;
     use crate::core::rng::Sampler;
+    use glam::DVec3;
 
     #[test]
     fn x8_kernels_match_scalar() {
@@ -820,6 +854,93 @@ mod tests {
     /// Conservative against the exact (f64) test on random rays and spheres at scales from
     /// 1e-3 to 1e4, and tight: the slack grows like 1e-6 of the distance, not 1e-3 (stop 32:
     /// the old widening made a 1 cm sphere 10⁴ units away count as hit from 13 units off).
+    #[test]
+    fn any_hit_test_is_conservative_and_covers_the_entry_test() {
+        // Eight rays per packet, each a segment [tnear, tfar] (some unbounded, some empty),
+        // aimed near the sphere's rim at scales 10⁻³–10⁴: `test_any` must report every sphere
+        // the segment truly meets (f64), and agree with `test` away from the rims.
+        let mut s = Sampler::new(3, 1, 4);
+        let (mut exact_hits, mut exact_misses, mut differ) = (0, 0, 0);
+        for _ in 0..40_000 {
+            let x: [f32; 6] = std::array::from_fn(|_| s.next());
+            let scale = 10f32.powf(-3.0 + 7.0 * x[0]);
+            let c = Vec3::new(x[1] - 0.5, x[2] - 0.5, x[3] - 0.5) * scale * 4.0;
+            let r = scale * 10f32.powf(-4.0 * x[4]);
+            let mut o = [[0.0f32; 8]; 3];
+            let mut d = [[0.0f32; 8]; 3];
+            let mut tn = [0.0f32; 8];
+            let mut tf = [0.0f32; 8];
+            for lane in 0..8 {
+                let y: [f32; 9] = std::array::from_fn(|_| s.next());
+                let v = |k: usize| Vec3::new(y[k] * 2.0 - 1.0, y[k + 1] * 2.0 - 1.0, y[k + 2] * 2.0 - 1.0);
+                let oo = v(0) * scale * 2.0;
+                let aim = c + v(3).normalize_or_zero() * r * (0.5 + y[6]);
+                let dd = (aim - oo) * (0.5 + y[7]);
+                let tmid = if dd == Vec3::ZERO { 0.0 } else { (aim - oo).dot(dd) / dd.length_squared() };
+                // Segments that end before, around or after the sphere, or start after it.
+                let (a, b) = match lane % 4 {
+                    0 => (0.0, f32::INFINITY),
+                    1 => (0.0, tmid * (0.5 + y[8])),
+                    2 => (tmid * y[8] * 1.5, tmid * 1.5 + 1.0),
+                    _ => (tmid * (1.0 + y[8]), f32::INFINITY),
+                };
+                for k in 0..3 {
+                    o[k][lane] = oo[k];
+                    d[k][lane] = dd[k];
+                }
+                (tn[lane], tf[lane]) = (a, b);
+            }
+            let pk = RayPacketX8::new(&o, &d, &tn);
+            let tfar = f32x8::from(tf);
+            let any = pk.test_any(c, r, tfar);
+            let (entry, _) = pk.test(c, r, tfar);
+            for lane in 0..8 {
+                let (o64, d64, c64) = (
+                    DVec3::new(o[0][lane] as f64, o[1][lane] as f64, o[2][lane] as f64),
+                    DVec3::new(d[0][lane] as f64, d[1][lane] as f64, d[2][lane] as f64),
+                    c.as_dvec3(),
+                );
+                if d64 == DVec3::ZERO {
+                    continue;
+                }
+                let (a, b) = (tn[lane] as f64, tf[lane] as f64);
+                let tc = ((c64 - o64).dot(d64) / d64.length_squared()).max(a).min(b);
+                let dist = (c64 - o64 - d64 * tc).length();
+                let exact = a <= b && dist <= r as f64;
+                if (entry ^ any) & (1 << lane) != 0 {
+                    // Where the kernels disagree the segment passes within their slacks of
+                    // the rim (or ends there: the entry test widens [t0, t1] as well).
+                    let near = (dist - r as f64).abs() <= 1e-5 * (r as f64 + (c64 - o64).length());
+                    let ends_near = a > b
+                        || [a, b].iter().any(|&t| {
+                            t.is_finite() && (c64 - o64 - d64 * t).length() <= (r as f64) * (1.0 + 1e-5) + 1e-5 * (c64 - o64).length()
+                        });
+                    assert!(near || ends_near, "kernels disagree away from the rim: lane {lane} dist {dist} r {r}");
+                    differ += 1;
+                }
+                if exact {
+                    exact_hits += 1;
+                    assert!(any & (1 << lane) != 0, "missed a sphere the segment meets: lane {lane} c {c} r {r}");
+                } else {
+                    exact_misses += 1;
+                }
+            }
+        }
+        assert!(exact_hits > 50_000 && exact_misses > 50_000, "both cases exercised: {exact_hits} {exact_misses}");
+        assert!(differ < 1_000, "the kernels disagree at few rims: {differ} of 320000");
+        // Tight far away (as `sphere_test_1`): a ray from 10⁴ units passing 0.05 above a 0.01
+        // sphere misses; a NaN ray (an invalid lane) hits nothing.
+        let c = Vec3::new(0.0, 1.0, 0.0);
+        let o = Vec3::new(-9_700.0, 8.0, 5_000.0);
+        let d = (c + Vec3::new(0.0, 0.06, 0.0) - o).normalize();
+        let lanes = |v: Vec3| [[v.x; 8], [v.y; 8], [v.z; 8]];
+        let pk = RayPacketX8::new(&lanes(o), &lanes(d), &[0.0; 8]);
+        assert_eq!(pk.test_any(c, 0.01, f32x8::splat(f32::INFINITY)), 0);
+        assert_eq!(pk.test_any(c, 0.07, f32x8::splat(f32::INFINITY)), 0xff);
+        let pk = RayPacketX8::new(&lanes(Vec3::NAN), &lanes(d), &[0.0; 8]);
+        assert_eq!(pk.test_any(c, 1e6, f32x8::splat(f32::INFINITY)), 0);
+    }
+
     #[test]
     fn sphere_tests_are_conservative_and_tight() {
         let mut s = Sampler::new(9, 8, 7);
