@@ -54,7 +54,12 @@
 //! lane), the MLS iteration then runs ray by ray. Each ray gets exactly the hit of the
 //! single-ray path (the argument above does not depend on the visiting order). Per frame
 //! this is 1.5–2.1× faster than ray by ray, mostly from the shared node fetch and update.
-//! The packet paths allocate nothing per packet (`PacketScratch`).
+//! The packet paths allocate nothing per packet (`PacketScratch`). The packet shadow rays
+//! (stop 47) test a node's two children together when both are current (always, in `naive`):
+//! the two slot loads and tests overlap instead of waiting one behind the other; otherwise
+//! they keep §4.4's order, one child at a time. They need only a hit mask, so they use the
+//! square-root-free segment test `RayPacketX8::test_any`. Together: 4–8 % off a `lazy-cache`
+//! frame, 1–4 % off a `naive` one (BENCHMARKS.md, "Stop 47").
 //!
 //! **Nearest ellipse (deviation; `TraceParams::nearest_ellipse`, on by default; `animate
 //! --nearest mls` restores the paper's rule).** The paper runs the MLS iteration (§4.2.1) at
