@@ -1792,8 +1792,8 @@ impl DeformTracer {
                     continue;
                 }
                 let n = n as usize;
-                let lv = if lv & UNTESTED != 0 {
-                    let lv = lv & !UNTESTED;
+                let (untested, lv) = (lv & UNTESTED != 0, lv & !UNTESTED);
+                if untested {
                     let (c, r) = self.sphere(ii, n);
                     let cnt = m.count_ones() as u64;
                     dc.sphere_tests += cnt;
@@ -1803,10 +1803,7 @@ impl DeformTracer {
                     if m == 0 {
                         continue;
                     }
-                    lv
-                } else {
-                    lv
-                };
+                }
                 if topo.right[n] == LEAF {
                     done |= self.leaf_x8(k, n, rays, pk, m, tfar, dc, ctr);
                     if done == valid {
