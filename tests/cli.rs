@@ -778,10 +778,25 @@ fn bench_deforming_sequences() {
     let m = ["naive", "lazy-cache:warm=1:cache_up=6:ordered=0", "refit:top=0", "lazy:packet=1"]
         .map(|u| format!("surfel:update={u}:detail=0.03:frames=4"))
         .join(",");
-    let (code, out, err) =
-        lodtrace(&["bench", "elastic-balls", "--methods", &m, "--width", "40", "--height", "30", "--quiet", "--out", d.to_str().unwrap()]);
+    let (code, out, err) = lodtrace(&[
+        "bench",
+        "elastic-balls",
+        "--methods",
+        &m,
+        "--width",
+        "40",
+        "--height",
+        "30",
+        "--repeat",
+        "2",
+        "--quiet",
+        "--out",
+        d.to_str().unwrap(),
+    ]);
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("Deforming sequences"), "{out}");
+    // Two rounds: each row's speed-up within each round, the first spec's 1 in both.
+    assert!(out.contains("per-round speed-up") && out.contains("| 1.00x [1.00–1.00] |"), "{out}");
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("bench.json")).unwrap()).unwrap();
     let rows = v["deform"].as_array().unwrap();
     assert_eq!(rows.len(), 4);
@@ -789,6 +804,11 @@ fn bench_deforming_sequences() {
         assert_eq!(r["same_image_as_first"], true, "{r}");
         assert_eq!(r["frames"], 4);
         assert!(r["sphere_tests_per_frame"].as_f64().unwrap() > 0.0);
+    }
+    for (i, r) in rows.iter().enumerate() {
+        let p: Vec<f64> = r["per_round_speedups"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+        assert_eq!(p.len(), 2, "{r}");
+        assert!(p.iter().all(|x| if i == 0 { *x == 1.0 } else { x.is_finite() && *x > 0.0 }), "{r}");
     }
     assert!(rows[1]["cache_lookups"].as_u64().unwrap() > 0);
     // warm=1: the rays alone, timed in a second pass over each frame.

@@ -75,8 +75,14 @@ pub struct DeformRow {
     /// Total over all frames (update + rays).
     pub render_seconds: f64,
     pub ms_per_frame: f64,
-    /// ms/frame of the first spec ÷ this one's (> 1 = faster).
+    /// ms/frame of the first spec ÷ this one's (> 1 = faster), each the best of the repeats.
     pub speedup_vs_first: f64,
+    /// With `--repeat` ≥ 2: the same ratio within each round of repeats (the first spec's
+    /// ms/frame in that round ÷ this spec's in the same round), in round order. A round runs
+    /// the specs one after the other, so each ratio pairs runs a few seconds apart; their
+    /// median is robust to a slow phase of the machine that the per-spec bests are not
+    /// (README, "Current figures"). Empty with one repeat.
+    pub per_round_speedups: Vec<f64>,
     pub update_ms_per_frame: f64,
     /// `warm=1`: ms/frame of the second, untimed-in-`ms_per_frame` pass over each frame's
     /// rays, once its hierarchy is updated (`animate --warm-pass`); `ms_per_frame` minus this
@@ -148,15 +154,21 @@ pub fn run(
         // this VM's speed drifts by ±10–20 % over tens of seconds, and a slow phase should hit
         // every method of the comparison alike, not all the runs of one.
         let mut bests: Vec<Option<crate::cli::animate::AnimateStats>> = specs.iter().map(|_| None).collect();
+        // ms/frame of every run: rounds × specs.
+        let mut rounds: Vec<Vec<f64>> = Vec::new();
         for _ in 0..repeat.max(1) {
+            let mut round = Vec::with_capacity(specs.len());
             for (args, best) in argv.iter().zip(bests.iter_mut()) {
                 let st = animate(args)?;
+                round.push(1e3 * st.render_seconds / st.frames.max(1) as f64);
                 if best.as_ref().is_none_or(|b| st.render_seconds < b.render_seconds) {
                     *best = Some(st);
                 }
             }
+            rounds.push(round);
         }
-        for (spec, best) in specs.iter().zip(bests) {
+        let paired = per_round_speedups(&rounds);
+        for ((spec, best), per_round_speedups) in specs.iter().zip(bests).zip(paired) {
             let s = &spec.surfel;
             let st = best.expect("at least one run");
             let n = st.frames.max(1) as f64;
@@ -192,6 +204,7 @@ pub fn run(
                 render_seconds: st.render_seconds,
                 ms_per_frame: ms,
                 speedup_vs_first: ms0 / ms.max(1e-12),
+                per_round_speedups,
                 update_ms_per_frame: 1e3 * st.per_frame.iter().map(|r| r.update_seconds).sum::<f64>() / n,
                 rays_ms_per_frame: s.warm.then(|| 1e3 * st.per_frame.iter().filter_map(|r| r.warm_seconds).sum::<f64>() / n),
                 sphere_tests_per_frame: st.per_frame.iter().map(|r| r.sphere_tests).sum::<u64>() as f64 / n,
@@ -277,15 +290,34 @@ fn plots(out: &Path, rows: &[DeformRow]) -> Result<()> {
     Ok(())
 }
 
+/// Per spec, the first spec's ms/frame ÷ its own in each round of `rounds` (rounds × specs);
+/// empty lists with fewer than two rounds, where the best-of speed-up says the same.
+pub fn per_round_speedups(rounds: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let specs = rounds.first().map_or(0, Vec::len);
+    (0..specs).map(|j| if rounds.len() < 2 { Vec::new() } else { rounds.iter().map(|r| r[0] / r[j].max(1e-12)).collect() }).collect()
+}
+
+/// "median [min–max]" of per-round speed-ups, or "-" for none.
+fn median_range(v: &[f64]) -> String {
+    if v.is_empty() {
+        return "-".into();
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let n = s.len();
+    let med = if n % 2 == 1 { s[n / 2] } else { 0.5 * (s[n / 2 - 1] + s[n / 2]) };
+    format!("{med:.2}x [{:.2}–{:.2}]", s[0], s[n - 1])
+}
+
 /// The rows as a Markdown table.
 pub fn table(rows: &[DeformRow]) -> String {
     let mut s = String::from("\nDeforming sequences (Adams et al.):\n\n");
-    s.push_str("| sequence | method | size | surfels | frames | thr | ms/frame | speed-up vs first | update ms/frame | rays ms/frame (warm) | BV tests/frame | leaf tests/frame | MLS runs/frame | MLS it. | cache hits | inner nodes updated/frame | root ratio | mean ratio | same image |\n");
-    s.push_str("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
+    s.push_str("| sequence | method | size | surfels | frames | thr | ms/frame | speed-up vs first | per-round speed-up: median [range] | update ms/frame | rays ms/frame (warm) | BV tests/frame | leaf tests/frame | MLS runs/frame | MLS it. | cache hits | inner nodes updated/frame | root ratio | mean ratio | same image |\n");
+    s.push_str("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
     for r in rows {
         let f = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
         s.push_str(&format!(
-            "| {} | {} | {}x{} | {} | {} | {} | {:.1} | {:.2}x | {:.1} | {} | {:.0} | {:.0} | {:.0} | {:.2} | {} | {:.0} | {} | {} | {} |\n",
+            "| {} | {} | {}x{} | {} | {} | {} | {:.1} | {:.2}x | {} | {:.1} | {} | {:.0} | {:.0} | {:.0} | {:.2} | {} | {:.0} | {} | {} | {} |\n",
             r.scene,
             r.spec,
             r.width,
@@ -295,6 +327,7 @@ pub fn table(rows: &[DeformRow]) -> String {
             r.threads,
             r.ms_per_frame,
             r.speedup_vs_first,
+            median_range(&r.per_round_speedups),
             r.update_ms_per_frame,
             r.rays_ms_per_frame.map(|v| format!("{v:.1}")).unwrap_or_else(|| "-".into()),
             r.sphere_tests_per_frame,
@@ -415,4 +448,26 @@ pub fn validate(spec: &MethodSpec) -> Result<()> {
         return bad("frames out of range".into());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each round pairs the specs' runs: a round in a slow phase (all three 2× slower) gives
+    /// the same ratios as a fast one, while the per-spec bests may come from different phases.
+    #[test]
+    fn per_round_speedups_pair_runs_of_one_round() {
+        let rounds = vec![vec![200.0, 100.0, 80.0], vec![400.0, 200.0, 160.0], vec![210.0, 140.0, 70.0]];
+        let p = per_round_speedups(&rounds);
+        assert_eq!(p[0], [1.0, 1.0, 1.0]);
+        assert_eq!(p[1], [2.0, 2.0, 1.5]);
+        assert_eq!(p[2], [2.5, 2.5, 3.0]);
+        assert_eq!(median_range(&p[1]), "2.00x [1.50–2.00]");
+        assert_eq!(median_range(&[3.0, 1.0]), "2.00x [1.00–3.00]");
+        assert_eq!(median_range(&[]), "-");
+        // One round: nothing to pair beyond the best-of speed-up.
+        assert!(per_round_speedups(&[vec![1.0, 2.0]]).iter().all(Vec::is_empty));
+        assert!(per_round_speedups(&[]).is_empty());
+    }
 }
