@@ -855,7 +855,7 @@ mod tests {
     /// 1e-3 to 1e4, and tight: the slack grows like 1e-6 of the distance, not 1e-3 (stop 32:
     /// the old widening made a 1 cm sphere 10⁴ units away count as hit from 13 units off).
     #[test]
-    fn any_hit_test_is_conservative_and_covers_the_entry_test() {
+    fn any_hit_test_is_conservative_and_tight() {
         // Eight rays per packet, each a segment [tnear, tfar] (some unbounded, some empty),
         // aimed near the sphere's rim at scales 10⁻³–10⁴: `test_any` must report every sphere
         // the segment truly meets (f64), and agree with `test` away from the rims.
