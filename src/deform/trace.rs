@@ -99,6 +99,13 @@
 //! the instance tree is built over (at `begin_frame`, which now computes the roots in
 //! parallel), kept its Eq. 9 sphere around two exact children: `elastic-balls`' 40 balls of
 //! 6,000 surfels, root radius ratio ≈ 1.3, 12 % more sphere tests than with exact roots.
+//!
+//! *Leaf spheres live with their surfels* (stop 48): a leaf's sphere is its surfel's leaf
+//! ball, stored in the surfel's slot when the surfel is deformed (§4.1.2 updates a leaf from
+//! its surfel), so the node slots hold inner nodes only and a refit publishes half as many
+//! nodes (each under the node's sequence lock). The refit also prefetches the surfel and node
+//! slots it is about to write. Whole-object refit (`elastic-balls`, one thread) −7 %, lazy
+//! frames 0–9 % faster (BENCHMARKS.md, "Stop 48").
 
 use super::displace::{deform_point, DeformField, DeformedSurfel};
 use super::miniball::miniball;
@@ -779,7 +786,9 @@ impl DeformTracer {
             for i in self.inst.iter_mut() {
                 let obj = &i.obj;
                 let def: Vec<DeformedSurfel> = (0..obj.surfel_count()).into_par_iter().map(|s| deform_surfel(obj, &i.field, s)).collect();
-                def.par_iter().enumerate().for_each(|(s, d)| store_surfel(&i.surf, s, d, frame));
+                def.par_iter().enumerate().for_each(|(s, d)| {
+                    store_surfel(&i.surf, s, d, frame);
+                });
                 let pts: Vec<Vec3> = def.iter().map(|d| d.p).collect();
                 let ext: Vec<f32> = def.iter().map(|d| d.extent()).collect();
                 i.naive = Some(Topology::build(&pts, &ext));
@@ -787,7 +796,9 @@ impl DeformTracer {
         } else if self.mode == UpdateMode::Refit {
             for i in self.inst.iter_mut() {
                 let (obj, field, surf) = (&i.obj, &i.field, &i.surf);
-                (0..obj.surfel_count()).into_par_iter().for_each(|s| store_surfel(surf, s, &deform_surfel(obj, field, s), frame));
+                (0..obj.surfel_count()).into_par_iter().for_each(|s| {
+                    store_surfel(surf, s, &deform_surfel(obj, field, s), frame);
+                });
                 let bvh = i.refit.as_mut().expect("refit tree");
                 let prims = &bvh.primitive_indices;
                 bvh.nodes.par_iter_mut().filter(|n| n.is_leaf()).for_each(|n| {
@@ -830,31 +841,31 @@ impl DeformTracer {
     /// Surfel `s` in this frame, read with `load` if another ray already deformed it in this
     /// frame, else deformed (Eq. 1), stored, and passed to `fresh`.
     #[inline(always)]
-    fn surfel_as<T>(&self, ii: &Instance, s: usize, load: fn(&SurfelState, usize) -> T, fresh: fn(&DeformedSurfel) -> T) -> T {
+    fn surfel_as<T>(&self, ii: &Instance, s: usize, load: fn(&SurfelState, usize) -> T, fresh: fn(&DeformedSurfel, Vec3, f32) -> T) -> T {
         if ii.surf.slot[s].stamp.load(Acquire) == self.frame {
             load(&ii.surf, s)
         } else {
             let d = deform_surfel(&ii.obj, &ii.field, s);
-            store_surfel(&ii.surf, s, &d, self.frame);
-            fresh(&d)
+            let (n, r) = store_surfel(&ii.surf, s, &d, self.frame);
+            fresh(&d, n, r)
         }
     }
 
     #[inline]
     fn surfel(&self, ii: &Instance, s: usize) -> DeformedSurfel {
-        self.surfel_as(ii, s, load_surfel, |d| *d)
+        self.surfel_as(ii, s, load_surfel, |d, _, _| *d)
     }
 
     /// The leaf ball of surfel `s` in this frame ([`leaf_sphere`], stored with the surfel).
     #[inline]
     fn surfel_ball(&self, ii: &Instance, s: usize) -> (Vec3, f32) {
-        self.surfel_as(ii, s, load_surfel_ball, leaf_sphere)
+        self.surfel_as(ii, s, load_surfel_ball, |d, _, r| (d.p, r))
     }
 
     /// Position and unit normal of surfel `s` in this frame (deforming it lazily).
     #[inline]
     fn surfel_pn(&self, ii: &Instance, s: usize) -> (Vec3, Vec3) {
-        self.surfel_as(ii, s, load_surfel_pn, |d| (d.p, d.normal()))
+        self.surfel_as(ii, s, load_surfel_pn, |d, n, _| (d.p, n))
     }
 
     #[inline]
@@ -862,9 +873,19 @@ impl DeformTracer {
         ii.naive.as_ref().unwrap_or(&ii.obj.tree.topo)
     }
 
+    /// Whether node n's sphere is this frame's. A leaf's sphere is its surfel's ball, kept in
+    /// the surfel's slot (see [`Self::sphere`]).
     #[inline]
     fn current(&self, ii: &Instance, n: usize) -> bool {
-        ii.naive.is_some() || ii.nodes.slot[n].stamp.load(Relaxed) == self.frame
+        if ii.naive.is_some() {
+            return true;
+        }
+        let topo = &ii.obj.tree.topo;
+        if topo.right[n] == LEAF {
+            ii.surf.slot[topo.surfel[n] as usize].stamp.load(Relaxed) == self.frame
+        } else {
+            ii.nodes.slot[n].stamp.load(Relaxed) == self.frame
+        }
     }
 
     /// The sphere of node n in this frame (updating it lazily: Eq. 3–4, 9 for inner nodes,
@@ -873,6 +894,14 @@ impl DeformTracer {
     fn sphere(&self, ii: &Instance, n: usize) -> (Vec3, f32) {
         if let Some(t) = &ii.naive {
             return (t.center(n), t.r[n]);
+        }
+        // A leaf's sphere is its surfel's leaf ball, stored with the deformed surfel (§4.1.2
+        // updates leaves from their surfel), not in the node's slot: the refit of a subtree
+        // then publishes only its inner nodes, half of them, and a leaf whose test passes
+        // finds its surfel's line, which the ellipse test reads next, already loaded.
+        let topo = &ii.obj.tree.topo;
+        if topo.right[n] == LEAF {
+            return self.surfel_ball(ii, topo.surfel[n] as usize);
         }
         let st = &ii.nodes;
         if st.slot[n].stamp.load(Acquire) == self.frame {
@@ -887,9 +916,10 @@ impl DeformTracer {
     #[inline(never)]
     fn update_sphere(&self, ii: &Instance, n: usize) -> (Vec3, f32) {
         let tree = &ii.obj.tree;
-        let (c, r) = if tree.topo.right[n] == LEAF {
-            self.surfel_ball(ii, tree.topo.surfel[n] as usize)
-        } else {
+        if tree.topo.right[n] == LEAF {
+            return self.surfel_ball(ii, tree.topo.surfel[n] as usize);
+        }
+        let (c, r) = {
             // Eq. 9 above the refitted subtrees, and for a subtree another thread has claimed
             // (published; Eq. 11 tightens it from the owner's children later, `child_spheres`).
             let (lim, cnt) = (self.params.exact_below.min(MAX_EXACT_BELOW), tree.topo.count[n]);
@@ -920,7 +950,8 @@ impl DeformTracer {
     /// A subtree of more than [`REFIT_CLAIM_MIN`] surfels is refitted by one thread per
     /// frame: `None` tells a thread that finds it claimed to bound `n` by Eq. 9 (valid,
     /// looser; Eq. 11 tightens it once the owner has published the children); the owner
-    /// publishes every node below `n` that is not already current. (Publishing nothing for
+    /// publishes every inner node below `n` that is not already current (a leaf's sphere is
+    /// its surfel's ball, made current with the surfel). (Publishing nothing for
     /// `n` until the owner is done was tried: every packet in the meantime recomputed Eq. 9
     /// and refitted the small subtrees below again, 2× slower frames.)
     fn refit_subtree(&self, ii: &Instance, n: usize) -> Option<(Vec3, f32)> {
@@ -935,7 +966,11 @@ impl DeformTracer {
             for v in [&mut *x, &mut *y, &mut *z, &mut *r] {
                 v.clear();
             }
-            for &s in &topo.perm[s0..s0 + cnt] {
+            let perm = &topo.perm[s0..s0 + cnt];
+            for (i, &s) in perm.iter().enumerate() {
+                if let Some(&a) = perm.get(i + PREFETCH_AHEAD) {
+                    prefetch(&ii.surf.slot[a as usize]);
+                }
                 let (c, rr) = self.surfel_ball(ii, s as usize);
                 (x.push(c.x), y.push(c.y), z.push(c.z), r.push(rr));
             }
@@ -949,6 +984,9 @@ impl DeformTracer {
             // Pre-order: a node's descendants follow it, so descending indices visit every
             // child before its parent.
             for q in (n..n + m).rev() {
+                if q >= n + PREFETCH_AHEAD {
+                    prefetch(&ii.nodes.slot[q - PREFETCH_AHEAD]);
+                }
                 let (a, k) = (topo.start[q] as usize - s0, topo.count[q] as usize);
                 let b = if topo.right[q] == LEAF {
                     let c = Vec3::new(x[a], y[a], z[a]);
@@ -975,7 +1013,7 @@ impl DeformTracer {
                     }
                 };
                 sph[q - n] = b;
-                if q != n && ii.nodes.slot[q].stamp.load(Relaxed) != self.frame {
+                if q != n && k > 1 && ii.nodes.slot[q].stamp.load(Relaxed) != self.frame {
                     ii.nodes.store(q, b.0, b.1, self.frame);
                 }
             }
@@ -1970,6 +2008,8 @@ impl DeformTracer {
     fn sphere_now(&self, ii: &Instance, n: usize) -> (Vec3, f32) {
         match &ii.naive {
             Some(t) => (t.center(n), t.r[n]),
+            // A leaf's sphere is its surfel's ball (`sphere`).
+            None if ii.obj.tree.topo.right[n] == LEAF => load_surfel_ball(&ii.surf, ii.obj.tree.topo.surfel[n] as usize),
             None => ii.nodes.load(n),
         }
     }
@@ -2145,6 +2185,23 @@ fn hmin(e: f32x8, m: u8) -> f32 {
     lanes(m).map(|i| e[i]).fold(f32::INFINITY, f32::min)
 }
 
+/// How far ahead [`DeformTracer::refit_subtree`] prefetches the surfel and node slots it
+/// will write (in elements).
+const PREFETCH_AHEAD: usize = 8;
+
+/// Asks for the cache line of `x` ahead of a write to it (a hint; no effect elsewhere than
+/// x86-64).
+#[inline(always)]
+fn prefetch<T>(x: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is a hint and never faults; `x` is a valid reference anyway.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_ET0 }>(x as *const T as *const i8);
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = x;
+}
+
 #[inline]
 fn deform_surfel(obj: &SurfelObject, f: &DeformField, s: usize) -> DeformedSurfel {
     let k = obj.weights.k;
@@ -2152,7 +2209,9 @@ fn deform_surfel(obj: &SurfelObject, f: &DeformField, s: usize) -> DeformedSurfe
 }
 
 #[inline]
-fn store_surfel(st: &SurfelState, s: usize, d: &DeformedSurfel, frame: u32) {
+/// Stores the deformed surfel `d` as this frame's; returns the unit normal and leaf-ball
+/// radius it stored with it.
+fn store_surfel(st: &SurfelState, s: usize, d: &DeformedSurfel, frame: u32) -> (Vec3, f32) {
     let n = d.normal();
     let r = leaf_sphere(d).1;
     let v = [d.p.x, d.p.y, d.p.z, d.u.x, d.u.y, d.u.z, d.v.x, d.v.y, d.v.z, d.stretch, n.x, n.y, n.z, r];
@@ -2161,6 +2220,7 @@ fn store_surfel(st: &SurfelState, s: usize, d: &DeformedSurfel, frame: u32) {
         a.store(x.to_bits(), Relaxed);
     }
     slot.stamp.store(frame, Release);
+    (n, r)
 }
 
 #[inline]
@@ -2289,7 +2349,7 @@ mod tests {
         tr.sphere(ii, n);
         for q in n..n + 2 * cnt - 1 {
             assert!(tr.current(ii, q), "node {q} of the subtree of {n} not published");
-            let (c, r) = ii.nodes.load(q);
+            let (c, r) = tr.sphere(ii, q);
             let (a, k) = (topo.start[q] as usize, topo.count[q] as usize);
             let balls: Vec<(Vec3, f32)> =
                 topo.perm[a..a + k].iter().map(|&s| leaf_sphere(&deform_surfel(&ii.obj, &ii.field, s as usize))).collect();
@@ -2300,7 +2360,7 @@ mod tests {
             let (lo, hi) = balls.iter().fold((Vec3::MAX, Vec3::MIN), |(lo, hi), b| (lo.min(b.0), hi.max(b.0)));
             let mut best = reach_from(0.5 * (lo + hi));
             if topo.right[q] != LEAF {
-                best = best.min(enclosing_sphere(ii.nodes.load(q + 1), ii.nodes.load(topo.right[q] as usize)).1);
+                best = best.min(enclosing_sphere(tr.sphere(ii, q + 1), tr.sphere(ii, topo.right[q] as usize)).1);
             }
             assert!(r <= best * (1.0 + 1e-4) + 1e-6, "node {q}: radius {r}, tightest of the two {best}");
         }
