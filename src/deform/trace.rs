@@ -910,15 +910,13 @@ impl DeformTracer {
         self.update_sphere(ii, n)
     }
 
-    /// The first computation of node n's sphere in this frame (out of line: the common path
+    /// The first computation of inner node n's sphere in this frame (out of line: the common path
     /// of [`Self::sphere`] is a stamp check and a load, and inlining this body's large stack
     /// frame into every caller costs more than the call).
     #[inline(never)]
     fn update_sphere(&self, ii: &Instance, n: usize) -> (Vec3, f32) {
         let tree = &ii.obj.tree;
-        if tree.topo.right[n] == LEAF {
-            return self.surfel_ball(ii, tree.topo.surfel[n] as usize);
-        }
+        debug_assert!(tree.topo.right[n] != LEAF, "a leaf's sphere is its surfel's ball (`sphere`)");
         let (c, r) = {
             // Eq. 9 above the refitted subtrees, and for a subtree another thread has claimed
             // (published; Eq. 11 tightens it from the owner's children later, `child_spheres`).
