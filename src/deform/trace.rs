@@ -880,11 +880,9 @@ impl DeformTracer {
         if ii.naive.is_some() {
             return true;
         }
-        let topo = &ii.obj.tree.topo;
-        if topo.right[n] == LEAF {
-            ii.surf.slot[topo.surfel[n] as usize].stamp.load(Relaxed) == self.frame
-        } else {
-            ii.nodes.slot[n].stamp.load(Relaxed) == self.frame
+        match leaf_surfel(ii, n) {
+            Some(s) => ii.surf.slot[s].stamp.load(Relaxed) == self.frame,
+            None => ii.nodes.slot[n].stamp.load(Relaxed) == self.frame,
         }
     }
 
@@ -899,9 +897,8 @@ impl DeformTracer {
         // updates leaves from their surfel), not in the node's slot: the refit of a subtree
         // then publishes only its inner nodes, half of them, and a leaf whose test passes
         // finds its surfel's line, which the ellipse test reads next, already loaded.
-        let topo = &ii.obj.tree.topo;
-        if topo.right[n] == LEAF {
-            return self.surfel_ball(ii, topo.surfel[n] as usize);
+        if let Some(s) = leaf_surfel(ii, n) {
+            return self.surfel_ball(ii, s);
         }
         let st = &ii.nodes;
         if st.slot[n].stamp.load(Acquire) == self.frame {
@@ -917,17 +914,14 @@ impl DeformTracer {
     fn update_sphere(&self, ii: &Instance, n: usize) -> (Vec3, f32) {
         let tree = &ii.obj.tree;
         debug_assert!(tree.topo.right[n] != LEAF, "a leaf's sphere is its surfel's ball (`sphere`)");
-        let (c, r) = {
-            // Eq. 9 above the refitted subtrees, and for a subtree another thread has claimed
-            // (published; Eq. 11 tightens it from the owner's children later, `child_spheres`).
-            let (lim, cnt) = (self.params.exact_below.min(MAX_EXACT_BELOW), tree.topo.count[n]);
-            // A root whose two children would both be refitted subtrees is refitted with them
-            // (module docs, "Subtree refit": small objects).
-            let refit = cnt <= lim || (n == 0 && lim > 0 && cnt <= 2 * lim);
-            (if refit { self.refit_subtree(ii, n) } else { None }).unwrap_or_else(|| {
-                tree.update_eq9(n, &ii.field, &ii.obj.nodes.rest, self.params.recentred_bound, self.params.node_rotation)
-            })
-        };
+        // Eq. 9 above the refitted subtrees, and for a subtree another thread has claimed
+        // (published; Eq. 11 tightens it from the owner's children later, `child_spheres`).
+        let (lim, cnt) = (self.params.exact_below.min(MAX_EXACT_BELOW), tree.topo.count[n]);
+        // A root whose two children would both be refitted subtrees is refitted with them
+        // (module docs, "Subtree refit": small objects).
+        let refit = cnt <= lim || (n == 0 && lim > 0 && cnt <= 2 * lim);
+        let (c, r) = (if refit { self.refit_subtree(ii, n) } else { None })
+            .unwrap_or_else(|| tree.update_eq9(n, &ii.field, &ii.obj.nodes.rest, self.params.recentred_bound, self.params.node_rotation));
         ii.nodes.store(n, c, r, self.frame);
         (c, r)
     }
@@ -2007,8 +2001,10 @@ impl DeformTracer {
         match &ii.naive {
             Some(t) => (t.center(n), t.r[n]),
             // A leaf's sphere is its surfel's ball (`sphere`).
-            None if ii.obj.tree.topo.right[n] == LEAF => load_surfel_ball(&ii.surf, ii.obj.tree.topo.surfel[n] as usize),
-            None => ii.nodes.load(n),
+            None => match leaf_surfel(ii, n) {
+                Some(s) => load_surfel_ball(&ii.surf, s),
+                None => ii.nodes.load(n),
+            },
         }
     }
 
@@ -2100,6 +2096,14 @@ impl DeformTracer {
             None => Ok(()),
         }
     }
+}
+
+/// The surfel of node `n` of the lazy (rest-pose) tree if n is a leaf. The lazy modes keep a
+/// leaf's sphere in its surfel's slot, not in the node slots (`DeformTracer::sphere`).
+#[inline(always)]
+fn leaf_surfel(ii: &Instance, n: usize) -> Option<usize> {
+    let topo = &ii.obj.tree.topo;
+    (topo.right[n] == LEAF).then(|| topo.surfel[n] as usize)
 }
 
 /// The node a hit at leaf `n` reports (for the per-ray cache): none in a rebuilt tree.
