@@ -948,3 +948,58 @@ fn a_defocused_ball_keeps_a_soft_silhouette() {
     let flip = lodtrace::film::metrics::flip_mean(&reference.color, &f.color, w, h).unwrap().0;
     assert!(flip < 0.09, "mean FLIP {flip} against the distributed reference");
 }
+
+/// A red cube on a large floor of two triangles, seen at a grazing angle: every pixel inside
+/// the cube's image in the conventional render is red in the cone tracer's too, under the
+/// paper's termination, with per-box and exact decompositions. The floor's triangles are
+/// stored in the floor's root node, whose box reaches far down the ray; until stop 49 their
+/// fragments took the depth interval from the footprint at the box's centre depth (hundreds
+/// of footprints at the hit), and the cone ended on the floor before the cube in front of the
+/// floor's hit was reached (11 % of the cube's pixels showed floor; review finding).
+#[test]
+fn grazing_floor_fragment_does_not_hide_what_stands_on_it() {
+    let mut scene = Scene::empty("cube-on-big-floor");
+    scene.materials[0] = Material::diffuse("green", Vec3::new(0.1, 0.6, 0.1));
+    let red = scene.add_material(Material::diffuse("red", Vec3::new(0.8, 0.05, 0.05)));
+    let floor = scene.add_mesh(builtin::checkerboard(1, 400.0, 0, 0));
+    scene.instance(Target::Mesh(floor), Affine3A::from_translation(Vec3::new(0.0, 0.0, -150.0)), None);
+    let cube = scene.add_mesh(builtin::cube_mesh(red));
+    scene.instance(
+        Target::Mesh(cube),
+        Affine3A::from_scale_rotation_translation(Vec3::splat(0.3), glam::Quat::IDENTITY, Vec3::new(0.0, 0.3, -10.0)),
+        None,
+    );
+    scene.camera = Camera {
+        eye: Vec3::new(0.0, 0.35, 0.0),
+        look: Vec3::new(0.0, 0.2, -10.0),
+        up: Vec3::Y,
+        fovy: 6.0,
+        aperture: 0.0,
+        focal_dist: 10.0,
+    };
+    scene.lights.push(Light::Point { pos: Vec3::new(0.0, 50.0, 0.0), intensity: Vec3::splat(2500.0) });
+    scene.ambient = Vec3::splat(0.2);
+    scene.validate().unwrap();
+    let (w, h) = (48u32, 48u32);
+    let reference = conventional(&scene, reference_accel(), &RenderOpts { width: w, height: h, ..Default::default() });
+    let red_px = |f: &Film, i: i32, j: i32| {
+        let c = f.color[(j as u32 * w + i as u32) as usize];
+        c.x > 2.0 * c.y
+    };
+    for eigen in [lodtrace::multires::trace::EigenMode::PerBox, lodtrace::multires::trace::EigenMode::Exact] {
+        let film = cones(&scene, &TraceParams { termination: Termination::Paper, eigen, ..Default::default() }, w, h);
+        let (mut inside, mut lost) = (0, Vec::new());
+        for j in 1..h as i32 - 1 {
+            for i in 1..w as i32 - 1 {
+                if [(0, 0), (-1, 0), (1, 0), (0, -1), (0, 1)].iter().all(|&(di, dj)| red_px(&reference, i + di, j + dj)) {
+                    inside += 1;
+                    if !red_px(&film, i, j) {
+                        lost.push((i, j));
+                    }
+                }
+            }
+        }
+        assert!(inside > 300, "{eigen:?}: the cube covers {inside} interior pixels");
+        assert!(lost.is_empty(), "{eigen:?}: {} of {inside} cube pixels show the floor, e.g. {:?}", lost.len(), &lost[..lost.len().min(6)]);
+    }
+}

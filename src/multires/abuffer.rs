@@ -180,6 +180,11 @@ impl Frag {
         // Split meshes: each of `s`'s groups joins the one here of its mesh; a new mesh
         // becomes `other` when that is free, else joins the group nearer in depth.
         let mut to_first = Group::default();
+        // The first group as it grows in this loop: the totals (`sums`) take `s` only after
+        // it, so `first()` (totals less `other`) is wrong once `other` has taken a group here.
+        // (Until stop 49 it was used: absorbing a two-mesh fragment could put its second mesh
+        // with the wrong group; review finding, test `third_mesh_joins_the_nearer_group`.)
+        let mut mine = self.first();
         for (g, gz0) in [(s.first(), s.z0_key), (s.other, s.other.z0)] {
             if !(g.w > 0.0) {
                 continue;
@@ -190,7 +195,7 @@ impl Frag {
                 }
                 true
             } else if self.other.w > 0.0 && g.key != self.other.key {
-                let (gt, mine) = (g.wt / g.w, self.first());
+                let gt = g.wt / g.w;
                 let ta = if mine.w > 0.0 { mine.wt / mine.w } else { gt };
                 (gt - ta).abs() <= (gt - self.other.wt / self.other.w).abs()
             } else {
@@ -198,6 +203,7 @@ impl Frag {
             };
             if joins_first {
                 to_first.add(&g);
+                mine.add(&g);
                 self.z0_key = self.z0_key.min(gz0);
             } else {
                 if !(self.other.w > 0.0) {
@@ -329,6 +335,11 @@ impl ABuffer {
         self.dirty = true;
         // First fragment that does not end before the sample starts.
         let i = self.frags.partition_point(|f| f.z1 < s.z0);
+        // The fragments from the first one changed here on are no longer known to be final
+        // (`opaque_before` checks them again): a merge can grow a final fragment past the
+        // front. (Until stop 49 only the prefix's length was capped; review finding, test
+        // `a_final_fragment_grown_past_the_front_is_not_final`.)
+        let mut touched = i;
         if i < self.frags.len() && self.frags[i].z0 <= s.z1 {
             self.frags[i].absorb(&s);
             self.merges += 1;
@@ -343,17 +354,19 @@ impl ABuffer {
                 let cur = self.frags.remove(i);
                 self.frags[i - 1].absorb(&cur);
                 self.merges += 1;
+                touched = i - 1;
             }
         } else {
             self.frags.insert(i, s);
             if self.frags.len() > self.cap {
-                self.merge_closest();
+                touched = touched.min(self.merge_closest());
             }
         }
-        self.n_final = self.n_final.min(self.frags.len());
+        self.n_final = self.n_final.min(touched);
     }
 
-    fn merge_closest(&mut self) {
+    /// Merges the two fragments closest in depth; returns the index of the merged one.
+    fn merge_closest(&mut self) -> usize {
         let mut best = (f32::INFINITY, 0);
         for i in 0..self.frags.len() - 1 {
             let gap = self.frags[i + 1].z0 - self.frags[i].z1;
@@ -365,6 +378,7 @@ impl ABuffer {
         let next = self.frags.remove(i + 1);
         self.frags[i].absorb(&next);
         self.merges += 1;
+        i
     }
 
     /// Called with the nearest depth the traversal can still reach: finalises the fragments
@@ -662,5 +676,49 @@ mod tests {
         for p in ab.frags.windows(2) {
             assert!(p[0].z1 < p[1].z0);
         }
+    }
+
+    fn piece(t: f32, d: f32, w: f32, c: Vec3, key: u32) -> Frag {
+        Frag { z0: t - d, z1: t + d, w, wt: w * t, col: c * w, best_w: w, key, ..Default::default() }
+    }
+
+    /// `absorb`: a new mesh joins the group nearer in depth. Absorbing a two-mesh fragment
+    /// (meshes 2 at t = 8 and 3 at 8.2) into a one-mesh fragment (mesh 1 at 5), mesh 3 must
+    /// join mesh 2's group, not mesh 1's; the opaque red front then hides the blue behind it.
+    /// (Review finding, stop 49: the comparison used the totals before `s` was added.)
+    #[test]
+    fn third_mesh_joins_the_nearer_group() {
+        let mut ab = ABuffer::new(16);
+        ab.insert(piece(5.0, 0.1, 1.0, Vec3::X, 1));
+        ab.insert(piece(8.0, 0.5, 2.0, Vec3::Y, 2));
+        ab.insert(piece(8.2, 0.5, 1.0, Vec3::Z, 3));
+        assert_eq!(ab.frags.len(), 2);
+        assert!(ab.frags[1].other.w > 0.0, "the second fragment holds two meshes");
+        // A faint sample of mesh 1 bridges the two fragments: the first absorbs the second.
+        ab.insert(piece(6.3, 1.25, 0.01, Vec3::X, 1));
+        assert_eq!(ab.frags.len(), 1);
+        let (parts, n) = ab.frags[0].parts();
+        assert_eq!(n, 2);
+        assert!((parts[0].t() - 5.0).abs() < 0.1, "front part at mean depth {}, mesh 1 alone is at 5", parts[0].t());
+        assert!((parts[1].t() - (8.0 * 2.0 + 8.2) / 3.0).abs() < 0.05, "back part at {}", parts[1].t());
+        let mut o = Over::default();
+        let col: Vec3 = parts[..n].iter().map(|p| p.col / p.w * o.add(p)).sum();
+        assert!((col - Vec3::X).length() < 1e-3, "colour {col}: the blue behind bleeds into the opaque red front");
+    }
+
+    /// `opaque_before` counts only fragments that end before the front; one that was final
+    /// and then grows past the front by a merge is not final any more. (Review finding, stop
+    /// 49: only the final prefix's length was capped.)
+    #[test]
+    fn a_final_fragment_grown_past_the_front_is_not_final() {
+        let mut ab = ABuffer::new(16);
+        ab.insert(piece(1.5, 0.5, 0.6, Vec3::X, 0));
+        assert!(!ab.opaque_before(3.0));
+        ab.insert(piece(3.45, 1.55, 0.6, Vec3::Y, 0));
+        assert_eq!(ab.frags.len(), 1);
+        assert!(ab.frags[0].z1 > 3.0);
+        assert!(!ab.opaque_before(3.0), "ended on the fragment [{}, {}], which reaches past the front 3", ab.frags[0].z0, ab.frags[0].z1);
+        // Once the front passes it, it counts (alpha 1.2 → 1).
+        assert!(ab.opaque_before(5.5));
     }
 }

@@ -845,8 +845,10 @@ pub fn triangle_ref_depth(lc: &Cone, pw: [Vec3; 3], tv: [f32; 3]) -> f32 {
 }
 
 /// A triangle in the per-box footprint coordinates of §5.2 (the 2-D triangle of §4.5, in
-/// which the cone's Gaussian is the unit one), with its vertices' depths along the axis.
-pub fn triangle_per_box_2d(lc: &Cone, pw: [Vec3; 3], boxe: &Eigen2, clamp: f32, lf: f32) -> ([glam::Vec2; 3], [f32; 3]) {
+/// which the cone's Gaussian is the unit one), with its vertices' depths along the axis and
+/// the larger of the footprint's two semi-axes there (along the box's axes): the footprint
+/// size at the triangle, for its fragment's depth interval (`Tracer::emit_triangle`).
+pub fn triangle_per_box_2d(lc: &Cone, pw: [Vec3; 3], boxe: &Eigen2, clamp: f32, lf: f32) -> ([glam::Vec2; 3], [f32; 3], f32) {
     // Per-box (§5.2): the node's eigen-decomposition gives the principal axes for
     // all its triangles; the extents along those fixed axes are evaluated once per
     // triangle, at the depth where the axis meets its plane (clamped to the
@@ -864,11 +866,12 @@ pub fn triangle_per_box_2d(lc: &Cone, pw: [Vec3; 3], boxe: &Eigen2, clamp: f32, 
     let sg = lc.sigma(triangle_ref_depth(lc, pw, tv));
     let e1 = (sg.a * co * co + 2.0 * sg.b * co * sn + sg.c * sn * sn).max(0.0).sqrt().max(lf);
     let e2 = (sg.a * sn * sn - 2.0 * sg.b * co * sn + sg.c * co * co).max(0.0).sqrt().max(clamp * e1).max(lf);
-    (dv.map(|d| glam::Vec2::new(d.dot(a1) / e1, d.dot(a2) / e2)), tv)
+    (dv.map(|d| glam::Vec2::new(d.dot(a1) / e1, d.dot(a2) / e2)), tv, e1.max(e2))
 }
 
 /// The per-box cone–triangle weight (§4.5 with §5.2): the node's decomposition `boxe`
-/// gives the axes. Returns (weight, b1, b2, t) or None below the 2% cut-off.
+/// gives the axes. Returns (weight, b1, b2, t, the footprint's size at the triangle as in
+/// [`triangle_per_box_2d`]) or None below the 2% cut-off.
 pub fn triangle_weight_per_box(
     lc: &Cone,
     pw: [Vec3; 3],
@@ -876,10 +879,10 @@ pub fn triangle_weight_per_box(
     clamp: f32,
     lf: f32,
     mode: TriWeight,
-) -> Option<(f32, f32, f32, f32)> {
-    let (q, tv) = triangle_per_box_2d(lc, pw, boxe, clamp, lf);
+) -> Option<(f32, f32, f32, f32, f32)> {
+    let (q, tv, size) = triangle_per_box_2d(lc, pw, boxe, clamp, lf);
     let (w, b1, b2) = weight_2d(q, mode)?;
-    Some((w, b1, b2, tv[0] * (1.0 - b1 - b2) + tv[1] * b1 + tv[2] * b2))
+    Some((w, b1, b2, tv[0] * (1.0 - b1 - b2) + tv[1] * b1 + tv[2] * b2, size))
 }
 
 /// Scalar reference of the triangle prefilter: can a triangle inside the sphere (c, r) get a
@@ -1793,24 +1796,24 @@ impl<'s, 'a> Tracer<'s, 'a> {
                         // after the quick reject and the cut-off on the nearest point, as
                         // `weight_2d` does for one triangle.
                         let mut qs = [[glam::Vec2::ZERO; 3]; 8];
-                        let mut hits = [(0usize, 0.0f32, 0.0f32, 0.0f32); 8];
+                        let mut hits = [(0usize, 0.0f32, 0.0f32, 0.0f32, 0.0f32); 8];
                         let mut n = 0;
                         while m != 0 {
                             let j = k + m.trailing_zeros() as usize;
                             m &= m - 1;
                             c.inc(Counter::triangle_tests);
-                            let (q, tv) = triangle_per_box_2d(&lc, tris.verts[j], &boxe, clamp, lf);
+                            let (q, tv, size) = triangle_per_box_2d(&lc, tris.verts[j], &boxe, clamp, lf);
                             if let Some((b1, b2)) = mass_candidate(q) {
-                                (qs[n], hits[n]) = (q, (j, b1, b2, tv[0] * (1.0 - b1 - b2) + tv[1] * b1 + tv[2] * b2));
+                                (qs[n], hits[n]) = (q, (j, b1, b2, tv[0] * (1.0 - b1 - b2) + tv[1] * b1 + tv[2] * b2, size));
                                 n += 1;
                             }
                         }
                         if n > 0 {
                             let mass = gauss_tri_mass_8(&qs);
-                            for (&w, &(j, b1, b2, t)) in mass.iter().zip(&hits[..n]) {
+                            for (&w, &(j, b1, b2, t, size)) in mass.iter().zip(&hits[..n]) {
                                 let w = w * (1.0 / MASS_IN_CUT);
                                 if w > 0.0 {
-                                    let hit = (w, b1, b2, t, boxe);
+                                    let hit = (w, b1, b2, t, size);
                                     self.emit_triangle(&lc, s, li, tree.tri_index[j], tris.verts[j], hit, e.blend, ab, mode);
                                 }
                             }
@@ -2010,8 +2013,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
     }
 
     /// The anti-aliased ray–triangle test (§4.3): weight, barycentrics b1 b2 of the closest
-    /// point, depth and the footprint's decomposition there, or `None` below the cut-off.
-    fn triangle_hit(&self, lc: &Cone, s: f32, pw: [Vec3; 3], boxe: &Eigen2, c: &mut Counters) -> Option<(f32, f32, f32, f32, Eigen2)> {
+    /// point, depth, and the footprint's major semi-axis at the triangle, or `None` below the
+    /// cut-off.
+    fn triangle_hit(&self, lc: &Cone, s: f32, pw: [Vec3; 3], boxe: &Eigen2, c: &mut Counters) -> Option<(f32, f32, f32, f32, f32)> {
         if self.p.eigen == EigenMode::Exact {
             // The triangle's own footprint (not the box's), solved at its reference depth.
             // (Until stop 38 each vertex had its own footprint: large floor and glass
@@ -2022,15 +2026,15 @@ impl<'s, 'a> Tracer<'s, 'a> {
             let lf = self.floor * s;
             let e = eigen_1(lc.sigma(triangle_ref_depth(lc, pw, pv.map(|p| p.z))), self.clamp, lf);
             let (w, b1, b2, t) = triangle_weight(pv, [e; 3], self.tri)?;
-            Some((w, b1, b2, t, e))
+            Some((w, b1, b2, t, e.s1))
         } else {
-            let (w, b1, b2, t) = triangle_weight_per_box(lc, pw, boxe, self.clamp, self.floor * s, self.tri)?;
-            Some((w, b1, b2, t, *boxe))
+            triangle_weight_per_box(lc, pw, boxe, self.clamp, self.floor * s, self.tri)
         }
     }
 
     /// The fragment of a triangle hit (weight, barycentrics b1 b2 of the closest point, depth,
-    /// and the footprint's decomposition there), unless its depth lies outside the cone's.
+    /// and the footprint's major semi-axis at the triangle), unless its depth lies outside the
+    /// cone's.
     #[allow(clippy::too_many_arguments)]
     fn emit_triangle(
         &self,
@@ -2039,7 +2043,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         li: u32,
         tri: u32,
         pw: [Vec3; 3],
-        (w, b1, b2, t, e_hit): (f32, f32, f32, f32, Eigen2),
+        (w, b1, b2, t, size): (f32, f32, f32, f32, f32),
         blend: f32,
         ab: &mut ABuffer,
         mode: Collect,
@@ -2051,7 +2055,13 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let mesh = &self.ms.scene.meshes[leaf.mesh as usize];
         let w = w * blend;
         let inv_s = 1.0 / s;
-        // Depth tolerance: how far the triangle's plane spans in depth across the footprint.
+        // Depth tolerance: how far the triangle's plane spans in depth across the footprint
+        // at the triangle. (Until stop 49 the per-box mode took the footprint of the node's
+        // box, solved at the box's centre depth: a floor triangle stored in a root that
+        // reaches far down the ray got an interval of hundreds of footprints, and under the
+        // paper's termination that fragment ended the cone before an object standing in
+        // front of the floor's hit was reached — review finding, test
+        // `grazing_floor_fragment_does_not_hide_what_stands_on_it`.)
         // With `tight_depth` (*deviation*, off by default) no more than the triangle's own
         // vertices span: a leaf smaller than the footprint, seen at an angle, otherwise
         // reaches up to 20 footprints deep and merges the leaves behind it into its
@@ -2062,7 +2072,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let ng = (b - a).cross(cc - a).normalize_or_zero();
         let cos = ng.dot(lc.dir).abs().max(0.05);
         let tan = (1.0 - cos * cos).max(0.0).sqrt() / cos;
-        let plane = R_CUT * e_hit.s1 * tan.min(8.0);
+        let plane = R_CUT * size * tan.min(8.0);
         let eps = 1e-5 * (1.0 + t.abs());
         let (mut z0, mut z1) = (t - plane.max(eps), t + plane.max(eps));
         if self.p.tight_depth {
