@@ -49,12 +49,15 @@ pub fn ellipse_hit(o: Vec3, d: Vec3, c: Vec3, u: Vec3, v: Vec3, tnear: f32, tfar
     if den == 0.0 || !den.is_finite() {
         return None;
     }
-    let t = n.dot(c - o) / den;
+    let w = c - o;
+    let t = n.dot(w) / den;
     if !(t >= tnear && t <= tfar) {
         return None;
     }
     let x = o + d * t;
-    let q = x - c;
+    // The offset from the centre as d·t − (c − o), not x − c: far from the origin x's own
+    // rounding (ulp of |x|) would exceed a small splat's size (review finding, stop 49).
+    let q = d * t - w;
     // Solve q = α u + β v in the least-squares sense (Gram system).
     let (a, b, cc) = (u.dot(u), u.dot(v), v.dot(v));
     let det = a * cc - b * b;

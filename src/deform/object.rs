@@ -43,7 +43,9 @@ pub struct SurfelObject {
     pub pos: Vec<Vec3>,
     /// Collection of each surfel.
     pub coll: Vec<u32>,
-    /// MLS neighbours: `nbr[i*nk .. i*nk + nk]` (nearest first, the surfel itself first).
+    /// MLS neighbours: `nbr[i*nk .. i*nk + nk]` (nearest first, the surfel itself first),
+    /// from the surfel's own collection; a collection of fewer than `nk` surfels leaves the
+    /// rest of its surfels' rows [`NO_NBR`].
     pub nk: usize,
     pub nbr: Vec<u32>,
     /// MLS support radius per surfel (reference).
@@ -55,6 +57,9 @@ pub struct SurfelObject {
     pub clip_base: Vec<usize>,
     pub clip_nb: Vec<[u32; 2]>,
 }
+
+/// An empty slot of a surfel's MLS neighbour row ([`SurfelObject::nbr`]).
+pub const NO_NBR: u32 = u32::MAX;
 
 impl SurfelObject {
     /// Precomputes an object from its surfels and simulation nodes (reference positions and
@@ -70,20 +75,26 @@ impl SurfelObject {
         let pos = model.surfels.positions();
         let weights = NodeWeights::new(&pos, &nodes, p.nodes_per_surfel);
         let coll = model.collection_of();
-        let min_coll = model.collections.iter().map(|c| (c.end - c.start) as usize).min().unwrap_or(0);
-        let nk = p.mls_neighbours.min(min_coll);
-        if nk < 3 {
+        let sizes = model.collections.iter().map(|c| (c.end - c.start) as usize);
+        let (min_coll, max_coll) = (sizes.clone().min().unwrap_or(0), sizes.max().unwrap_or(0));
+        if min_coll < 3 {
             return Err(DeformError::TooSmall(format!("a surfel collection has {min_coll} surfels")));
         }
+        // Each collection's surfels take min(mls_neighbours, its size) neighbours. (Until stop
+        // 49 the smallest collection set that number for every surfel: one 9-surfel part
+        // shrank every neighbourhood of the object to 9; review finding.)
+        let nk = p.mls_neighbours.min(max_coll);
         // Per-collection kd-trees for MLS and clipping neighbours.
         let trees: Vec<KdTree> = model.collections.iter().map(|c| KdTree::new(&pos[c.start as usize..c.end as usize])).collect();
         let per: Vec<(Vec<u32>, f32)> = (0..pos.len())
             .into_par_iter()
             .map_init(Vec::new, |out, i| {
                 let c = &model.collections[coll[i] as usize];
-                trees[coll[i] as usize].knn(pos[i], nk, None, out);
+                trees[coll[i] as usize].knn(pos[i], nk.min((c.end - c.start) as usize), None, out);
                 let h = out.last().map(|o| o.1.sqrt()).unwrap_or(0.0) * p.mls_support;
-                (out.iter().map(|o| o.0 + c.start).collect(), h.max(model.surfels.r[i]))
+                let mut row: Vec<u32> = out.iter().map(|o| o.0 + c.start).collect();
+                row.resize(nk, NO_NBR);
+                (row, h.max(model.surfels.r[i]))
             })
             .collect();
         let mut nbr = Vec::with_capacity(pos.len() * nk);

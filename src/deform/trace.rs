@@ -110,7 +110,7 @@
 use super::displace::{deform_point, DeformField, DeformedSurfel};
 use super::miniball::miniball;
 use super::mls::{clipped_by, ellipse_hit, mls_intersect_x8, MlsNbr, MlsOutcome, MlsParams, MAX_NBR};
-use super::object::SurfelObject;
+use super::object::{SurfelObject, NO_NBR};
 use super::top::TopTree;
 use super::tree::{child_bound, leaf_sphere, max_reach_x8, sphere_test_1, sphere_test_spheres, RayPacketX8, Topology, LEAF, RADIUS_PAD};
 use super::DeformError;
@@ -1249,21 +1249,27 @@ impl DeformTracer {
         let ii = &self.inst[k];
         let obj = &ii.obj;
         let (sc, sr) = leaf_sphere(ds);
+        // The iteration runs relative to the leaf's centre: its convergence test compares
+        // |f(x)| with eps_rel·h, which absolute coordinates cannot resolve far from the
+        // origin (at 300 units their rounding is 3e-5, ε for h = 0.05 is 5e-6: every
+        // iteration ran out and the surface got holes; review finding, stop 49, test
+        // `objects_far_from_the_origin_are_hit_as_near_it`).
         let mut nb = MlsNbr::default();
         let nk = obj.nk.min(MAX_NBR);
-        for q in &obj.nbr[s * obj.nk..s * obj.nk + nk] {
+        for q in obj.nbr[s * obj.nk..s * obj.nk + nk].iter().take_while(|&&q| q != NO_NBR) {
             let (p, n) = self.surfel_pn(ii, *q as usize);
-            nb.push(p, n);
+            nb.push(p - sc, n);
         }
         let h = obj.h[s] * ds.stretch.clamp(1.0, self.params.max_support_stretch);
         dc.mls_runs += 1;
-        match mls_intersect_x8(ray.org, ray.dir, t0, x0, &nb, h, sc, sr, ray.tnear, ray.tfar, &self.params.mls) {
+        match mls_intersect_x8(ray.org - sc, ray.dir, t0, x0 - sc, &nb, h, Vec3::ZERO, sr, ray.tnear, ray.tfar, &self.params.mls) {
             MlsOutcome::Rejected { iters } => {
                 dc.mls_iterations += iters as u64;
                 dc.mls_rejected += 1;
                 None
             }
             MlsOutcome::Hit { t, p, n: nrm, iters } => {
+                let p = p + sc;
                 dc.mls_iterations += iters as u64;
                 dc.mls_hits += 1;
                 let c = obj.coll[s];
@@ -1289,7 +1295,7 @@ impl DeformTracer {
 
     /// [`intersect`](Self::intersect) with the tracer's own counters.
     pub fn intersect_ex(&self, ray: &Ray, slot: Option<u32>, ctr: &mut Counters, dc: &mut DeformCounters) -> Option<SurfelHit> {
-        if !ray.is_valid() || self.frame == 0 {
+        if !traceable(ray) || self.frame == 0 {
             return None;
         }
         let mut best = Best::new(ray.tfar, self.params.nearest_ellipse);
@@ -1334,7 +1340,7 @@ impl DeformTracer {
     /// surfel) wins, the key being `t0` under the nearest-ellipse rule (except for clipped
     /// collections) and the MLS `t` otherwise. Slow: for tests.
     pub fn closest_brute(&self, ray: &Ray) -> Option<SurfelHit> {
-        if !ray.is_valid() || self.frame == 0 {
+        if !traceable(ray) || self.frame == 0 {
             return None;
         }
         let (mut dc, mut ctr) = (DeformCounters::default(), Counters::default());
@@ -1502,7 +1508,7 @@ impl DeformTracer {
     }
 
     pub fn occluded_ex(&self, ray: &Ray, ctr: &mut Counters, dc: &mut DeformCounters) -> bool {
-        if !ray.is_valid() || self.frame == 0 {
+        if !traceable(ray) || self.frame == 0 {
             return false;
         }
         if self.mode == UpdateMode::Refit {
@@ -2156,7 +2162,18 @@ fn lanes(m: u8) -> impl Iterator<Item = usize> {
 /// Bit i set when `rays[i]` is valid.
 #[inline]
 fn valid_mask(rays: &[Ray]) -> u8 {
-    rays.iter().enumerate().fold(0u8, |m, (i, r)| if r.is_valid() { m | 1 << i } else { m })
+    rays.iter().enumerate().fold(0u8, |m, (i, r)| if traceable(r) { m | 1 << i } else { m })
+}
+
+/// Whether the tracer takes `ray` at all (every entry point, [`DeformTracer::closest_brute`]
+/// included, so the hits still equal the brute-force search's): a valid ray
+/// ([`Ray::is_valid`]) whose direction's squared length lies in [1e-24, 1e24]. Directions are
+/// not normalised, and beyond that range the sphere kernels' squares underflow or overflow
+/// (a direction of length 1e-20 culled every node past the first hit; review finding,
+/// stop 49).
+#[inline]
+fn traceable(ray: &Ray) -> bool {
+    ray.is_valid() && (1e-24..=1e24).contains(&ray.dir.length_squared())
 }
 
 /// The rays of `valid` as a packet; other lanes get a harmless dummy ray (they are masked).

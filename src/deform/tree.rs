@@ -574,8 +574,10 @@ impl RayPacketX8 {
         let den = sp(n.x) * dx + sp(n.y) * dy + sp(n.z) * dz;
         let (wx, wy, wz) = (sp(c.x) - ox, sp(c.y) - oy, sp(c.z) - oz);
         let t = (sp(n.x) * wx + sp(n.y) * wy + sp(n.z) * wz) / den;
-        let x = [ox + dx * t, oy + dy * t, oz + dz * t];
-        let (qx, qy, qz) = (x[0] - sp(c.x), x[1] - sp(c.y), x[2] - sp(c.z));
+        let (dtx, dty, dtz) = (dx * t, dy * t, dz * t);
+        let x = [ox + dtx, oy + dty, oz + dtz];
+        // As `ellipse_hit`: the offset from the centre as d·t − (c − o).
+        let (qx, qy, qz) = (dtx - wx, dty - wy, dtz - wz);
         let qu = qx * sp(u.x) + qy * sp(u.y) + qz * sp(u.z);
         let qv = qx * sp(v.x) + qy * sp(v.y) + qz * sp(v.z);
         let al = (sp(cc) * qu - sp(b) * qv) / sp(det);
