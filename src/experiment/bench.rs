@@ -385,7 +385,10 @@ pub struct EqualTime {
     /// The sweep's mean FLIP at this row's render time (interpolated in log time); `None`
     /// when this row is faster than the sweep's 1-spp render (below its curve).
     pub sweep_flip_at_equal_time: Option<f64>,
-    /// Samples per pixel the sweep affords in this row's time (interpolated).
+    /// Samples per pixel the sweep affords in this row's time (interpolated): the mean the
+    /// sweep's renders actually took (the `samples` counter over the pixels), which for the
+    /// adaptive distributed tracer is below its `spp=` setting (`spp=64` takes at most 51,
+    /// 33 with the default variance threshold). Until stop 49 this was the setting.
     pub sweep_spp_at_equal_time: Option<f64>,
     /// Render seconds the sweep needs to reach this row's FLIP; `None` when the sweep did
     /// not reach it (then `sweep_max_seconds` is a lower bound).
@@ -395,6 +398,10 @@ pub struct EqualTime {
     /// The sweep's first (1-spp) point already has a lower FLIP than this row: the two
     /// figures above are upper bounds (its 1-spp time), not interpolated.
     pub sweep_match_at_most: bool,
+    /// This row took longer than the sweep's last (slowest) render: the two figures at equal
+    /// time are that last render's, a bound (in this row's time the sweep would do at least
+    /// as well), not an interpolation.
+    pub sweep_beyond: bool,
     pub sweep_max_seconds: f64,
     /// The same comparison inside each `--region`: the sweep's curve of that region's mean
     /// FLIP against this row's. A method can win one part of the image at equal time (the
@@ -414,6 +421,8 @@ pub struct RegionEqualTime {
     pub time_ratio_at_equal_error: Option<f64>,
     /// As [`EqualTime::sweep_match_at_most`].
     pub sweep_match_at_most: bool,
+    /// As [`EqualTime::sweep_beyond`].
+    pub sweep_beyond: bool,
 }
 
 /// Interpolates the sweep curve (`(seconds, spp, flip)`, sorted by spp) for a method at
@@ -421,7 +430,7 @@ pub struct RegionEqualTime {
 /// neighbouring sweep points; error is interpolated linearly.
 pub fn equal_time(sweep: &[(f64, f64, f64)], t: f64, flip: f64, name: &str) -> EqualTime {
     let lt = |x: f64| x.max(1e-9).ln();
-    let mut at_t = None;
+    let (mut at_t, mut beyond) = (None, false);
     for w in sweep.windows(2) {
         let ((t0, s0, f0), (t1, s1, f1)) = (w[0], w[1]);
         if t >= t0 && t <= t1 {
@@ -434,7 +443,7 @@ pub fn equal_time(sweep: &[(f64, f64, f64)], t: f64, flip: f64, name: &str) -> E
         if let Some(&(tl, sl, fl)) = sweep.last() {
             if t >= tl {
                 // Slower than the whole sweep: its last point is the best known bound.
-                at_t = Some((fl, sl));
+                (at_t, beyond) = (Some((fl, sl)), t > tl);
             }
         }
     }
@@ -463,6 +472,7 @@ pub fn equal_time(sweep: &[(f64, f64, f64)], t: f64, flip: f64, name: &str) -> E
         sweep_seconds_to_match: to_match,
         time_ratio_at_equal_error: to_match.map(|m| m / t.max(1e-12)),
         sweep_match_at_most: at_most,
+        sweep_beyond: beyond,
         regions: Vec::new(),
         sweep_max_seconds: sweep.iter().map(|x| x.0).fold(0.0, f64::max),
     }
@@ -850,10 +860,14 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                 row.speedup_vs_first = t0 / row.stats.render_seconds.max(1e-12);
                 row.sweep = Some(sw.text.clone());
                 let (t, f) = (row.stats.render_seconds, row.flip.unwrap_or(0.0));
-                curve.push((t, spp as f64, f));
+                // Samples actually taken per pixel (the adaptive tracer takes fewer than its
+                // setting); the setting where a tracer does not count them.
+                let taken = row.stats.counters.get("samples").copied().unwrap_or(0) as f64 / (a.width as f64 * a.height as f64);
+                let n = if taken > 0.0 { taken } else { spp as f64 };
+                curve.push((t, n, f));
                 region_curves.resize(row.regions.len(), Vec::new());
                 for (c, g) in region_curves.iter_mut().zip(&row.regions) {
-                    c.push((t, spp as f64, g.figures.flip_mean));
+                    c.push((t, n, g.figures.flip_mean));
                 }
                 rows.push(row);
                 if (t >= t_slowest && f <= f_best) || spp.saturating_mul(2) > a.sweep_max_spp {
@@ -873,6 +887,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                             sweep_seconds_to_match: ge.sweep_seconds_to_match,
                             time_ratio_at_equal_error: ge.time_ratio_at_equal_error,
                             sweep_match_at_most: ge.sweep_match_at_most,
+                            sweep_beyond: ge.sweep_beyond,
                         });
                     }
                     r.equal_time.push(e);
@@ -1059,9 +1074,10 @@ pub fn table_string(report: &BenchReport) -> String {
     for r in &report.rows {
         let f = |x: Option<f64>, p: usize| x.map(|v| format!("{v:.p$}")).unwrap_or_else(|| "-".into());
         s.push_str(&format!(
-            "| {} | {} | {} | {:.3} | {:.3} | {:.2} | {:.2}x | {} | {} | {} | {} | {} |\n",
+            "| {} | {}{} | {} | {:.3} | {:.3} | {:.2} | {:.2}x | {} | {} | {} | {} | {} |\n",
             r.scene,
             r.spec,
+            if r.stats.finished { "" } else { " (stopped at its time budget: incomplete image)" },
             r.stats.threads,
             r.stats.build_seconds,
             r.stats.render_seconds,
@@ -1111,10 +1127,11 @@ pub fn table_string(report: &BenchReport) -> String {
         let eq: Vec<(&BenchRow, &EqualTime)> =
             report.rows.iter().filter_map(|r| r.equal_time.iter().find(|e| e.sweep == name).map(|e| (r, e))).collect();
         s.push_str(&format!("\nEqual time and equal error against {name} (mean FLIP against the reference):\n\n"));
-        s.push_str("| scene | method | render s | FLIP | sweep FLIP at equal time (spp) | sweep time to match FLIP | time ratio at equal error |\n");
+        s.push_str("| scene | method | render s | FLIP | sweep FLIP at equal time (samples per pixel) | sweep time to match FLIP | time ratio at equal error |\n");
         s.push_str("|---|---|---:|---:|---:|---:|---:|\n");
         for &(r, e) in &eq {
             let at = match (e.sweep_flip_at_equal_time, e.sweep_spp_at_equal_time) {
+                (Some(f), Some(n)) if e.sweep_beyond => format!("≤ {f:.4} ({n:.1}; slower than the whole sweep)"),
                 (Some(f), Some(n)) => format!("{f:.4} ({n:.1})"),
                 _ => "faster than 1 spp".into(),
             };
@@ -1145,7 +1162,13 @@ pub fn table_string(report: &BenchReport) -> String {
             for &&(r, e) in &eqr {
                 s.push_str(&format!("| {} | {} | {:.3} |", r.scene, r.spec, r.stats.render_seconds));
                 for g in &e.regions {
-                    let at = g.sweep_flip_at_equal_time.map_or("-".into(), |f| format!("{f:.4}"));
+                    let at = g.sweep_flip_at_equal_time.map_or("-".into(), |f| {
+                        if g.sweep_beyond {
+                            format!("≤ {f:.4}")
+                        } else {
+                            format!("{f:.4}")
+                        }
+                    });
                     let q = g.time_ratio_at_equal_error.map_or_else(
                         || format!("> {:.2}x", e.sweep_max_seconds / r.stats.render_seconds.max(1e-12)),
                         |q| if g.sweep_match_at_most { format!("≤ {q:.2}x") } else { format!("{q:.2}x") },
@@ -1280,6 +1303,10 @@ mod tests {
         assert_eq!(e.sweep_seconds_to_match, None);
         assert_eq!(e.sweep_flip_at_equal_time, Some(0.1));
         assert_eq!(e.sweep_max_seconds, 4.0);
+        // ... which is a bound, flagged (stop 49; it was printed as an interpolated value).
+        assert!(e.sweep_beyond);
+        assert!(!equal_time(&c, 2.0, 0.25, "d").sweep_beyond);
+        assert!(!equal_time(&c, 4.0, 0.25, "d").sweep_beyond, "the last point itself is not beyond the sweep");
         // Faster than 1 spp: no equal-time point; worse than 1 spp: matched by its time, at
         // most (an upper bound, flagged).
         let e = equal_time(&c, 0.5, 0.5, "d");

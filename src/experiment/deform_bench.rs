@@ -210,7 +210,10 @@ pub fn run(
                 sphere_tests_per_frame: st.per_frame.iter().map(|r| r.sphere_tests).sum::<u64>() as f64 / n,
                 leaf_tests_per_frame: st.per_frame.iter().map(|r| r.leaf_tests).sum::<u64>() as f64 / n,
                 mls_runs_per_frame: st.per_frame.iter().map(|r| r.mls_runs).sum::<u64>() as f64 / n,
-                mls_iterations_mean: st.per_frame.iter().map(|r| r.mls_iterations_mean).sum::<f64>() / n,
+                // Over all MLS runs of the sequence, not a mean of the frames' means (a frame
+                // without runs would count as 0 iterations).
+                mls_iterations_mean: st.per_frame.iter().map(|r| r.mls_iterations_mean * r.mls_runs as f64).sum::<f64>()
+                    / st.per_frame.iter().map(|r| r.mls_runs).sum::<u64>().max(1) as f64,
                 cache_lookups: st.per_frame.iter().map(|r| r.cache_lookups).sum(),
                 cache_hits: st.per_frame.iter().map(|r| r.cache_hits).sum(),
                 inner_nodes_updated_per_frame: st.per_frame.iter().map(|r| r.inner_nodes_updated).sum::<u64>() as f64 / n,
