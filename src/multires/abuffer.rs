@@ -184,7 +184,9 @@ impl Frag {
         // it, so `first()` (totals less `other`) is wrong once `other` has taken a group here.
         // (Until stop 49 it was used: absorbing a two-mesh fragment could put its second mesh
         // with the wrong group; review finding, test `third_mesh_joins_the_nearer_group`.)
-        let mut mine = self.first();
+        // Only read where `other` is taken, which needs a second mesh here or in `s`: the
+        // common single-mesh merge skips the copy.
+        let mut mine = if self.other.w > 0.0 || s.other.w > 0.0 { self.first() } else { Group::default() };
         for (g, gz0) in [(s.first(), s.z0_key), (s.other, s.other.z0)] {
             if !(g.w > 0.0) {
                 continue;
