@@ -6,8 +6,9 @@
 //! - Key: a 64-bit hash of everything the tree depends on — the mesh geometry (positions,
 //!   normals, triangles), the materials the triangles use (colour and the seven shading
 //!   properties, by value, in first-use order; names do not matter), every field of
-//!   [`BuildParams`], [`FORMAT_VERSION`] and the crate version. Bump [`FORMAT_VERSION`] when
-//!   the builder or the layout changes, so old files are never read.
+//!   [`BuildParams`], [`FORMAT_VERSION`], the crate version and the text of the builder's
+//!   source files (`build.rs`, `quant.rs`, this file), so a changed builder never reads what
+//!   an older one wrote. Bump [`FORMAT_VERSION`] when the layout changes all the same.
 //! - Format: a compact little-endian binary image of the struct-of-arrays (no new dependency:
 //!   the arrays are plain numbers, a dozen lines of writer/reader, like the LOD chain cache).
 //!   Header: magic, format version, key, payload length and a checksum of the payload; then
@@ -31,8 +32,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Version of the cached layout *and* of the builder's output: bump on any change to either.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 5;
 const MAGIC: [u8; 8] = *b"LTPTREE\0";
+/// The source files whose code decides a tree's content, hashed into the key.
+const BUILDER_SOURCE: [&str; 3] = [include_str!("build.rs"), include_str!("quant.rs"), include_str!("cache.rs")];
 /// magic, version, key, payload length, checksum.
 const HEADER: usize = 8 + 4 + 8 + 8 + 8;
 
@@ -75,6 +78,11 @@ pub fn key(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> u64 {
     h.write(b"lodtrace-pointtree");
     h.write_u32(FORMAT_VERSION);
     h.write(env!("CARGO_PKG_VERSION").as_bytes());
+    // The builder's own source: a changed build never reads a tree an older one wrote, even
+    // when nobody bumped FORMAT_VERSION (stop 49 lost a fix to exactly that).
+    for src in BUILDER_SOURCE {
+        h.write(src.as_bytes());
+    }
     let BuildParams { k, c, stay_reps, max_depth, seed, weights } = params; // every field (a new one fails to compile here)
     for x in [*k, c.to_bits(), *stay_reps, *max_depth, *seed, *weights as u32] {
         h.write_u32(x);
@@ -318,7 +326,7 @@ pub fn decode(b: &[u8], key: u64, n_tris: usize, params: &BuildParams) -> Option
             return None;
         }
     }
-    let g = 2 * k; // grid cells per axis, margin included
+    let g = 2 * k * super::build::codes_per_voxel(k); // position codes per axis, margin included
     if points.qx.iter().chain(&points.qy).chain(&points.qz).any(|&q| q as u32 >= g) {
         return None;
     }

@@ -1056,13 +1056,13 @@ pub struct PointBlock<'t> {
 impl<'t> PointBlock<'t> {
     #[inline]
     pub fn new(tree: &'t PointTree, node: usize, cone: &Cone) -> Self {
-        let h = tree.spacing(tree.nodes.depth[node]);
+        let st = tree.code_step(tree.nodes.depth[node]);
         let s = tree.nodes.pt_start[node] as usize;
         let n = tree.nodes.pt_count[node] as usize;
         let p = &tree.points;
         let e = (s + n + 7).min(p.len());
         let g = (&p.qx[s..e], &p.qy[s..e], &p.qz[s..e]);
-        Self { n, ..Self::from_grid(g, &p.normal[s..e], &p.cover[s..e], tree.nodes.grid_lo[node], h, cone) }
+        Self { n, ..Self::from_grid(g, &p.normal[s..e], &p.cover[s..e], tree.nodes.grid_lo[node], st, cone) }
     }
     /// A block of grid coordinates `q` (voxel centres at grid_lo + (q + ½)·h) in the ray
     /// coordinates of `cone`.
