@@ -162,3 +162,34 @@ fn odd_meshes_get_chains() {
     assert_eq!(c.levels.len(), 8);
     assert!(c.levels.iter().all(|l| !l.tris.is_empty()));
 }
+
+/// Selective tracing (§4) drops the weaker child "provided that the LOD used is less than
+/// 100 %": a ray whose LOD maps to the full-detail model L₀ keeps both children. So with one
+/// level per mesh (only L₀ exists) the LOD tracer renders exactly what the full-detail tracer
+/// renders, and so do the pixels whose level-1 rays all use L₀ with the default chain (the
+/// flat mirror of the cabinet, Fig. 6: "for rays that hit the perfect flat mirror … the LOD is
+/// not decreased").
+#[test]
+fn full_detail_models_are_traced_without_selective_drops() {
+    use lodtrace::core::stats::Counter;
+    use lodtrace::lod::chain::level_of;
+    for name in ["cabinet", "chessboard"] {
+        let scene = builtin::get(name).unwrap();
+        let o = opts(64, 48, 1);
+        let w = render(&scene, Method::Whitted, AccelKind::Bvh, &o, &LodArgs::default());
+        let one = render(&scene, Method::Lod, AccelKind::Bvh, &o, &LodArgs { lod_levels: 1, ..Default::default() });
+        let differ = w.out.film.color.iter().zip(&one.out.film.color).filter(|(a, b)| a != b).count();
+        let dropped = one.out.counters.get(Counter::lod_rays_dropped);
+        assert_eq!((differ, dropped), (0, 0), "{name}, one level: pixels differing, rays dropped");
+        // Default chain: the pixels whose level-1 rays all use L₀.
+        let l = render(&scene, Method::Lod, AccelKind::Bvh, &o, &LodArgs::default());
+        let m = &l.lod.as_ref().unwrap().maps;
+        let full: Vec<usize> = (0..m.lod_r.len()).filter(|&i| level_of(m.lod_r[i], 7) == 0 && level_of(m.lod_t[i], 7) == 0).collect();
+        let reflective = full.iter().filter(|&&i| m.d_r[i] > 0.0 || m.d_t[i] > 0.0).count();
+        if name == "cabinet" {
+            assert!(reflective > 50, "{name}: {reflective} full-detail pixels with level-1 rays");
+        }
+        let differ = full.iter().filter(|&&i| w.out.film.color[i] != l.out.film.color[i]).count();
+        assert_eq!(differ, 0, "{name}: full-detail pixels that differ from the full-detail render (of {})", full.len());
+    }
+}
