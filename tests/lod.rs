@@ -193,3 +193,33 @@ fn full_detail_models_are_traced_without_selective_drops() {
         assert_eq!(differ, 0, "{name}: full-detail pixels that differ from the full-detail render (of {})", full.len());
     }
 }
+
+/// The distance criterion gives an object its highest model LOD⁽⁰⁾ (§2.2), and the level-1
+/// LOD is LOD⁽¹⁾ = LOD⁽⁰⁾·(1 − d)^f (§3): the two multiply, and the model must keep at least
+/// that fraction of the triangles (§2). An object at twice the criterion's distance
+/// (LOD⁽⁰⁾ = 0.5) seen by a ray of LOD x gets model `level_of(0.5·x)`, not a coarser one.
+#[test]
+fn distance_lod_and_ray_lod_multiply() {
+    use glam::{Affine3A, Vec3};
+    use lodtrace::lod::chain::{level_of, ChainParams, LodScenes};
+    use lodtrace::scene::{Scene, Target};
+    let mut s = Scene::empty("far");
+    let m = s.add_mesh(builtin::uv_sphere(48, 96, 0));
+    // A unit sphere whose bounding box is 20 from the eye: with dist₀ = 10, LOD⁽⁰⁾ = 0.5.
+    s.instance(Target::Mesh(m), Affine3A::from_translation(Vec3::new(0.0, 0.0, -21.0)), None);
+    s.camera.eye = Vec3::ZERO;
+    s.camera.look = -Vec3::Z;
+    let ls = LodScenes::build(&s, &ChainParams { levels: 8, distance: Some(10.0) }).unwrap();
+    let tris = ls.triangles_per_level();
+    let chain: Vec<u64> = ls.chains[0].levels.iter().map(|l| l.tris.len() as u64).collect();
+    let mut got = Vec::new();
+    let mut want = Vec::new();
+    for r in 0..=7u32 {
+        // The largest ray LOD of level r.
+        let x = (7 - r) as f32 / 7.0;
+        got.push(tris[r as usize]);
+        want.push(chain[level_of(0.5 * x, 7) as usize]);
+    }
+    assert_eq!(got[0], chain[3], "primary rays: the distance criterion's model");
+    assert!(got.iter().zip(&want).all(|(g, w)| g >= w), "triangles per ray level {got:?}, at least {want:?}");
+}
