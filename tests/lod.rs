@@ -223,3 +223,43 @@ fn distance_lod_and_ray_lod_multiply() {
     assert_eq!(got[0], chain[3], "primary rays: the distance criterion's model");
     assert!(got.iter().zip(&want).all(|(g, w)| g >= w), "triangles per ray level {got:?}, at least {want:?}");
 }
+
+/// The bench's "max diff, full-LOD pixels" is documented as the largest difference among
+/// the pixels whose level-1 rays all kept full detail, "e.g. those seen in a flat mirror":
+/// the pixels whose level-1 LODs map to the full-detail model L₀ (§2: k = lvl_max −
+/// ⌈LOD·lvl_max⌉). With deeper rays degrading everywhere (thres = 0, a = 1) those
+/// pixels differ from full detail, and the figure must say so.
+#[test]
+fn bench_full_lod_figure_covers_the_pixels_at_the_full_detail_model() {
+    use lodtrace::experiment::bench::{self, BenchArgs};
+    use lodtrace::lod::chain::level_of;
+    let a = BenchArgs {
+        scenes: vec!["cabinet".into()],
+        methods: "whitted:bvh,lod:bvh:thres=0:a=1".into(),
+        reference: None,
+        out: None,
+        width: 64,
+        height: 48,
+        threads: 2,
+        repeat: 1,
+        sweep: vec![],
+        sweep_max_spp: 256,
+        regions: vec![],
+        sizes: None,
+        quiet: true,
+    };
+    let got = bench::bench(&a).unwrap().rows[1].lod_vs_full.as_ref().unwrap().max_diff_full_lod_pixels;
+    // The same figure, computed here.
+    let scene = builtin::get("cabinet").unwrap();
+    let specs = bench::parse_list(&a.methods).unwrap();
+    let (wf, ..) = bench::run_spec(&scene, &specs[0], 64, 48, 2, 1, true).unwrap();
+    let (lf, _, maps, _) = bench::run_spec(&scene, &specs[1], 64, 48, 2, 1, true).unwrap();
+    let m = maps.unwrap();
+    let d = bench::pixel_diff(&lf, &wf);
+    let full: Vec<usize> = (0..d.len()).filter(|&i| level_of(m.lod_r[i], 7) == 0 && level_of(m.lod_t[i], 7) == 0).collect();
+    let mirrored = full.iter().filter(|&&i| m.d_r[i] > 0.0).count();
+    assert!(mirrored > 50, "{mirrored} full-detail pixels with a reflected ray");
+    let want = full.iter().map(|&i| d[i]).fold(0.0f32, f32::max) as f64;
+    assert!(want > 0.0, "deeper rays degraded somewhere in those pixels");
+    assert_eq!(got, want, "max diff over the full-detail pixels");
+}
