@@ -162,3 +162,104 @@ fn odd_meshes_get_chains() {
     assert_eq!(c.levels.len(), 8);
     assert!(c.levels.iter().all(|l| !l.tris.is_empty()));
 }
+
+/// Selective tracing (§4) drops the weaker child "provided that the LOD used is less than
+/// 100 %": a ray whose LOD maps to the full-detail model L₀ keeps both children. So with one
+/// level per mesh (only L₀ exists) the LOD tracer renders exactly what the full-detail tracer
+/// renders, and so do the pixels whose level-1 rays all use L₀ with the default chain (the
+/// flat mirror of the cabinet, Fig. 6: "for rays that hit the perfect flat mirror … the LOD is
+/// not decreased").
+#[test]
+fn full_detail_models_are_traced_without_selective_drops() {
+    use lodtrace::core::stats::Counter;
+    use lodtrace::lod::chain::level_of;
+    for name in ["cabinet", "chessboard"] {
+        let scene = builtin::get(name).unwrap();
+        let o = opts(64, 48, 1);
+        let w = render(&scene, Method::Whitted, AccelKind::Bvh, &o, &LodArgs::default());
+        let one = render(&scene, Method::Lod, AccelKind::Bvh, &o, &LodArgs { lod_levels: 1, ..Default::default() });
+        let differ = w.out.film.color.iter().zip(&one.out.film.color).filter(|(a, b)| a != b).count();
+        let dropped = one.out.counters.get(Counter::lod_rays_dropped);
+        assert_eq!((differ, dropped), (0, 0), "{name}, one level: pixels differing, rays dropped");
+        // Default chain: the pixels whose level-1 rays all use L₀.
+        let l = render(&scene, Method::Lod, AccelKind::Bvh, &o, &LodArgs::default());
+        let m = &l.lod.as_ref().unwrap().maps;
+        let full: Vec<usize> = (0..m.lod_r.len()).filter(|&i| level_of(m.lod_r[i], 7) == 0 && level_of(m.lod_t[i], 7) == 0).collect();
+        let reflective = full.iter().filter(|&&i| m.d_r[i] > 0.0 || m.d_t[i] > 0.0).count();
+        if name == "cabinet" {
+            assert!(reflective > 50, "{name}: {reflective} full-detail pixels with level-1 rays");
+        }
+        let differ = full.iter().filter(|&&i| w.out.film.color[i] != l.out.film.color[i]).count();
+        assert_eq!(differ, 0, "{name}: full-detail pixels that differ from the full-detail render (of {})", full.len());
+    }
+}
+
+/// The distance criterion gives an object its highest model LOD⁽⁰⁾ (§2.2), and the level-1
+/// LOD is LOD⁽¹⁾ = LOD⁽⁰⁾·(1 − d)^f (§3): the two multiply, and the model must keep at least
+/// that fraction of the triangles (§2). An object at twice the criterion's distance
+/// (LOD⁽⁰⁾ = 0.5) seen by a ray of LOD x gets model `level_of(0.5·x)`, not a coarser one.
+#[test]
+fn distance_lod_and_ray_lod_multiply() {
+    use glam::{Affine3A, Vec3};
+    use lodtrace::lod::chain::{level_of, ChainParams, LodScenes};
+    use lodtrace::scene::{Scene, Target};
+    let mut s = Scene::empty("far");
+    let m = s.add_mesh(builtin::uv_sphere(48, 96, 0));
+    // A unit sphere whose bounding box is 20 from the eye: with dist₀ = 10, LOD⁽⁰⁾ = 0.5.
+    s.instance(Target::Mesh(m), Affine3A::from_translation(Vec3::new(0.0, 0.0, -21.0)), None);
+    s.camera.eye = Vec3::ZERO;
+    s.camera.look = -Vec3::Z;
+    let ls = LodScenes::build(&s, &ChainParams { levels: 8, distance: Some(10.0) }).unwrap();
+    let tris = ls.triangles_per_level();
+    let chain: Vec<u64> = ls.chains[0].levels.iter().map(|l| l.tris.len() as u64).collect();
+    let mut got = Vec::new();
+    let mut want = Vec::new();
+    for r in 0..=7u32 {
+        // The largest ray LOD of level r.
+        let x = (7 - r) as f32 / 7.0;
+        got.push(tris[r as usize]);
+        want.push(chain[level_of(0.5 * x, 7) as usize]);
+    }
+    assert_eq!(got[0], chain[3], "primary rays: the distance criterion's model");
+    assert!(got.iter().zip(&want).all(|(g, w)| g >= w), "triangles per ray level {got:?}, at least {want:?}");
+}
+
+/// The bench's "max diff, full-LOD pixels" is documented as the largest difference among
+/// the pixels whose level-1 rays all kept full detail, "e.g. those seen in a flat mirror":
+/// the pixels whose level-1 LODs map to the full-detail model L₀ (§2: k = lvl_max −
+/// ⌈LOD·lvl_max⌉). With deeper rays degrading everywhere (thres = 0, a = 1) those
+/// pixels differ from full detail, and the figure must say so.
+#[test]
+fn bench_full_lod_figure_covers_the_pixels_at_the_full_detail_model() {
+    use lodtrace::experiment::bench::{self, BenchArgs};
+    use lodtrace::lod::chain::level_of;
+    let a = BenchArgs {
+        scenes: vec!["cabinet".into()],
+        methods: "whitted:bvh,lod:bvh:thres=0:a=1".into(),
+        reference: None,
+        out: None,
+        width: 64,
+        height: 48,
+        threads: 2,
+        repeat: 1,
+        sweep: vec![],
+        sweep_max_spp: 256,
+        regions: vec![],
+        sizes: None,
+        quiet: true,
+    };
+    let got = bench::bench(&a).unwrap().rows[1].lod_vs_full.as_ref().unwrap().max_diff_full_lod_pixels;
+    // The same figure, computed here.
+    let scene = builtin::get("cabinet").unwrap();
+    let specs = bench::parse_list(&a.methods).unwrap();
+    let (wf, ..) = bench::run_spec(&scene, &specs[0], 64, 48, 2, 1, true).unwrap();
+    let (lf, _, maps, _) = bench::run_spec(&scene, &specs[1], 64, 48, 2, 1, true).unwrap();
+    let m = maps.unwrap();
+    let d = bench::pixel_diff(&lf, &wf);
+    let full: Vec<usize> = (0..d.len()).filter(|&i| level_of(m.lod_r[i], 7) == 0 && level_of(m.lod_t[i], 7) == 0).collect();
+    let mirrored = full.iter().filter(|&&i| m.d_r[i] > 0.0).count();
+    assert!(mirrored > 50, "{mirrored} full-detail pixels with a reflected ray");
+    let want = full.iter().map(|&i| d[i]).fold(0.0f32, f32::max) as f64;
+    assert!(want > 0.0, "deeper rays degraded somewhere in those pixels");
+    assert_eq!(got, want, "max diff over the full-detail pixels");
+}

@@ -22,9 +22,15 @@
 //!
 //! Per-level scenes ([`LodScenes`]): level scene r holds every leaf instance of the input
 //! scene, in the same order (so a hit's instance index means the same object at every
-//! level), with the mesh of level `min(lvl_max, r + offset(instance))`; the offset is the
-//! optional distance criterion (§2.2: the distance of the object's bounding box from the
-//! viewer gives its highest model), composed with the ray's level in level space.
+//! level). Without the distance criterion the instance has the mesh of level r. With it
+//! (§2.2: the distance of the object's bounding box from the viewer gives LOD⁽⁰⁾, its
+//! highest model) the two LODs multiply as in §3 (`LOD⁽¹⁾ = LOD⁽⁰⁾·(1 − d)^f`, and so on
+//! down the tree): level scene r holds model `level_of(LOD⁽⁰⁾ · (lvl_max − r)/lvl_max)`,
+//! the product with the largest ray LOD that maps to level r. Scenes are per ray level, not
+//! per ray LOD, so this is the paper's per-ray product rounded towards detail: never a
+//! coarser model than the paper's, at most one level finer. (Adding the two *levels*
+//! instead would be coarser than the paper: LOD⁽⁰⁾ = 0.5 and a ray LOD of 4/7 gave level 6,
+//! 1/7 of the triangles, where the product 2/7 asks for level 5.)
 
 use crate::error::{Error, Result};
 use crate::scene::{Instance, Mesh, Scene, Target};
@@ -261,7 +267,7 @@ pub struct ChainParams {
 pub struct LodScenes {
     pub scenes: Vec<Scene>,
     pub chains: Vec<LodChain>,
-    /// Level offset of each leaf instance from the distance criterion (0 without it).
+    /// Level of each leaf instance's highest model, from the distance criterion (0 without it).
     pub offsets: Vec<u32>,
     pub lvl_max: u32,
     pub build_seconds: f64,
@@ -282,27 +288,31 @@ impl LodScenes {
         let leaves = scene.leaf_instances()?;
         let chains: Vec<LodChain> = scene.meshes.par_iter().map(|m| LodChain::cached(m, p.levels)).collect();
         let eye = scene.camera.eye;
-        let offsets: Vec<u32> = leaves
+        // LOD⁽⁰⁾ of each leaf instance (1 without the distance criterion).
+        let lod0: Vec<f32> = leaves
             .iter()
             .map(|l| match p.distance {
-                None => 0,
+                None => 1.0,
                 Some(d0) => {
                     let (lo, hi) = scene.meshes[l.mesh as usize].bounds();
                     let dist = world_box_distance(&l.xform, lo, hi, eye);
                     if dist <= d0 {
-                        0
+                        1.0
                     } else {
-                        level_of(d0 / dist, lvl_max)
+                        d0 / dist
                     }
                 }
             })
             .collect();
+        let offsets: Vec<u32> = lod0.iter().map(|&x| level_of(x, lvl_max)).collect();
         let mut scenes = Vec::with_capacity(p.levels as usize);
         for r in 0..=lvl_max {
             let mut s = scene.clone_without_geometry();
             let mut ids: HashMap<(u32, u32), u32> = HashMap::new();
+            // The largest ray LOD that maps to level r.
+            let ray_lod = if lvl_max == 0 { 1.0 } else { (lvl_max - r) as f32 / lvl_max as f32 };
             for (o, l) in leaves.iter().enumerate() {
-                let k = (r + offsets[o]).min(lvl_max);
+                let k = level_of(lod0[o] * ray_lod, lvl_max);
                 let id = *ids.entry((l.mesh, k)).or_insert_with(|| {
                     s.meshes.push(chains[l.mesh as usize].levels[k as usize].clone());
                     (s.meshes.len() - 1) as u32

@@ -11,10 +11,14 @@
 //! Deeper rays carry the attenuation `k⁽ᵐ⁾ = k⁽ᵐ⁻¹⁾·k_r` (reflection) or `·k_t` (transmission)
 //! and, when the disparity their level-1 ancestor measured exceeds `thres_LOD`, degrade by
 //! `λ⁽ᵐ⁾ = 1 − a_LOD + a_LOD·k⁽ᵐ⁾`. Each ray keeps the list of objects it is inside with the
-//! level it entered them at, and tests the exit against that level (Fig. 3). At levels ≥ 2
-//! with LOD < 1, of a reflected and a transmitted child whose strengths differ by more than
-//! 200 % only the stronger is traced (§4, selective tracing). Shadow rays use the level of
-//! the incident ray.
+//! level it entered them at, and tests the exit against that level (Fig. 3). At levels ≥ 2,
+//! of a reflected and a transmitted child whose strengths differ by more than 200 % only the
+//! stronger is traced (§4, selective tracing), "provided that the LOD used is less than
+//! 100 %": only when the incident ray's LOD selects a model coarser than L₀ (k > 0). A ray
+//! whose LOD is below 1 but still maps to L₀ (a flat mirror's level-1 rays, whose absolute
+//! disparity is the pixel's own angle; a chain of one level) uses the full-detail model and
+//! keeps both children, so its sub-tree renders exactly as the full-detail tracer's. Shadow
+//! rays use the level of the incident ray.
 //!
 //! Choices and deviations, written down:
 //! - The λ formula in the paper's text reads `λ = 1` when `d > thres_LOD` and
@@ -295,7 +299,8 @@ impl<'a> LodTracer<'a> {
         let kr = sec.reflect_w;
         let mut do_t = sec.refract.is_some();
         let mut do_r = sec.reflect_w > 0.0;
-        if self.p.selective && depth >= self.p.selective_level && st.lod < 1.0 && do_t && do_r {
+        // "Provided that the LOD used is less than 100 %" (§4): the model, not the raw value.
+        if self.p.selective && depth >= self.p.selective_level && lv > 0 && do_t && do_r {
             if kr > self.p.selective_ratio * kt {
                 do_t = false;
                 c.inc(Counter::lod_rays_dropped);
