@@ -94,7 +94,9 @@ pub trait Accel: Sync + Send {
     fn memory_bytes(&self) -> usize;
     /// Closest hit among the leaf instances `filter` admits (used by the per-ray LOD tracer's
     /// enter/exit list). The default steps past rejected hits with repeated queries (at most
-    /// 64); back-ends that can test the filter at the instance level override it.
+    /// 64), so it loses an admitted hit at exactly the distance of a rejected one (coplanar
+    /// faces of touching objects); back-ends that can test the filter during traversal
+    /// override it (the BVH per instance, Embree in a context filter function).
     fn intersect1_filtered(&self, ray: &Ray, filter: InstFilter, c: &mut Counters) -> Option<Hit> {
         let mut r = *ray;
         for _ in 0..64 {

@@ -11,6 +11,9 @@
 //! [`intersect_node`] (SSE2 on x86-64, `wide::f32x8` elsewhere). obvhs' own `intersect_ray` clamps the entry
 //! distance at a fixed 1e-4 instead of the ray's `tmin`, which loses hits closer than 1e-4
 //! ray units (found by `lodtrace verify`: origins within 1e-4 of a surface missed it).
+//! The node-test ray is built by [`ob_ray`], which scales the direction by a power of two
+//! (obvhs' `safe_inverse` clamps components below f32::EPSILON in absolute terms, which broke
+//! short direction vectors and instances under large scales).
 //!
 //! Packets: obvhs has no packet traversal; [`Accel::intersect8`] here is the default loop of
 //! single rays over the CWBVH (the coherent-packet path is Embree's `rtcIntersect8`).
@@ -126,15 +129,31 @@ pub unsafe fn intersect_node_avx2(node: &CwBvhNode, ray: &obvhs::ray::Ray, oct_i
     hit_bits(node, m, oct_inv4)
 }
 
-/// An obvhs ray with −0.0 direction components made +0.0. obvhs inverts a zero component
-/// to ±1/ε by its sign bit (−0.0 → negative) but picks the ray octant, and the node tests
-/// their near and far planes, by `d < 0` (−0.0 → positive): with −0.0 the two disagree, the
-/// slab comes out inverted, and every box is missed (`lodtrace verify cube --rays 100000000`
-/// found a ray along (0, −0, 1) through a face's interior that the BVH missed).
+/// The obvhs ray for the node tests, and the factor `k` that converts a ray distance `t` into
+/// the node ray's (`t·k`). Two repairs of obvhs' `Ray::new`:
+///
+/// - −0.0 direction components are made +0.0. obvhs inverts a zero component to ±1/ε by its
+///   sign bit (−0.0 → negative) but picks the ray octant, and the node tests their near and
+///   far planes, by `d < 0` (−0.0 → positive): with −0.0 the two disagree, the slab comes out
+///   inverted, and every box is missed (`lodtrace verify cube --rays 100000000` found a ray
+///   along (0, −0, 1) through a face's interior that the BVH missed).
+/// - The direction is scaled by a power of two `1/k` so that its largest component lies in
+///   [1, 2) (the interval by `k`, both exact). obvhs' `safe_inverse` replaces every component
+///   with |d| ≤ f32::EPSILON by ±1/EPSILON, an absolute threshold: a short direction vector
+///   (the `Ray` contract allows any length) or an instance-space one under a large scale
+///   (a unit mesh scaled by 1e9 gives |d| ~ 1e-9) got all its inverses clamped, the slabs
+///   came out wrong, and hits far from any edge were missed (`spheres`' camera rays scaled by
+///   1e-9: 3,938 of 15,360 rays changed). After the scaling the clamp only touches components
+///   below 1.2e-7 of the largest one. The triangle test keeps the unscaled ray.
 #[inline(always)]
-fn ob_ray(o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> obvhs::ray::Ray {
+fn ob_ray(o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> (obvhs::ray::Ray, f32) {
     // x + 0.0 is x except that −0.0 becomes +0.0 (IEEE 754, round to nearest).
-    obvhs::ray::Ray::new(Vec3A::from(o), Vec3A::from(d) + Vec3A::ZERO, tmin, tmax)
+    let d = Vec3A::from(d) + Vec3A::ZERO;
+    // 2^−e for the largest component's exponent e, kept inside the normal range.
+    let e = ((d.abs().max_element().to_bits() >> 23) as i32 - 127).clamp(-126, 126);
+    let k = f32::from_bits(((127 - e) as u32) << 23);
+    let ik = f32::from_bits(((127 + e) as u32) << 23);
+    (obvhs::ray::Ray::new(Vec3A::from(o), d * k, tmin * ik, tmax * ik), ik)
 }
 
 #[inline(always)]
@@ -308,7 +327,7 @@ impl BvhAccel {
         let mut tfar = ray.tfar;
         let mut best: Option<Hit> = None;
         let tnear = ray.tnear.max(0.0).min(tfar);
-        let world = ob_ray(ray.org, ray.dir, tnear, tfar);
+        let (world, tl_k) = ob_ray(ray.org, ray.dir, tnear, tfar);
         let mut tl_ray = world;
         let mut state = self.tlas.new_traversal(world.direction);
         let mut node;
@@ -332,7 +351,7 @@ impl BvhAccel {
                     let blas = &self.blas[inst.blas as usize];
                     let lo = inst.inv.transform_point3(ray.org);
                     let ld = inst.inv.transform_vector3(ray.dir);
-                    let mut bl_ray = ob_ray(lo, ld, tnear, tfar);
+                    let (mut bl_ray, bl_k) = ob_ray(lo, ld, tnear, tfar);
                     let shear = RayShear::new(lo, ld);
                     let mut bstate = blas.bvh.new_traversal(bl_ray.direction);
                     let mut bnode;
@@ -351,7 +370,7 @@ impl BvhAccel {
                                 let v = &blas.verts[3 * p..3 * p + 3];
                                 if let Some((t, u, vv)) = intersect_watertight(&shear, v[0], v[1], v[2], tnear, tfar) {
                                     tfar = t;
-                                    bl_ray.tmax = t;
+                                    bl_ray.tmax = t * bl_k;
                                     best = Some(Hit { t, u, v: vv, prim: blas.prim_ids[p], inst: self.inst_ids[ti] });
                                     if ANY {
                                         break 'blas;
@@ -363,7 +382,7 @@ impl BvhAccel {
                     if ANY && best.is_some() {
                         break 'tlas;
                     }
-                    tl_ray.tmax = tfar;
+                    tl_ray.tmax = tfar * tl_k;
                 }
             );
         }

@@ -10,6 +10,12 @@
 //! `rtcOccluded8` with a coherent context (primary packets). `intersect_stream` is
 //! `rtcIntersect1M`, the stream API, for `verify` and the traversal benchmark.
 //!
+//! Filtered queries ([`Accel::intersect1_filtered`], the per-ray LOD tracer's enter/exit
+//! list) test the instance filter in an Embree context filter function
+//! (`RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION` on every scene; unfiltered queries pass no filter):
+//! the trait's default, which steps `tnear` past each rejected hit, lost an admitted hit at
+//! the same distance (a floor under a box's bottom face).
+//!
 //! Robust mode (`RTC_SCENE_FLAG_ROBUST`, watertight triangle test) is used by `verify`;
 //! rendering uses Embree's default fast mode. The ISA can be pinned with the environment
 //! variable `LODTRACE_EMBREE_ISA` (e.g. `sse4.2`, `avx2`), passed as Embree's `isa=` device
@@ -18,7 +24,7 @@
 //! Only the raw `embree3::sys` bindings are used: the safe wrapper of the crate does not
 //! expose instance IDs of hits in packets or the memory monitor.
 
-use super::accel::{Accel, Hit, Ray, K};
+use super::accel::{Accel, Hit, InstFilter, Ray, K};
 use crate::core::stats::{Counter, Counters};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
@@ -51,6 +57,31 @@ unsafe extern "C" fn memory_monitor(user: *mut c_void, bytes: isize, _post: bool
 
 #[repr(C, align(32))]
 struct Valid8([i32; 8]);
+
+/// An intersect context extended with an instance filter: Embree hands the context pointer
+/// to the context filter function, so data placed after it travels along (Embree's
+/// documented way to pass per-query data).
+#[repr(C)]
+struct FilterContext<'a> {
+    ctx: RTCIntersectContext,
+    filter: InstFilter<'a>,
+}
+
+/// Context filter: rejects the hits of leaf instances the query's filter does not admit.
+unsafe extern "C" fn instance_filter(args: *const RTCFilterFunctionNArguments) {
+    let a = &*args;
+    // SAFETY: only installed by `intersect1_filtered`, whose context is a `FilterContext`.
+    let fc = &*(a.context as *const FilterContext);
+    let n = a.N as usize;
+    for i in 0..n {
+        // RTCHitN is SoA: field k of lane i at ((u32*)hit)[k·N + i]; instID[0] is field 7
+        // (after Ng_x, Ng_y, Ng_z, u, v, primID, geomID).
+        let inst = *(a.hit as *const u32).add(7 * n + i);
+        if *a.valid.add(i) != 0 && !fc.filter.admits(inst) {
+            *a.valid.add(i) = 0;
+        }
+    }
+}
 
 fn context(coherent: bool) -> RTCIntersectContext {
     RTCIntersectContext {
@@ -106,7 +137,7 @@ impl EmbreeAccel {
             let mem = Box::new(AtomicIsize::new(0));
             rtcSetDeviceMemoryMonitorFunction(device, Some(memory_monitor), &*mem as *const AtomicIsize as *mut c_void);
             let mut acc = EmbreeAccel { device, top: std::ptr::null_mut(), meshes: Vec::new(), mem, robust };
-            let flags = if robust { RTCSceneFlags::ROBUST } else { RTCSceneFlags::NONE };
+            let flags = RTCSceneFlags::CONTEXT_FILTER_FUNCTION | if robust { RTCSceneFlags::ROBUST } else { RTCSceneFlags::NONE };
 
             for mesh in &scene.meshes {
                 let s = rtcNewScene(device);
@@ -252,6 +283,21 @@ impl Accel for EmbreeAccel {
         let mut ctx = context(false);
         // SAFETY: committed scene, initialised ray-hit.
         unsafe { rtcIntersect1(self.top, &mut ctx, &mut rh) };
+        to_hit(&rh)
+    }
+
+    fn intersect1_filtered(&self, ray: &Ray, filter: InstFilter, c: &mut Counters) -> Option<Hit> {
+        if matches!(filter, InstFilter::All) {
+            return self.intersect1(ray, c);
+        }
+        if !ray.is_valid() {
+            return None;
+        }
+        let mut rh = ray_hit(ray);
+        let mut fc = FilterContext { ctx: context(false), filter };
+        fc.ctx.filter = Some(instance_filter);
+        // SAFETY: committed scene, initialised ray-hit; `fc` outlives the call.
+        unsafe { rtcIntersect1(self.top, &mut fc.ctx, &mut rh) };
         to_hit(&rh)
     }
 
