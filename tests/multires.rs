@@ -3,7 +3,7 @@
 //! anti-aliasing against a 256-spp reference, silhouettes against Embree's, degenerate input,
 //! and packet width 1 vs 8 of the conventional tracer on the same octree.
 
-use glam::{Affine3A, Vec3};
+use glam::{Affine3A, Mat3, Vec3};
 use lodtrace::baseline::accel::{self, AccelKind};
 use lodtrace::baseline::render::{render, Integrator, RenderOpts};
 use lodtrace::baseline::shade::TraceCtx;
@@ -11,7 +11,7 @@ use lodtrace::core::stats::Counters;
 use lodtrace::film::Film;
 use lodtrace::multires::abuffer::{ABuffer, Elem};
 use lodtrace::multires::build::BuildParams;
-use lodtrace::multires::cone::{self, Cone};
+use lodtrace::multires::cone::{self, Cone, Fp, Outgoing};
 use lodtrace::multires::render::render as cone_render;
 use lodtrace::multires::trace::{Collect, MultiresScene, Scratch, ShadeScratch, Termination, TraceParams, Tracer, TriWeight};
 use lodtrace::scene::{builtin, Camera, Light, Material, Mesh, Scene, Target};
@@ -1040,4 +1040,41 @@ fn triangle_normal_derivative_is_that_of_the_unit_normal() {
         }
     }
     assert!(worst < 0.02, "relative error of W·δ against the unit normal's finite difference: {worst}");
+}
+
+/// §4.2, transmitted rays: the centre ray decides between refraction and total reflection;
+/// a refracted cone is then built like a reflected one, from the directions of the rays
+/// through the footprint's axis ends. Near the critical angle the refracted directions fan
+/// out fastest (dθₜ/dθᵢ = η·cosθᵢ/cosθₜ, here 4.1), so the cone's spread must be largest
+/// there; an axis end whose own ray is totally reflected must not make it zero. (Until this
+/// review that axis got the centre direction, no spread at all.)
+#[test]
+fn refracted_cone_near_the_critical_angle_keeps_its_spread() {
+    let eta = 1.5f32; // glass to air: critical sin θ = 1/1.5
+    let sin_i = 0.64f32;
+    let cos_i = (1.0 - sin_i * sin_i).sqrt();
+    let sin_t = eta * sin_i;
+    let cos_t = (1.0 - sin_t * sin_t).sqrt();
+    let gain = eta * cos_i / cos_t;
+    for sx in [1.0f32, -1.0] {
+        let dir = Vec3::new(sx * sin_i, -cos_i, 0.0);
+        let along = Vec3::new(sx * cos_i, sin_i, 0.0); // ⟂ dir, in the plane of incidence
+        let spread_for = |k: f32| {
+            let mut c = Cone::new(-dir, dir, &[]);
+            let incr = c.fp_of(along * k, Vec3::Z * 0.01);
+            c.add_pair(Fp::ZERO, incr);
+            let fs = c.footprint_and_spread(1.0, 1e-9, 1e-30);
+            let out = cone::secondary(Vec3::ZERO, dir, Vec3::Y, &Mat3::ZERO, fs, Outgoing::Refract(eta), 0.0).unwrap();
+            // The spread in the plane of incidence: √(eᵀ·C·e), e the outgoing in-plane axis.
+            let e = Vec3::Z.cross(out.dir).normalize();
+            let (x, y) = (e.dot(out.u), e.dot(out.v));
+            (out.c.a * x * x + 2.0 * out.c.b * x * y + out.c.c * y * y).max(0.0).sqrt()
+        };
+        // Small spread: every ray of the cone refracts, first order holds.
+        let small = spread_for(0.002);
+        assert!((small - 0.002 * gain).abs() < 0.1 * 0.002 * gain, "side {sx}: spread {small}, first order {}", 0.002 * gain);
+        // 0.05 rad: the rays on one side pass the critical angle (2.0° away).
+        let wide = spread_for(0.05);
+        assert!(wide > 0.5 * 0.05 * gain, "side {sx}: spread {wide}, first order {}, the small cone's × 25 {}", 0.05 * gain, small * 25.0);
+    }
 }

@@ -27,7 +27,11 @@
 //! - reflected/refracted: startDev = the incoming footprint projected along the ray onto the
 //!   tangent plane and expressed in the outgoing frame; incrDev = the difference between the
 //!   outgoing directions at p + u_fp, p + v_fp (normals from ∇n) and the centre direction.
-//!   The refract-or-total-reflection decision is the centre ray's. Roughness adds a radial
+//!   The refract-or-total-reflection decision is the centre ray's. An axis end whose own ray
+//!   is totally reflected (the centre ray refracting near the critical angle) takes the
+//!   grazing direction, the limit its refracted rays fan out to; until the ray-cone review it
+//!   took the centre direction, so the cone lost its spread where it is largest (the in-plane
+//!   spread 1.5 → 1 at 2° from the critical angle: 0.0002 instead of ≈ 0.2 rad). Roughness adds a radial
 //!   increment tan(roughness)·I (§6, "Special Effects").
 
 use crate::core::eigen2::{eigen_1, Eigen2, Sym2};
@@ -284,6 +288,14 @@ pub fn secondary(p: Vec3, dir: Vec3, n: Vec3, w: &Mat3, fs: [Vec3; 4], out: Outg
         }
     };
     let r = bend(dir, n)?;
+    // The rays through the axis ends: a refracted one that is totally reflected (only the
+    // centre ray decides, §4.2) leaves along the surface, the limit of its side's fan.
+    let bend_edge = |d: Vec3, nn: Vec3| -> Option<Vec3> {
+        match out {
+            Outgoing::Reflect => Some(reflect(d, nn)),
+            Outgoing::Refract(eta) => refract(d, nn, eta).or_else(|| (d - nn * d.dot(nn)).try_normalize()),
+        }
+    };
     let g0 = project_on_plane(fs[0], dir, n);
     let g1 = project_on_plane(fs[1], dir, n);
     let mut c = Cone::new(p, r, &[]);
@@ -295,7 +307,7 @@ pub fn secondary(p: Vec3, dir: Vec3, n: Vec3, w: &Mat3, fs: [Vec3; 4], out: Outg
         if nn == Vec3::ZERO || di == Vec3::ZERO || !nn.is_finite() || !di.is_finite() {
             return r;
         }
-        bend(di, nn).unwrap_or(r)
+        bend_edge(di, nn).unwrap_or(r)
     };
     let o0 = dir_at(g0, fs[2]) - r;
     let o1 = dir_at(g1, fs[3]) - r;
