@@ -7,6 +7,7 @@ use glam::{Affine3A, Mat3, Vec3};
 use lodtrace::baseline::accel::{self, AccelKind};
 use lodtrace::baseline::render::{render, Integrator, RenderOpts};
 use lodtrace::baseline::shade::TraceCtx;
+use lodtrace::core::eigen2::eigen_1;
 use lodtrace::core::stats::Counters;
 use lodtrace::film::Film;
 use lodtrace::multires::abuffer::{ABuffer, Elem};
@@ -1076,5 +1077,52 @@ fn refracted_cone_near_the_critical_angle_keeps_its_spread() {
         // 0.05 rad: the rays on one side pass the critical angle (2.0° away).
         let wide = spread_for(0.05);
         assert!(wide > 0.5 * 0.05 * gain, "side {sx}: spread {wide}, first order {}, the small cone's × 25 {}", 0.05 * gain, small * 25.0);
+    }
+}
+
+/// Semi-axes (major, minor) of a cone's footprint at t, unclamped.
+fn axes_at(c: &Cone, t: f32) -> (f32, f32) {
+    let e = eigen_1(c.sigma(t), 1e-9, 1e-30);
+    (e.s1, e.s2)
+}
+
+/// §4.2, reflected rays: a flat mirror reflects every ray of the incoming cone, so the
+/// reflected cone is the mirror image of the incoming one continued through the mirror; its
+/// footprint `t'` past the mirror is the incoming cone's at `t_hit + t'`. A depth-of-field
+/// cone (the pixel cone plus the lens cone, §4.2 "Primary Rays") meeting a mirror at the
+/// focal plane carries the lens cone's rays, which cross there and diverge again: a mirror
+/// in focus shows the objects it reflects as blurred as the lens blurs them at that
+/// distance. (Until this review the reflected cone kept only the growth rate of the
+/// footprint's semi-axes, which at the focal plane is the pixel cone's: the lens spread was
+/// lost and a mirror in focus reflected everything in focus.)
+#[test]
+fn flat_mirror_in_focus_keeps_the_lens_blur() {
+    let cam = Camera { eye: Vec3::ZERO, look: Vec3::new(0.0, 0.0, -1.0), up: Vec3::Y, fovy: 40.0, aperture: 0.2, focal_dist: 5.0 };
+    let fr = cam.frame(64, 64);
+    for (i, j, tilt) in [(32u32, 32u32, 0.0f32), (32, 32, 0.4), (9, 51, 0.25), (50, 20, 0.0)] {
+        let c = Cone::primary(&fr, i, j, 1.0, std::f32::consts::FRAC_1_SQRT_2);
+        for t_hit in [5.0 / c.dir.dot(fr.f), 3.0] {
+            let p = c.org + c.dir * t_hit;
+            let n = (-c.dir + Vec3::new(0.3, 1.0, 0.2).normalize() * tilt).normalize();
+            let fs = c.footprint_and_spread(t_hit, 1e-9, 1e-30);
+            let r = cone::secondary(p, c.dir, n, &Mat3::ZERO, fs, Outgoing::Reflect, 0.0).unwrap();
+            for tp in [0.5f32, 2.0, 10.0] {
+                let (got, want) = (axes_at(&r, tp), axes_at(&c, t_hit + tp));
+                let err = ((got.0 - want.0) / want.0).abs().max(((got.1 - want.1) / want.1).abs());
+                assert!(
+                    err < 0.01,
+                    "pixel ({i},{j}) tilt {tilt} hit at {t_hit}: {tp} past the mirror, axes {got:?}, mirror image {want:?}"
+                );
+            }
+        }
+    }
+    // The same for a footprint that does not grow (startDev only) plus a rough reflection's
+    // blur (a second cone, added in quadrature, §6): a flat mirror further on keeps the blur.
+    let c = Cone::new(Vec3::new(0.0, 0.0, 10.0), Vec3::NEG_Z, &[(Fp::diag(0.5), Fp::ZERO), (Fp::ZERO, Fp::diag(0.1))]);
+    let fs = c.footprint_and_spread(1.0, 1e-9, 1e-30);
+    let r = cone::secondary(Vec3::new(0.0, 0.0, 9.0), Vec3::NEG_Z, Vec3::Z, &Mat3::ZERO, fs, Outgoing::Reflect, 0.0).unwrap();
+    for tp in [1.0f32, 10.0] {
+        let (got, want) = (axes_at(&r, tp), axes_at(&c, 1.0 + tp));
+        assert!((got.0 - want.0).abs() < 0.01 * want.0, "rough then flat: {tp} past the mirror, axes {got:?}, mirror image {want:?}");
     }
 }
