@@ -3,15 +3,16 @@
 //! anti-aliasing against a 256-spp reference, silhouettes against Embree's, degenerate input,
 //! and packet width 1 vs 8 of the conventional tracer on the same octree.
 
-use glam::{Affine3A, Vec3};
+use glam::{Affine3A, Mat3, Vec3};
 use lodtrace::baseline::accel::{self, AccelKind};
 use lodtrace::baseline::render::{render, Integrator, RenderOpts};
 use lodtrace::baseline::shade::TraceCtx;
+use lodtrace::core::eigen2::eigen_1;
 use lodtrace::core::stats::Counters;
 use lodtrace::film::Film;
-use lodtrace::multires::abuffer::ABuffer;
+use lodtrace::multires::abuffer::{ABuffer, Elem};
 use lodtrace::multires::build::BuildParams;
-use lodtrace::multires::cone::{self, Cone};
+use lodtrace::multires::cone::{self, Cone, Fp, Outgoing};
 use lodtrace::multires::render::render as cone_render;
 use lodtrace::multires::trace::{Collect, MultiresScene, Scratch, ShadeScratch, Termination, TraceParams, Tracer, TriWeight};
 use lodtrace::scene::{builtin, Camera, Light, Material, Mesh, Scene, Target};
@@ -1007,5 +1008,127 @@ fn grazing_floor_fragment_does_not_hide_what_stands_on_it() {
         }
         assert!(inside > 300, "{eigen:?}: the cube covers {inside} interior pixels");
         assert!(lost.is_empty(), "{eigen:?}: {} of {inside} cube pixels show the floor, e.g. {:?}", lost.len(), &lost[..lost.len().min(6)]);
+    }
+}
+
+/// ∇n of a triangle (for reflected and refracted cones, §4.2) is the derivative of the
+/// *normalised* interpolated normal, the one that shades: on a coarse mesh the interpolated
+/// normal is markedly shorter than 1 inside a triangle (0.79 at an icosahedron's face
+/// centres), and forgetting the normalisation's 1/|n| underestimates the curvature as much.
+#[test]
+fn triangle_normal_derivative_is_that_of_the_unit_normal() {
+    let mut mesh = builtin::icosphere(0, 0);
+    mesh.compute_normals();
+    let mut scene = Scene::empty("ico");
+    let id = scene.add_mesh(mesh.clone());
+    scene.instance(Target::Mesh(id), Affine3A::from_scale(Vec3::splat(2.0)), None);
+    scene.validate().unwrap();
+    let ms = MultiresScene::build(&scene, &BuildParams::default()).unwrap();
+    let p = TraceParams::default();
+    let abort = AtomicBool::new(false);
+    let tr = Tracer::new(&ms, &p, 1e-7, &abort, None);
+    let m = &scene.meshes[id as usize];
+    let mut worst = 0.0f32;
+    for tri in 0..20u32 {
+        let [i0, i1, i2] = m.tris[tri as usize];
+        let at = |b1: f32, b2: f32| {
+            let b0 = 1.0 - b1 - b2;
+            let po = m.pos(i0) * b0 + m.pos(i1) * b1 + m.pos(i2) * b2;
+            let no = m.normal(i0) * b0 + m.normal(i1) * b1 + m.normal(i2) * b2;
+            (po * 2.0, no.normalize())
+        };
+        let (b1, b2) = (1.0 / 3.0, 1.0 / 3.0);
+        let w = tr.shape_operator(Elem::Tri { leaf: 0, tri, b1, b2 });
+        let (p0, n0) = at(b1, b2);
+        for (d1, d2) in [(1e-3, 0.0), (0.0, 1e-3)] {
+            let (p1, n1) = at(b1 + d1, b2 + d2);
+            let fd = n1 - n0;
+            worst = worst.max((fd - w * (p1 - p0)).length() / fd.length());
+        }
+    }
+    assert!(worst < 0.02, "relative error of W·δ against the unit normal's finite difference: {worst}");
+}
+
+/// §4.2, transmitted rays: the centre ray decides between refraction and total reflection;
+/// a refracted cone is then built like a reflected one, from the directions of the rays
+/// through the footprint's axis ends. Near the critical angle the refracted directions fan
+/// out fastest (dθₜ/dθᵢ = η·cosθᵢ/cosθₜ, here 4.1), so the cone's spread must be largest
+/// there; an axis end whose own ray is totally reflected must not make it zero. (Until this
+/// review that axis got the centre direction, no spread at all.)
+#[test]
+fn refracted_cone_near_the_critical_angle_keeps_its_spread() {
+    let eta = 1.5f32; // glass to air: critical sin θ = 1/1.5
+    let sin_i = 0.64f32;
+    let cos_i = (1.0 - sin_i * sin_i).sqrt();
+    let sin_t = eta * sin_i;
+    let cos_t = (1.0 - sin_t * sin_t).sqrt();
+    let gain = eta * cos_i / cos_t;
+    for sx in [1.0f32, -1.0] {
+        let dir = Vec3::new(sx * sin_i, -cos_i, 0.0);
+        let along = Vec3::new(sx * cos_i, sin_i, 0.0); // ⟂ dir, in the plane of incidence
+        let spread_for = |k: f32| {
+            let mut c = Cone::new(-dir, dir, &[]);
+            let incr = c.fp_of(along * k, Vec3::Z * 0.01);
+            c.add_pair(Fp::ZERO, incr);
+            let fs = c.footprint_and_spread(1.0, 1e-9, 1e-30);
+            let out = cone::secondary(Vec3::ZERO, dir, Vec3::Y, &Mat3::ZERO, fs, Outgoing::Refract(eta), 0.0).unwrap();
+            // The spread in the plane of incidence: √(eᵀ·C·e), e the outgoing in-plane axis.
+            let e = Vec3::Z.cross(out.dir).normalize();
+            let (x, y) = (e.dot(out.u), e.dot(out.v));
+            (out.c.a * x * x + 2.0 * out.c.b * x * y + out.c.c * y * y).max(0.0).sqrt()
+        };
+        // Small spread: every ray of the cone refracts, first order holds.
+        let small = spread_for(0.002);
+        assert!((small - 0.002 * gain).abs() < 0.1 * 0.002 * gain, "side {sx}: spread {small}, first order {}", 0.002 * gain);
+        // 0.05 rad: the rays on one side pass the critical angle (2.0° away).
+        let wide = spread_for(0.05);
+        assert!(wide > 0.5 * 0.05 * gain, "side {sx}: spread {wide}, first order {}, the small cone's × 25 {}", 0.05 * gain, small * 25.0);
+    }
+}
+
+/// Semi-axes (major, minor) of a cone's footprint at t, unclamped.
+fn axes_at(c: &Cone, t: f32) -> (f32, f32) {
+    let e = eigen_1(c.sigma(t), 1e-9, 1e-30);
+    (e.s1, e.s2)
+}
+
+/// §4.2, reflected rays: a flat mirror reflects every ray of the incoming cone, so the
+/// reflected cone is the mirror image of the incoming one continued through the mirror; its
+/// footprint `t'` past the mirror is the incoming cone's at `t_hit + t'`. A depth-of-field
+/// cone (the pixel cone plus the lens cone, §4.2 "Primary Rays") meeting a mirror at the
+/// focal plane carries the lens cone's rays, which cross there and diverge again: a mirror
+/// in focus shows the objects it reflects as blurred as the lens blurs them at that
+/// distance. (Until this review the reflected cone kept only the growth rate of the
+/// footprint's semi-axes, which at the focal plane is the pixel cone's: the lens spread was
+/// lost and a mirror in focus reflected everything in focus.)
+#[test]
+fn flat_mirror_in_focus_keeps_the_lens_blur() {
+    let cam = Camera { eye: Vec3::ZERO, look: Vec3::new(0.0, 0.0, -1.0), up: Vec3::Y, fovy: 40.0, aperture: 0.2, focal_dist: 5.0 };
+    let fr = cam.frame(64, 64);
+    for (i, j, tilt) in [(32u32, 32u32, 0.0f32), (32, 32, 0.4), (9, 51, 0.25), (50, 20, 0.0)] {
+        let c = Cone::primary(&fr, i, j, 1.0, std::f32::consts::FRAC_1_SQRT_2);
+        for t_hit in [5.0 / c.dir.dot(fr.f), 3.0] {
+            let p = c.org + c.dir * t_hit;
+            let n = (-c.dir + Vec3::new(0.3, 1.0, 0.2).normalize() * tilt).normalize();
+            let fs = c.footprint_and_spread(t_hit, 1e-9, 1e-30);
+            let r = cone::secondary(p, c.dir, n, &Mat3::ZERO, fs, Outgoing::Reflect, 0.0).unwrap();
+            for tp in [0.5f32, 2.0, 10.0] {
+                let (got, want) = (axes_at(&r, tp), axes_at(&c, t_hit + tp));
+                let err = ((got.0 - want.0) / want.0).abs().max(((got.1 - want.1) / want.1).abs());
+                assert!(
+                    err < 0.01,
+                    "pixel ({i},{j}) tilt {tilt} hit at {t_hit}: {tp} past the mirror, axes {got:?}, mirror image {want:?}"
+                );
+            }
+        }
+    }
+    // The same for a footprint that does not grow (startDev only) plus a rough reflection's
+    // blur (a second cone, added in quadrature, §6): a flat mirror further on keeps the blur.
+    let c = Cone::new(Vec3::new(0.0, 0.0, 10.0), Vec3::NEG_Z, &[(Fp::diag(0.5), Fp::ZERO), (Fp::ZERO, Fp::diag(0.1))]);
+    let fs = c.footprint_and_spread(1.0, 1e-9, 1e-30);
+    let r = cone::secondary(Vec3::new(0.0, 0.0, 9.0), Vec3::NEG_Z, Vec3::Z, &Mat3::ZERO, fs, Outgoing::Reflect, 0.0).unwrap();
+    for tp in [1.0f32, 10.0] {
+        let (got, want) = (axes_at(&r, tp), axes_at(&c, 1.0 + tp));
+        assert!((got.0 - want.0).abs() < 0.01 * want.0, "rough then flat: {tp} past the mirror, axes {got:?}, mirror image {want:?}");
     }
 }

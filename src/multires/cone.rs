@@ -27,7 +27,14 @@
 //! - reflected/refracted: startDev = the incoming footprint projected along the ray onto the
 //!   tangent plane and expressed in the outgoing frame; incrDev = the difference between the
 //!   outgoing directions at p + u_fp, p + v_fp (normals from ∇n) and the centre direction.
-//!   The refract-or-total-reflection decision is the centre ray's. Roughness adds a radial
+//!   A cone that is a sum of pairs (depth of field, a rough reflection) also passes on the
+//!   spread of its rays through the centre as a second pair ([`Cone::footprint_and_spread`]):
+//!   the paper's one-pair construction alone would lose the lens cone at the focal plane.
+//!   The refract-or-total-reflection decision is the centre ray's. An axis end whose own ray
+//!   is totally reflected (the centre ray refracting near the critical angle) takes the
+//!   grazing direction, the limit its refracted rays fan out to; until the ray-cone review it
+//!   took the centre direction, so the cone lost its spread where it is largest (the in-plane
+//!   spread 1.5 → 1 at 2° from the critical angle: 0.0002 instead of ≈ 0.2 rad). Roughness adds a radial
 //!   increment tan(roughness)·I (§6, "Special Effects").
 
 use crate::core::eigen2::{eigen_1, Eigen2, Sym2};
@@ -144,34 +151,64 @@ impl Cone {
     fn axis_dirs(&self, e: &Eigen2) -> (Vec3, Vec3) {
         (self.u * e.cos + self.v * e.sin, self.v * e.cos - self.u * e.sin)
     }
-    /// The footprint at t, (f0, f1), and the direction differentials of the rays through
-    /// its two axis ends, (d0, d1): the growth rate of each semi-axis, ds/dt = eᵀΣ'(t)e/(2s)
-    /// (first-order eigenvalue perturbation), along that axis. For a one-pair cone without
-    /// shear this is exactly incrDev applied to the axis.
+    /// The footprint at t, (f0, f1), the direction differentials of the rays through its two
+    /// axis ends, (d0, d1), and the spread of the rays through its centre, (x0, x1): the
+    /// incoming cone split into two pairs, ([f0 f1], [d0 d1]) and (0, [x0 x1]), whose squares
+    /// add up to Σ(t + τ) = Σ(t) + τ·Σ'(t) + τ²·C (C the t² term) for every τ, so that a
+    /// surface that only turns the rays (a flat mirror) passes the whole cone on.
+    ///
+    /// With the footprint's principal axes E = [e₁ e₂] and semi-axes sᵢ = √(eᵢᵀΣeᵢ), the
+    /// first pair's directions are E·Y with Y symmetric, Y_ij = eᵢᵀΣ'(t)eⱼ / (sᵢ + sⱼ): then
+    /// [f0 f1]·[d0 d1]ᵀ + [d0 d1]·[f0 f1]ᵀ = Σ'(t). Yᵢᵢ = ds/dt along eᵢ (first-order eigenvalue
+    /// perturbation); for a one-pair cone without shear Y is exactly incrDev applied to the
+    /// axes. The rest of the direction spread, C − E·Y²·Eᵀ (its positive part), is the second
+    /// pair's: rays through the centre, uncorrelated with their position. A sum of pairs (the
+    /// pixel and lens cones of depth of field, §4.2; a rough reflection's blur) needs it: at
+    /// the focal plane the lens cone has no footprint but all its spread. (Until the ray-cone
+    /// review only Yᵢᵢ was kept, so a mirror in focus reflected everything in focus, and a
+    /// mirror before the focal plane refocused the cone at a false focus: 48–57% too narrow
+    /// 10 units on; `flat_mirror_in_focus_keeps_the_lens_blur`.)
     ///
     /// The footprint is the clamped one (the anisotropy clamp inflates the minor axis), the
-    /// growth rate that of the cone itself: s is the unclamped semi-axis √(eᵀΣe). (Until
-    /// stop 32 it was divided by the clamped s₂, which slowed a clamped minor axis's growth
-    /// by the clamp's inflation, up to 16×; review finding of stop 31.) eᵀΣ(t)e is a sum of
-    /// squares of linear functions of t, so |ds/dt| ≤ √(eᵀCe) exactly (C the t² term): the
-    /// rate is held to that bound, which keeps it finite where s vanishes.
-    pub fn footprint_and_spread(&self, t: f32, clamp: f32, floor: f32) -> [Vec3; 4] {
+    /// growth rates those of the cone itself: sᵢ are the unclamped semi-axes. (Until stop 32
+    /// the rate was divided by the clamped s₂, which slowed a clamped minor axis's growth by
+    /// the clamp's inflation, up to 16×; review finding of stop 31.) eᵀΣ(t)e is a sum of
+    /// squares of linear functions of t, so |ds/dt| ≤ √(eᵀCe) exactly: the rates are held to
+    /// that bound (the cross rate to the larger of the two), which keeps them finite where s
+    /// vanishes.
+    pub fn footprint_and_spread(&self, t: f32, clamp: f32, floor: f32) -> [Vec3; 6] {
         let (f0, f1, e) = self.footprint_vectors(t, clamp, floor);
         let sig = self.sigma(t);
         let d = Sym2 { a: self.b.a + 2.0 * t * self.c.a, b: self.b.b + 2.0 * t * self.c.b, c: self.b.c + 2.0 * t * self.c.c };
-        let quad = |m: &Sym2, c: f32, s: f32| m.a * c * c + 2.0 * m.b * c * s + m.c * s * s;
-        let rate = |c: f32, s: f32| {
-            let size = quad(&sig, c, s).max(0.0).sqrt().max(floor);
-            let bound = quad(&self.c, c, s).max(0.0).sqrt();
-            let r = quad(&d, c, s) / (2.0 * size);
+        // xᵀ·M·y for x = (xc, xs), y = (yc, ys).
+        let bil = |m: &Sym2, xc: f32, xs: f32, yc: f32, ys: f32| m.a * xc * yc + m.b * (xc * ys + xs * yc) + m.c * xs * ys;
+        let (e1, e2) = ((e.cos, e.sin), (-e.sin, e.cos));
+        let size = |x: (f32, f32)| bil(&sig, x.0, x.1, x.0, x.1).max(0.0).sqrt().max(floor);
+        let bound = |x: (f32, f32)| bil(&self.c, x.0, x.1, x.0, x.1).max(0.0).sqrt();
+        let rate = |x: (f32, f32), y: (f32, f32), lim: f32| {
+            let r = bil(&d, x.0, x.1, y.0, y.1) / (size(x) + size(y));
             if r.is_finite() {
-                r.clamp(-bound, bound)
+                r.clamp(-lim, lim)
             } else {
                 0.0
             }
         };
-        let (e1, e2) = self.axis_dirs(&e);
-        [f0, f1, e1 * rate(e.cos, e.sin), e2 * rate(-e.sin, e.cos)]
+        let y11 = rate(e1, e1, bound(e1));
+        let y22 = rate(e2, e2, bound(e2));
+        let y12 = rate(e1, e2, bound(e1).max(bound(e2)));
+        let (w1, w2) = self.axis_dirs(&e);
+        let (d0, d1) = (w1 * y11 + w2 * y12, w1 * y12 + w2 * y22);
+        // The centre rays' spread: the positive part of C − (d0 d0ᵀ + d1 d1ᵀ).
+        let dd = sq(self.fp_of(d0, d1));
+        let rest = Sym2 { a: self.c.a - dd.a, b: self.c.b - dd.b, c: self.c.c - dd.c };
+        let (x0, x1) = if rest.is_finite() && rest.a + rest.c > 0.0 {
+            let er = eigen_1(rest, 0.0, 0.0);
+            let (r1, r2) = self.axis_dirs(&er);
+            (r1 * er.s1, r2 * er.s2)
+        } else {
+            (Vec3::ZERO, Vec3::ZERO)
+        };
+        [f0, f1, d0, d1, x0, x1]
     }
 
     /// The primary cone through pixel (i, j) (its centre, as the DESIGN.md camera): its pixel
@@ -272,11 +309,14 @@ pub enum Outgoing {
 
 /// The reflected or refracted cone at surface point `p` with unit normal `n` (facing the
 /// incoming ray), shape operator `w` (n(p+δ) ≈ normalize(n + w·δ), from ∇n), for an incoming
-/// cone with direction `dir` whose footprint at the hit is `fs = [f0, f1, d0, d1]` (world
-/// semi-axes and the direction differentials of the rays through them, see
-/// [`Cone::footprint_and_spread`]). Returns None on total internal reflection of the centre
-/// ray (the caller reflects instead).
-pub fn secondary(p: Vec3, dir: Vec3, n: Vec3, w: &Mat3, fs: [Vec3; 4], out: Outgoing, roughness: f32) -> Option<Cone> {
+/// cone with direction `dir` whose footprint at the hit is `fs = [f0, f1, d0, d1, x0, x1]`
+/// (world semi-axes, the direction differentials of the rays through them, and the spread
+/// of the rays through the centre, see [`Cone::footprint_and_spread`]). Both parts are
+/// carried over as the paper carries one cone: the footprint's pair to (startDev, incrDev),
+/// the centre rays' spread to a second pair with zero startDev (their bent directions);
+/// their squares add. Returns None on total internal reflection of the centre ray (the
+/// caller reflects instead).
+pub fn secondary(p: Vec3, dir: Vec3, n: Vec3, w: &Mat3, fs: [Vec3; 6], out: Outgoing, roughness: f32) -> Option<Cone> {
     let bend = |d: Vec3, nn: Vec3| -> Option<Vec3> {
         match out {
             Outgoing::Reflect => Some(reflect(d, nn)),
@@ -284,6 +324,14 @@ pub fn secondary(p: Vec3, dir: Vec3, n: Vec3, w: &Mat3, fs: [Vec3; 4], out: Outg
         }
     };
     let r = bend(dir, n)?;
+    // The rays through the axis ends: a refracted one that is totally reflected (only the
+    // centre ray decides, §4.2) leaves along the surface, the limit of its side's fan.
+    let bend_edge = |d: Vec3, nn: Vec3| -> Option<Vec3> {
+        match out {
+            Outgoing::Reflect => Some(reflect(d, nn)),
+            Outgoing::Refract(eta) => refract(d, nn, eta).or_else(|| (d - nn * d.dot(nn)).try_normalize()),
+        }
+    };
     let g0 = project_on_plane(fs[0], dir, n);
     let g1 = project_on_plane(fs[1], dir, n);
     let mut c = Cone::new(p, r, &[]);
@@ -295,12 +343,17 @@ pub fn secondary(p: Vec3, dir: Vec3, n: Vec3, w: &Mat3, fs: [Vec3; 4], out: Outg
         if nn == Vec3::ZERO || di == Vec3::ZERO || !nn.is_finite() || !di.is_finite() {
             return r;
         }
-        bend(di, nn).unwrap_or(r)
+        bend_edge(di, nn).unwrap_or(r)
     };
     let o0 = dir_at(g0, fs[2]) - r;
     let o1 = dir_at(g1, fs[3]) - r;
     let incr = c.fp_of(o0 - r * r.dot(o0), o1 - r * r.dot(o1));
     c.add_pair(start, incr);
+    if fs[4] != Vec3::ZERO || fs[5] != Vec3::ZERO {
+        let x0 = dir_at(Vec3::ZERO, fs[4]) - r;
+        let x1 = dir_at(Vec3::ZERO, fs[5]) - r;
+        c.add_pair(Fp::ZERO, c.fp_of(x0 - r * r.dot(x0), x1 - r * r.dot(x1)));
+    }
     if roughness > 0.0 {
         c.add_pair(Fp::ZERO, Fp::diag(roughness.min(1.4).tan()));
     }
@@ -406,7 +459,7 @@ mod tests {
         let dir = Vec3::new(0.0, 0.0, -1.0);
         let c = Cone::new(Vec3::new(0.0, 0.0, 10.0), dir, &[(Fp::ZERO, Fp { c0: Vec2::new(0.01, 0.0), c1: Vec2::new(0.0, 1e-4) })]);
         for clamp in [1e-9, 1.0 / 16.0, 0.25] {
-            let [f0, f1, d0, d1] = c.footprint_and_spread(10.0, clamp, 1e-30);
+            let [f0, f1, d0, d1, ..] = c.footprint_and_spread(10.0, clamp, 1e-30);
             assert!((f0.length() - 0.1).abs() < 1e-5, "{f0}");
             assert!((f1.length() - (1e-3f32).max(clamp * 0.1)).abs() < 1e-6, "{f1}");
             assert!((d0.length() - 0.01).abs() < 1e-6, "{d0}");
@@ -415,7 +468,7 @@ mod tests {
         // A pair whose footprint passes through zero (a lens pair at its focus): the rate is
         // the bound, finite, where s vanishes.
         let lens = Cone::new(Vec3::ZERO, dir, &[(Fp::diag(0.1), Fp::diag(-0.02))]);
-        let [_, _, d0, d1] = lens.footprint_and_spread(5.0, 1.0 / 16.0, 1e-30);
+        let [_, _, d0, d1, ..] = lens.footprint_and_spread(5.0, 1.0 / 16.0, 1e-30);
         assert!(d0.is_finite() && d1.is_finite() && d0.length() <= 0.02 + 1e-6 && d1.length() <= 0.02 + 1e-6, "{d0} {d1}");
     }
 
@@ -423,7 +476,7 @@ mod tests {
     fn total_internal_reflection_by_centre_ray() {
         let dir = Vec3::new(1.0, -0.2, 0.0).normalize();
         let n = Vec3::Y;
-        let fs = [Vec3::X * 0.01, Vec3::Z * 0.01, Vec3::ZERO, Vec3::ZERO];
+        let fs = [Vec3::X * 0.01, Vec3::Z * 0.01, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO];
         assert!(secondary(Vec3::ZERO, dir, n, &Mat3::ZERO, fs, Outgoing::Refract(1.5), 0.0).is_none());
         assert!(secondary(Vec3::ZERO, dir, n, &Mat3::ZERO, fs, Outgoing::Refract(1.0 / 1.5), 0.0).is_some());
     }
