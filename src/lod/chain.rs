@@ -104,11 +104,15 @@ impl LodChain {
 pub use crate::core::cache::cache_dir;
 
 /// Cache key of a mesh's chain: a hash of the geometry, the materials, the level count and
-/// the code version (so a changed simplifier never reads old files).
+/// the code version and the text of this file (so a changed simplifier never reads old
+/// files).
 fn chain_key(mesh: &Mesh, n_levels: u32) -> u64 {
     use std::hash::{Hash, Hasher};
     let mut h = std::collections::hash_map::DefaultHasher::new();
     ("lodchain-v1", env!("CARGO_PKG_VERSION"), n_levels, mesh.tris.len(), mesh.vertex_count()).hash(&mut h);
+    // The chain builder's own source, as the point-tree cache does: a changed builder never
+    // reads a chain an older one wrote, bumped version or not.
+    include_str!("chain.rs").hash(&mut h);
     for v in [&mesh.px, &mesh.py, &mesh.pz, &mesh.nx, &mesh.ny, &mesh.nz] {
         for x in v.iter() {
             x.to_bits().hash(&mut h);

@@ -431,12 +431,14 @@ impl<'a> LodTracer<'a> {
 }
 
 /// Mean planar angle / 2π between a direction and its horizontal and vertical neighbours
-/// (§2.2); a zero vector means "no ray here".
+/// (§2.2); a zero vector means "no ray here", and so does a non-finite one: a NaN would
+/// otherwise pass through (1 − d)^f as LOD NaN and select the coarsest model, where
+/// [`super::chain::level_of`] reads NaN as full detail.
 pub fn disparity(d: Vec3, h: Option<Vec3>, v: Option<Vec3>) -> f32 {
-    if d == Vec3::ZERO {
+    if d == Vec3::ZERO || !d.is_finite() {
         return 0.0;
     }
-    let ang = |o: Option<Vec3>| o.filter(|x| *x != Vec3::ZERO).map(|x| d.dot(x).clamp(-1.0, 1.0).acos()).unwrap_or(0.0);
+    let ang = |o: Option<Vec3>| o.filter(|x| *x != Vec3::ZERO && x.is_finite()).map(|x| d.dot(x).clamp(-1.0, 1.0).acos()).unwrap_or(0.0);
     ((ang(h) + ang(v)) / std::f32::consts::TAU).clamp(0.0, 1.0)
 }
 
@@ -618,6 +620,12 @@ mod tests {
         let e = Vec3::new(1.0, 0.0, 1.0).normalize();
         let x = disparity(d, Some(e), None);
         assert!((x - 0.125).abs() < 1e-6, "{x}");
+        // A non-finite neighbour is no neighbour; a non-finite ray has no disparity (full
+        // detail, as `level_of` reads NaN), never NaN.
+        let nan = Vec3::new(f32::NAN, 0.0, 1.0);
+        assert_eq!(disparity(d, Some(nan), Some(e)), x);
+        assert_eq!(disparity(nan, Some(d), Some(e)), 0.0);
+        assert_eq!(disparity(d, Some(Vec3::splat(f32::INFINITY)), None), 0.0);
     }
 
     /// A ray that entered an object at one level leaves it at that level (Fig. 3), whatever
