@@ -181,6 +181,11 @@ fn full_detail_models_are_traced_without_selective_drops() {
         let differ = w.out.film.color.iter().zip(&one.out.film.color).filter(|(a, b)| a != b).count();
         let dropped = one.out.counters.get(Counter::lod_rays_dropped);
         assert_eq!((differ, dropped), (0, 0), "{name}, one level: pixels differing, rays dropped");
+        // The literal reading (`--lod-selective-on value`, the behaviour before stop 50) drops
+        // weak children on those full-detail paths.
+        let lit = LodArgs { lod_levels: 1, lod_selective_on: lodtrace::lod::trace::SelectiveOn::Value, ..Default::default() };
+        let v = render(&scene, Method::Lod, AccelKind::Bvh, &o, &lit);
+        assert!(v.out.counters.get(Counter::lod_rays_dropped) > 0, "{name}: the value reading drops no ray");
         // Default chain: the pixels whose level-1 rays all use L₀.
         let l = render(&scene, Method::Lod, AccelKind::Bvh, &o, &LodArgs::default());
         let m = &l.lod.as_ref().unwrap().maps;

@@ -7,7 +7,8 @@
 //! `fps` (distributed first-pass spp), `vt` (distributed variance threshold), `depth`; for
 //! the cone tracers (`multires`, `cone`): `k`, `c` (oversampling), `clamp`, `clamp2` (secondary cones), `lod`, `dtol`,
 //! `cs` (cone scale), `lens` (lens scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage|mass`, `term=paper|final`, `pw=area|voxel`, `spread=0`, `groups=0`, `agg=0` (surface shadow skip for aggregates too), `plane=0` (`--no-plane-skip`), `tight=1` (a triangle fragment's depth interval from its vertices, not its plane), `mask=1` (`--coverage-masks`);
-//! for `lod`: `f`, `a` (a_LOD), `thres`, `sel=0` (no selective tracing), `levels`, `dist`
+//! for `lod`: `f`, `a` (a_LOD), `thres`, `sel=0` (no selective tracing), `selon=model|value`
+//! (`--lod-selective-on`), `levels`, `dist`
 //! (distance criterion), `force` (fixed LOD), `net=1` (net disparity), `select=cone` (the
 //! ray-cone selector); for `surfel`: `update`, `frames`, `detail`, `shadows=0`, `exact`,
 //! `warm=1`, `cache_up`, `ordered=0`, `top=0` (`--no-instance-tree`), `nearest=mls`.
@@ -243,6 +244,10 @@ impl MethodSpec {
                     "dist" => spec.lod.lod_distance = Some(num(v)? as f32),
                     "force" => spec.lod.lod_force = Some(num(v)? as f32),
                     "net" => spec.lod.lod_net_disparity = on(v)?,
+                    "selon" => {
+                        spec.lod.lod_selective_on =
+                            crate::lod::trace::SelectiveOn::from_str(v, true).map_err(|_| bad(format!("selon={v}: model or value")))?
+                    }
                     "select" => {
                         spec.lod.lod_selector = crate::lod::trace::Selector::from_str(v, true).map_err(|_| bad(format!("select={v}: disparity or cone")))?
                     }
@@ -288,7 +293,7 @@ impl MethodSpec {
                 {
                     "multires and cone"
                 }
-                "f" | "a" | "thres" | "sel" | "levels" | "dist" | "force" | "net" | "select" if method != Method::Lod => "lod",
+                "f" | "a" | "thres" | "sel" | "selon" | "levels" | "dist" | "force" | "net" | "select" if method != Method::Lod => "lod",
                 "update" | "frames" | "detail" | "shadows" | "exact" | "warm" | "cache_up" | "ordered" | "top" | "nearest"
                     if method != Method::Surfel =>
                 {

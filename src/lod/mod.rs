@@ -33,6 +33,10 @@ pub struct LodArgs {
     /// Strength ratio above which selective tracing drops the weaker child (paper: 200 % = 2).
     #[arg(long, default_value_t = 2.0)]
     pub lod_selective_ratio: f32,
+    /// When selective tracing applies: the ray's model is coarser than L₀ (`model`), or its
+    /// LOD value is below 1 (`value`, the literal reading of §4, used until stop 50).
+    #[arg(long, value_enum, default_value = "model")]
+    pub lod_selective_on: trace::SelectiveOn,
     /// Distance criterion: objects farther than this get LOD = distance₀/distance as their
     /// highest model (off by default).
     #[arg(long)]
@@ -60,6 +64,7 @@ impl Default for LodArgs {
             no_selective: !p.selective,
             lod_selective_level: p.selective_level,
             lod_selective_ratio: p.selective_ratio,
+            lod_selective_on: p.selective_on,
             lod_distance: None,
             lod_force: None,
             lod_net_disparity: p.net_disparity,
@@ -80,7 +85,7 @@ impl LodArgs {
         diff!(
             lod_levels => "--lod-levels", lod_f => "--lod-f", lod_a => "--lod-a", lod_threshold => "--lod-threshold",
             no_selective => "--no-selective", lod_selective_level => "--lod-selective-level",
-            lod_selective_ratio => "--lod-selective-ratio", lod_distance => "--lod-distance", lod_force => "--lod-force",
+            lod_selective_ratio => "--lod-selective-ratio", lod_selective_on => "--lod-selective-on", lod_distance => "--lod-distance", lod_force => "--lod-force",
             lod_net_disparity => "--lod-net-disparity", lod_selector => "--lod-selector",
         );
         v
@@ -94,6 +99,7 @@ impl LodArgs {
             selective: !self.no_selective,
             selective_level: self.lod_selective_level,
             selective_ratio: self.lod_selective_ratio,
+            selective_on: self.lod_selective_on,
             force: self.lod_force,
             net_disparity: self.lod_net_disparity,
             selector: self.lod_selector,

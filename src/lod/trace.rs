@@ -71,6 +71,18 @@ pub enum Selector {
     Cone,
 }
 
+/// When selective tracing (§4) may drop a child: "provided that the LOD used is less than
+/// 100 %", read two ways.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SelectiveOn {
+    /// The model the ray's LOD selects is coarser than L₀ (the default since stop 50): a
+    /// ray on the full-detail model renders its sub-tree as the full-detail tracer does.
+    Model,
+    /// The ray's LOD value is below 1 (the literal reading, used until stop 50): nearly
+    /// every level-1 ray qualifies, since the absolute disparity is never exactly 0.
+    Value,
+}
+
 /// The paper's parameters (§3, §4), each a named option.
 #[derive(Clone, Debug)]
 pub struct LodParams {
@@ -86,6 +98,8 @@ pub struct LodParams {
     pub selective_level: u32,
     /// Strength ratio above which the weaker child is dropped (paper: 200 % = 2).
     pub selective_ratio: f32,
+    /// Which "LOD used" must be below 100 % for selective tracing ([`SelectiveOn`]).
+    pub selective_on: SelectiveOn,
     /// Every ray uses this LOD (for tests and experiments): 1.0 = the full-detail tracer.
     pub force: Option<f32>,
     /// Disparity net of the incident rays' own divergence (a flat mirror then gives exactly
@@ -103,6 +117,7 @@ impl Default for LodParams {
             selective: true,
             selective_level: 2,
             selective_ratio: 2.0,
+            selective_on: SelectiveOn::Model,
             force: None,
             net_disparity: false,
             selector: Selector::Disparity,
@@ -300,7 +315,11 @@ impl<'a> LodTracer<'a> {
         let mut do_t = sec.refract.is_some();
         let mut do_r = sec.reflect_w > 0.0;
         // "Provided that the LOD used is less than 100 %" (§4): the model, not the raw value.
-        if self.p.selective && depth >= self.p.selective_level && lv > 0 && do_t && do_r {
+        let below_full = match self.p.selective_on {
+            SelectiveOn::Model => lv > 0,
+            SelectiveOn::Value => st.lod < 1.0,
+        };
+        if self.p.selective && depth >= self.p.selective_level && below_full && do_t && do_r {
             if kr > self.p.selective_ratio * kt {
                 do_t = false;
                 c.inc(Counter::lod_rays_dropped);
