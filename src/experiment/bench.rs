@@ -483,12 +483,18 @@ pub fn equal_time(sweep: &[(f64, f64, f64)], t: f64, flip: f64, name: &str) -> E
     }
 }
 
+/// A share as "12.3 %", or "–" where it was not measured.
+pub fn pct_or_dash(x: Option<f64>) -> String {
+    x.map_or("–".into(), |v| format!("{:.1} %", 100.0 * v))
+}
+
 /// A `lod` row against its full-detail Whitted counterpart (Papaioannou et al. Fig. 4).
 #[derive(Serialize, Debug, Clone)]
 pub struct LodComparison {
     pub against: String,
-    /// 1 − tests(lod)/tests(full), so 0.3 = 30 % fewer ray–triangle tests.
-    pub triangle_test_reduction: f64,
+    /// 1 − tests(lod)/tests(full), so 0.3 = 30 % fewer ray–triangle tests; `None` where the
+    /// back-end does not count its tests (Embree), shown as "–" rather than a false 0 %.
+    pub triangle_test_reduction: Option<f64>,
     /// 1 − time(lod)/time(full).
     pub time_reduction: f64,
     /// The same from process CPU time (with one thread: robust against a busy machine).
@@ -814,7 +820,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                     });
                     lod_vs_full = Some(LodComparison {
                         against: fs.text.clone(),
-                        triangle_test_reduction: if tests(fst) > 0.0 { 1.0 - tests(&stats) / tests(fst) } else { 0.0 },
+                        triangle_test_reduction: (tests(fst) > 0.0).then(|| 1.0 - tests(&stats) / tests(fst)),
                         time_reduction: 1.0 - stats.render_seconds / fst.render_seconds.max(1e-12),
                         cpu_time_reduction: 1.0 - stats.render_cpu_seconds / fst.render_cpu_seconds.max(1e-12),
                         max_pixel_diff: dmax as f64,
@@ -1211,11 +1217,11 @@ pub fn table_string(report: &BenchReport) -> String {
         for r in lod {
             let c = r.lod_vs_full.as_ref().expect("filtered");
             s.push_str(&format!(
-                "| {} | {} | {} | {:.1} % | {:.1} % | {:.1} % | {:.1} % ({},{}) | {:.1} % | {:.2} % | {:.1} % | {:.2} | {} | {} | {} |\n",
+                "| {} | {} | {} | {} | {:.1} % | {:.1} % | {:.1} % ({},{}) | {:.1} % | {:.2} % | {:.1} % | {:.2} | {} | {} | {} |\n",
                 r.scene,
                 r.spec,
                 c.against,
-                100.0 * c.triangle_test_reduction,
+                pct_or_dash(c.triangle_test_reduction),
                 100.0 * c.time_reduction,
                 100.0 * c.cpu_time_reduction,
                 100.0 * c.max_pixel_diff,
@@ -1295,6 +1301,13 @@ mod tests {
         assert!(e("whitted:spp=99999999999").contains("0..="), "{}", e("whitted:spp=99999999999"));
         assert!(e("distributed:fps=0").contains("fps=0 out of range"), "{}", e("distributed:fps=0"));
         assert!(e("whitted:packet=4").contains("packet=4"), "{}", e("whitted:packet=4"));
+    }
+
+    #[test]
+    fn unmeasured_shares_show_as_a_dash() {
+        assert_eq!(pct_or_dash(None), "–");
+        assert_eq!(pct_or_dash(Some(0.0)), "0.0 %");
+        assert_eq!(pct_or_dash(Some(0.1234)), "12.3 %");
     }
 
     #[test]

@@ -438,10 +438,10 @@ fn index_html(sections: &[(Job, BenchReport)]) -> String {
             for (row, c) in &lod {
                 let _ = write!(
                     h,
-                    "<tr><td>{}</td><td>{}</td><td>{:.1} %</td><td>{:.1} %</td><td>{:.1} %</td><td>{:.1} %</td><td>{:.2} %</td><td>{:.1} %</td><td>{}</td><td>{}</td></tr>",
+                    "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.1} %</td><td>{:.1} %</td><td>{:.1} %</td><td>{:.2} %</td><td>{:.1} %</td><td>{}</td><td>{}</td></tr>",
                     esc(&row.spec),
                     esc(&c.against),
-                    100.0 * c.triangle_test_reduction,
+                    super::bench::pct_or_dash(c.triangle_test_reduction),
                     100.0 * c.time_reduction,
                     100.0 * c.max_pixel_diff,
                     100.0 * c.p99_pixel_diff,
