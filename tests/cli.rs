@@ -9,11 +9,12 @@ fn lodtrace(args: &[&str]) -> (i32, String, String) {
     (o.status.code().unwrap_or(-1), String::from_utf8_lossy(&o.stdout).into(), String::from_utf8_lossy(&o.stderr).into())
 }
 
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("lodtrace-cli-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+mod common;
+use common::Scratch;
+
+/// A fresh, empty folder unique to this test and process, removed when the test passes.
+fn tmp(name: &str) -> Scratch {
+    Scratch::new("lodtrace-cli", name)
 }
 
 fn one_error_line(stderr: &str) {
@@ -24,7 +25,7 @@ fn one_error_line(stderr: &str) {
 
 /// `lodtrace bench ARGS --width 48 --height 36 --quiet --out DIR` into a fresh folder:
 /// (exit code, stdout, stderr, folder, bench.json when it was written).
-fn small_bench(name: &str, args: &[&str]) -> (i32, String, String, PathBuf, Option<serde_json::Value>) {
+fn small_bench(name: &str, args: &[&str]) -> (i32, String, String, Scratch, Option<serde_json::Value>) {
     let d = tmp(name);
     let mut all = vec!["bench"];
     all.extend_from_slice(args);
@@ -601,7 +602,7 @@ fn animate_cost_maps_beside_the_frames() {
             height: 36,
             update: "lazy".into(),
             packet,
-            out: Some(d),
+            out: Some(d.to_path_buf()),
             cost: true,
             quiet: true,
             ..lodtrace::cli::animate::AnimateArgs::new("bend")

@@ -3,18 +3,17 @@
 
 use glam::Vec3;
 use lodtrace::film::{io, linear_to_srgb, metrics, Film};
-use std::path::PathBuf;
 use std::process::Command;
 
 const W: u32 = 64;
 const H: u32 = 48;
 
-/// A fresh, empty folder unique to this test and process.
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("lodtrace-film-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+mod common;
+use common::Scratch;
+
+/// A fresh, empty folder unique to this test and process, removed when the test passes.
+fn tmp(name: &str) -> Scratch {
+    Scratch::new("lodtrace-film-test", name)
 }
 
 /// Deterministic pseudo-random value in [0,1).
