@@ -1132,3 +1132,50 @@ fn flat_mirror_in_focus_keeps_the_lens_blur() {
         assert!((got.0 - want.0).abs() < 0.01 * want.0, "rough then flat: {tp} past the mirror, axes {got:?}, mirror image {want:?}");
     }
 }
+
+/// The cones of a blurry reflection and of an elliptical light have the variance of what
+/// the distributed reference samples there (a uniform cap of half-angle `roughness`, a
+/// uniform ellipse), at the default `--rough-scale` and `--light-scale`. A Gaussian
+/// exp(−x²/a²) has variance a²/2 per axis, a uniform disk of radius R has R²/4: with the
+/// scales at 1 (the paper's tan(roughness) and the light's axes) the cones were √2 too wide,
+/// blurrier reflections and wider penumbrae than the reference (stop 51).
+#[test]
+fn glossy_and_light_cones_have_the_reference_samplers_variance() {
+    use lodtrace::baseline::shade::sample_cone;
+    let tp = TraceParams::default();
+    let n = 200;
+    let grid = || (0..n * n).map(move |k| (((k % n) as f32 + 0.5) / n as f32, ((k / n) as f32 + 0.5) / n as f32));
+    for roughness in [0.03f32, 0.1, 0.25] {
+        // Per axis, in the plane at unit distance along the mirror direction.
+        let var_ref = grid()
+            .map(|(u, v)| {
+                let d = sample_cone(Vec3::Z, roughness, u, v);
+                (((d.x / d.z).powi(2) + (d.y / d.z).powi(2)) / 2.0) as f64
+            })
+            .sum::<f64>()
+            / (n * n) as f64;
+        let a = cone::rough_spread(roughness, tp.rough_scale) as f64;
+        let ratio = a * a / 2.0 / var_ref;
+        assert!((ratio - 1.0).abs() < 0.03, "roughness {roughness}: cone variance ÷ the reference's {ratio}");
+        // And the reflected cone carries it: a mirror hit by a negligible footprint.
+        let incoming = Cone::new(Vec3::new(0.0, 0.0, 10.0), Vec3::new(0.0, 0.0, -1.0), &[(Fp::ZERO, Fp::diag(1e-6))]);
+        let fs = incoming.footprint_and_spread(10.0, 1e-9, 1e-30);
+        let rc = cone::secondary(Vec3::ZERO, incoming.dir, Vec3::Z, &Mat3::ZERO, fs, Outgoing::Reflect, a as f32).unwrap();
+        let e = eigen_1(rc.sigma(3.0), 1e-9, 1e-30);
+        assert!(((e.s1 / 3.0) as f64 / a - 1.0).abs() < 1e-3 && ((e.s2 / 3.0) as f64 / a - 1.0).abs() < 1e-3);
+    }
+    // An ellipse facing the shading point, 9 units away: the shadow cone at the light.
+    let (c, axis_a, axis_b) = (Vec3::new(0.0, 9.0, 0.0), Vec3::new(2.8, 0.0, 0.0), Vec3::new(0.0, 0.0, 1.7));
+    let light = Light::Ellipse { center: c, axis_a, axis_b, intensity: Vec3::ONE };
+    let var_along = |axis: Vec3| {
+        let u = axis.normalize();
+        grid().map(|(s, t)| ((light.sample(s, t) - c).dot(u) as f64).powi(2)).sum::<f64>() / (n * n) as f64
+    };
+    let (la, lb) = cone::light_axes(axis_a, axis_b, tp.light_scale);
+    let (sh, dist) = cone::shadow(Vec3::ZERO, Vec3::X * 1e-6, Vec3::Z * 1e-6, c, la, lb);
+    let e = eigen_1(sh.sigma(dist), 1e-9, 1e-30);
+    for (semi, axis) in [(e.s1, axis_a), (e.s2, axis_b)] {
+        let ratio = (semi as f64).powi(2) / 2.0 / var_along(axis);
+        assert!((ratio - 1.0).abs() < 0.03, "light axis {axis}: cone variance ÷ the reference's {ratio}");
+    }
+}

@@ -207,6 +207,8 @@ impl MethodSpec {
                     "dtol" => spec.multires.depth_tolerance = num(v)? as f32,
                     "cs" => spec.multires.cone_scale = num(v)? as f32,
                     "lens" => spec.multires.lens_scale = num(v)? as f32,
+                    "rough" => spec.multires.rough_scale = num(v)? as f32,
+                    "light" => spec.multires.light_scale = num(v)? as f32,
                     "mip" => spec.multires.no_mipmap = !on(v)?,
                     "primary" => spec.multires.primary_only = on(v)?,
                     "budget" => spec.multires.time_budget = Some(num(v)?),
@@ -287,8 +289,8 @@ impl MethodSpec {
         for key in &seen {
             let of = match *key {
                 "k" | "c" | "pw" if !(cone || octree) => "multires and cone, and of the accel octree",
-                "clamp" | "clamp2" | "lod" | "dtol" | "cs" | "lens" | "mip" | "primary" | "budget" | "spread" | "groups" | "agg"
-                | "plane" | "tight" | "mask" | "term" | "tri" | "eigen"
+                "clamp" | "clamp2" | "lod" | "dtol" | "cs" | "lens" | "rough" | "light" | "mip" | "primary" | "budget" | "spread"
+                | "groups" | "agg" | "plane" | "tight" | "mask" | "term" | "tri" | "eigen"
                     if !cone =>
                 {
                     "multires and cone"

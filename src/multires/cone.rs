@@ -36,6 +36,14 @@
 //!   took the centre direction, so the cone lost its spread where it is largest (the in-plane
 //!   spread 1.5 → 1 at 2° from the critical angle: 0.0002 instead of ≈ 0.2 rad). Roughness adds a radial
 //!   increment tan(roughness)·I (§6, "Special Effects").
+//!   *Deviation (stop 51, `--rough-scale`):* by default that increment is × 1/√2, the same
+//!   variance match as the lens: the distributed reference samples the reflection uniformly
+//!   in a cap of half-angle `roughness` (about a uniform disk of radius tan(roughness) per unit
+//!   distance, variance tan²/4 per axis), the Gaussian of axis a has variance a²/2.
+//! - elliptical lights: the shadow cone's light pair is the ellipse's axes × `light_scale`,
+//!   by default 1/√2 for the same reason (*deviation, stop 51, `--light-scale`*: the
+//!   reference samples the ellipse uniformly; with the axes themselves a penumbra is √2
+//!   too wide).
 
 use crate::core::eigen2::{eigen_1, Eigen2, Sym2};
 use crate::core::onb;
@@ -314,9 +322,10 @@ pub enum Outgoing {
 /// of the rays through the centre, see [`Cone::footprint_and_spread`]). Both parts are
 /// carried over as the paper carries one cone: the footprint's pair to (startDev, incrDev),
 /// the centre rays' spread to a second pair with zero startDev (their bent directions);
-/// their squares add. Returns None on total internal reflection of the centre ray (the
-/// caller reflects instead).
-pub fn secondary(p: Vec3, dir: Vec3, n: Vec3, w: &Mat3, fs: [Vec3; 6], out: Outgoing, roughness: f32) -> Option<Cone> {
+/// their squares add. `rough_spread` is a blurry reflection's radial spread per unit
+/// distance (§6: tan(roughness), times the tracer's `rough_scale`), added as a third pair.
+/// Returns None on total internal reflection of the centre ray (the caller reflects instead).
+pub fn secondary(p: Vec3, dir: Vec3, n: Vec3, w: &Mat3, fs: [Vec3; 6], out: Outgoing, rough_spread: f32) -> Option<Cone> {
     let bend = |d: Vec3, nn: Vec3| -> Option<Vec3> {
         match out {
             Outgoing::Reflect => Some(reflect(d, nn)),
@@ -354,10 +363,26 @@ pub fn secondary(p: Vec3, dir: Vec3, n: Vec3, w: &Mat3, fs: [Vec3; 6], out: Outg
         let x1 = dir_at(Vec3::ZERO, fs[5]) - r;
         c.add_pair(Fp::ZERO, c.fp_of(x0 - r * r.dot(x0), x1 - r * r.dot(x1)));
     }
-    if roughness > 0.0 {
-        c.add_pair(Fp::ZERO, Fp::diag(roughness.min(1.4).tan()));
+    if rough_spread > 0.0 {
+        c.add_pair(Fp::ZERO, Fp::diag(rough_spread));
     }
     Some(c)
+}
+
+/// A blurry reflection's radial spread per unit distance (§6, "Special Effects"): tan of
+/// the roughness angle (clamped below 80°) × `scale` (`--rough-scale`, see the module notes).
+pub fn rough_spread(roughness: f32, scale: f32) -> f32 {
+    if roughness > 0.0 {
+        roughness.min(1.4).tan() * scale
+    } else {
+        0.0
+    }
+}
+
+/// An elliptical light's axes as the shadow cone's Gaussian sees them: × `scale`
+/// (`--light-scale`, see the module notes).
+pub fn light_axes(axis_a: Vec3, axis_b: Vec3, scale: f32) -> (Vec3, Vec3) {
+    (axis_a * scale, axis_b * scale)
 }
 
 /// The shadow cone from surface point `p` towards a light at `light_pos` (distance `dist`):
@@ -448,7 +473,7 @@ mod tests {
         assert!(s(&convex, 5.0) > 2.0 * s(&flat, 5.0));
         // Roughness widens it further.
         let rough = secondary(Vec3::ZERO, dir, n, &Mat3::ZERO, fs, Outgoing::Reflect, 0.1).unwrap();
-        let want = (s(&flat, 5.0).powi(2) + (5.0 * 0.1f32.tan()).powi(2)).sqrt();
+        let want = (s(&flat, 5.0).powi(2) + (5.0f32 * 0.1).powi(2)).sqrt();
         assert!((s(&rough, 5.0) - want).abs() < 1e-3, "roughness adds in quadrature");
     }
 

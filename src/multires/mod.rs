@@ -106,6 +106,16 @@ pub struct MultiresArgs {
     /// uniform disk, which distributed ray tracing samples.
     #[arg(long, default_value_t = std::f32::consts::FRAC_1_SQRT_2)]
     pub lens_scale: f32,
+    /// Blurry reflection: the cone's added spread in units of tan(roughness) (§6; the paper
+    /// does not say, 1 = tan(roughness)). The default 1/√2 gives the Gaussian the variance of
+    /// the uniform cone of half-angle `roughness` that distributed ray tracing samples.
+    #[arg(long, default_value_t = std::f32::consts::FRAC_1_SQRT_2)]
+    pub rough_scale: f32,
+    /// Elliptical lights: the shadow cone's light Gaussian in units of the ellipse's axes
+    /// (§4.2; 1 = the axes). The default 1/√2 gives it the variance of the uniform ellipse
+    /// that distributed ray tracing samples.
+    #[arg(long, default_value_t = std::f32::consts::FRAC_1_SQRT_2)]
+    pub light_scale: f32,
     /// Disable the mipmap blend one level down.
     #[arg(long)]
     pub no_mipmap: bool,
@@ -176,6 +186,8 @@ impl Default for MultiresArgs {
             merge_meshes: !t.split_meshes,
             cone_scale: t.cone_scale,
             lens_scale: t.lens_scale,
+            rough_scale: t.rough_scale,
+            light_scale: t.light_scale,
             no_mipmap: !t.mipmap,
             primary_only: t.primary_only,
             time_budget: t.time_budget,
@@ -208,6 +220,7 @@ impl MultiresArgs {
             anisotropy_clamp => "--anisotropy-clamp", secondary_clamp => "--secondary-clamp", lod_scale => "--lod-scale",
             depth_tolerance => "--depth-tolerance", eigen => "--eigen", tri_weight => "--tri-weight",
             shadow_tri_weight => "--shadow-tri-weight", no_facing => "--no-facing", merge_meshes => "--merge-meshes", cone_scale => "--cone-scale", lens_scale => "--lens-scale",
+            rough_scale => "--rough-scale", light_scale => "--light-scale",
             no_mipmap => "--no-mipmap", primary_only => "--primary-only", termination => "--termination",
             no_normal_spread => "--no-normal-spread", no_group_points => "--no-group-points",
             no_aggregate_shadow => "--no-aggregate-shadow", tight_depth => "--tight-depth", coverage_masks => "--coverage-masks",
@@ -230,6 +243,8 @@ impl MultiresArgs {
             split_meshes: !self.merge_meshes,
             cone_scale: self.cone_scale,
             lens_scale: self.lens_scale,
+            rough_scale: self.rough_scale,
+            light_scale: self.light_scale,
             mipmap: !self.no_mipmap,
             primary_only: self.primary_only,
             time_budget: self.time_budget,

@@ -199,6 +199,12 @@ pub struct TraceParams {
     pub cone_scale: f32,
     /// Lens footprint at the lens in lens radii (`--lens-scale`; [`super::cone::Cone::primary`]).
     pub lens_scale: f32,
+    /// Blurry reflection's spread in units of tan(roughness) (`--rough-scale`; 1/√2 matches
+    /// the variance of the distributed reference's uniform cap, [`super::cone::secondary`]).
+    pub rough_scale: f32,
+    /// Elliptical light's Gaussian in units of its axes (`--light-scale`; 1/√2 matches the
+    /// variance of the uniform ellipse the distributed reference samples).
+    pub light_scale: f32,
     /// A-buffer capacity.
     pub max_fragments: usize,
     /// Secondary cones below this contribution to the pixel are not traced.
@@ -246,6 +252,8 @@ impl Default for TraceParams {
             points: true,
             cone_scale: 0.5,
             lens_scale: std::f32::consts::FRAC_1_SQRT_2,
+            rough_scale: std::f32::consts::FRAC_1_SQRT_2,
+            light_scale: std::f32::consts::FRAC_1_SQRT_2,
             max_fragments: 16,
             min_importance: 1e-3,
             primary_only: false,
@@ -306,6 +314,12 @@ impl TraceParams {
         }
         if !(self.lens_scale.is_finite() && self.lens_scale > 0.0 && self.lens_scale <= 16.0) {
             return bad(format!("--lens-scale {} out of range (0, 16]", self.lens_scale));
+        }
+        if !(self.rough_scale.is_finite() && self.rough_scale > 0.0 && self.rough_scale <= 16.0) {
+            return bad(format!("--rough-scale {} out of range (0, 16]", self.rough_scale));
+        }
+        if !(self.light_scale.is_finite() && self.light_scale > 0.0 && self.light_scale <= 16.0) {
+            return bad(format!("--light-scale {} out of range (0, 16]", self.light_scale));
         }
         if self.max_fragments < 2 || self.max_fragments > 256 {
             return bad(format!("--max-fragments {} out of range [2, 256]", self.max_fragments));
@@ -2583,7 +2597,10 @@ impl<'s, 'a> Tracer<'s, 'a> {
             for light in &scene.lights {
                 let (lp, ax_a, ax_b) = match light {
                     Light::Point { pos, .. } => (*pos, Vec3::ZERO, Vec3::ZERO),
-                    Light::Ellipse { center, axis_a, axis_b, .. } => (*center, *axis_a, *axis_b),
+                    Light::Ellipse { center, axis_a, axis_b, .. } => {
+                        let (a, b) = cone::light_axes(*axis_a, *axis_b, self.p.light_scale);
+                        (*center, a, b)
+                    }
                 };
                 let to_l = lp - p;
                 let d2 = to_l.length_squared();
@@ -2657,7 +2674,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
             }
         }
         if reflect_w > 0.0 && importance * reflect_w > self.p.min_importance {
-            if let Some(mut rc) = cone::secondary(p, cone.dir, n, &w, fs, Outgoing::Reflect, roughness) {
+            if let Some(mut rc) =
+                cone::secondary(p, cone.dir, n, &w, fs, Outgoing::Reflect, cone::rough_spread(roughness, self.p.rough_scale))
+            {
                 rc.tmin = t_self(rc.dir);
                 c.inc(Counter::rays_reflect);
                 let r = self.secondary().radiance_own(&rc, own, depth + 1, importance * reflect_w, ss, c);
