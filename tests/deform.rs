@@ -688,7 +688,7 @@ fn simulation_energy_bounded() {
 
 /// Collisions do not inject energy: a soft ball (overlapping clusters) dropped with
 /// restitution 1 and no damping must never hold more kinetic plus gravitational energy than
-/// it was dropped with (its elastic energy starts at zero). Until the review of stop 50 a
+/// it was dropped with (its elastic energy starts at zero). Until stop 51 a
 /// node in resting contact had the velocity that gravity and its goal gave it in the same
 /// substep reflected as if it had hit the floor at that speed: 24 % above the drop energy.
 #[test]
@@ -991,7 +991,7 @@ fn cache_hits_in(name: &str) {
                 assert!(dc.cache_hits as f64 >= 0.95 * dc.cache_lookups as f64, "{dc:?}");
                 // With front-to-back traversal the cache saves nothing measurable (module docs
                 // of `trace`), and a cached ancestor's subtree may cost a few extra leaf tests:
-                // 1 % slack there (elastic-balls, cache_up 3: 3222 vs 3220 after the stop-50
+                // 1 % slack there (elastic-balls, cache_up 3: 3222 vs 3220 after the stop-51
                 // change to the contact restitution moved the balls).
                 let slack = if ordered { dc0.leaf_tests / 100 } else { 0 };
                 assert!(dc.leaf_tests <= dc0.leaf_tests + slack, "{name}: {dc:?} vs {dc0:?}");
