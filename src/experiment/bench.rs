@@ -991,13 +991,18 @@ fn finish_row(
     })
 }
 
-fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
+/// `bench.json` (every figure) and `bench.md` (the tables) of `report` in `out`.
+pub fn write_report(out: &Path, report: &BenchReport) -> Result<()> {
     let json = serde_json::to_string_pretty(report).expect("report serialises") + "\n";
     let p = out.join("bench.json");
     crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, json).map_err(|e| Error::io(&p, e)))?;
     let p = out.join("bench.md");
     let md = table_string(report);
-    crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, md).map_err(|e| Error::io(&p, e)))?;
+    crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, md).map_err(|e| Error::io(&p, e)))
+}
+
+fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
+    write_report(out, report)?;
     let mut bars: Vec<(String, f64)> = report.rows.iter().map(|r| (format!("{} {}", r.scene, r.spec), r.stats.render_seconds)).collect();
     bars.extend(report.deform.iter().map(|r| (format!("{} {} {}x{}", r.scene, r.spec, r.width, r.height), r.render_seconds)));
 
@@ -1035,15 +1040,20 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
             }
             curves.append(&mut per);
             let per = curves;
-            // Fast, noisy renders sit top left and the converged sweep bottom right.
+            // Fast, noisy renders sit top left and the converged sweep bottom right. Times
+            // spanning more than a decade go on a log axis: on a linear one the fast methods
+            // crowded into one spot at the left edge.
+            let ts = per.iter().flat_map(|c| c.1.iter().map(|p| p.0)).filter(|t| *t > 0.0);
+            let (tl, th) = ts.fold((f64::INFINITY, 0.0f64), |(a, b), t| (a.min(t), b.max(t)));
             super::plot::line_chart_fmt(
                 &out.join(format!("{sc}-equal-time.png")),
                 &format!("{sc}: mean FLIP against the reference vs render time"),
                 "render time (s)",
                 "mean FLIP",
                 &per,
-                plotters::chart::SeriesLabelPosition::MiddleRight,
+                th / tl > 8.0,
                 &super::plot::fmt_axis,
+                None,
             )?;
         } else {
             scatter.extend(rows.filter_map(|r| r.flip.map(|f| (sc.to_string(), r.spec.clone(), r.stats.render_seconds, f))));

@@ -3,6 +3,7 @@
 //! Embree, and writes images, tables, plots and an `index.html` a person can open.
 
 use super::bench::{self, BenchArgs, BenchReport};
+use super::deform_bench::update_label;
 use crate::error::{Error, Result};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -295,18 +296,6 @@ fn size_section(a: &DemoArgs, dir: &Path, detail: f32) -> Result<String> {
     }
     h.push_str("</table><p><img src=\"deform/sizes/speedup-vs-size.png\" style=\"max-width:640px\"></p>");
     Ok(h)
-}
-
-/// The demo table's "update" cell: the mode, and the cache ablation switches of its spec.
-fn update_label(update: &str, spec: &str) -> String {
-    let mut l = update.to_string();
-    if spec.contains("ordered=0") {
-        l.push_str(", unordered");
-    }
-    if let Some(n) = spec.split(':').find_map(|k| k.strip_prefix("cache_up=")) {
-        let _ = write!(l, ", cache {n} up");
-    }
-    l
 }
 
 /// One paper target beside this run's figure: the first table of the page.
