@@ -631,11 +631,15 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
                     esc(&row.spec),
                     row.stats.render_seconds,
                     o(row.flip, 4),
-                    if e.sweep_beyond { format!("&le; {}", o(e.sweep_flip_at_equal_time, 4)) } else { o(e.sweep_flip_at_equal_time, 4) },
-                    if e.sweep_beyond {
-                        format!("{} (its slowest)", o(e.sweep_spp_at_equal_time, 1))
-                    } else {
-                        o(e.sweep_spp_at_equal_time, 1)
+                    match e.sweep_flip_at_equal_time {
+                        None => "faster than its 1 spp".into(),
+                        Some(_) if e.sweep_beyond => format!("&le; {}", o(e.sweep_flip_at_equal_time, 4)),
+                        Some(_) => o(e.sweep_flip_at_equal_time, 4),
+                    },
+                    match e.sweep_spp_at_equal_time {
+                        None => "&lt; 1".into(),
+                        Some(_) if e.sweep_beyond => format!("{} (its slowest)", o(e.sweep_spp_at_equal_time, 1)),
+                        Some(_) => o(e.sweep_spp_at_equal_time, 1),
                     },
                     match e.sweep_seconds_to_match {
                         Some(v) if e.sweep_match_at_most => format!("&le; {v:.3} s (1 spp is better)"),
@@ -657,15 +661,16 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
         }
         let lod: Vec<_> = r.rows.iter().filter_map(|row| row.lod_vs_full.as_ref().map(|c| (row, c))).collect();
         if !lod.is_empty() {
-            h.push_str("<h3>Per-ray LOD against full detail</h3><p>Difference images are magnified like the paper's Fig. 4e (white = equal, black = the largest difference); the distortion maps show 20·d (refraction d<sub>t</sub>, reflection d<sub>r</sub>) as in Fig. 4c/d. The floor is the full-detail render repeated on the other exact back-end (Embree ↔ CWBVH) with the same samples: what two correct intersectors already differ by in these chaotic glass scenes.</p><table><tr><th>method</th><th>against</th><th>triangle tests saved</th><th>time saved</th><th>max pixel diff</th><th>99th pct</th><th>mean diff</th><th>max diff, full-LOD pixels</th><th>floor max / 99th / mean</th><th>LOD pixels above floor max</th></tr>");
+            h.push_str("<h3>Per-ray LOD against full detail</h3><p>Difference images are magnified like the paper's Fig. 4e (white = equal, black = the largest difference); the distortion maps show 20·d (refraction d<sub>t</sub>, reflection d<sub>r</sub>) as in Fig. 4c/d. The floor is the full-detail render repeated on the other exact back-end (Embree ↔ CWBVH) with the same samples: what two correct intersectors already differ by in these chaotic glass scenes.</p><table><tr><th>method</th><th>against</th><th>triangle tests saved</th><th>time saved</th><th>CPU time saved</th><th>max pixel diff</th><th>99th pct</th><th>mean diff</th><th>max diff, full-LOD pixels</th><th>floor max / 99th / mean</th><th>LOD pixels above floor max</th></tr>");
             for (row, c) in &lod {
                 let _ = write!(
                     h,
-                    "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.1} %</td><td>{:.1} %</td><td>{:.1} %</td><td>{:.2} %</td><td>{:.1} %</td><td>{}</td><td>{}</td></tr>",
+                    "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.1} %</td><td>{:.1} %</td><td>{:.1} %</td><td>{:.1} %</td><td>{:.2} %</td><td>{:.1} %</td><td>{}</td><td>{}</td></tr>",
                     esc(&row.spec),
                     esc(&c.against),
                     super::bench::pct_or_dash(c.triangle_test_reduction),
                     100.0 * c.time_reduction,
+                    100.0 * c.cpu_time_reduction,
                     100.0 * c.max_pixel_diff,
                     100.0 * c.p99_pixel_diff,
                     100.0 * c.mean_pixel_diff,
@@ -675,10 +680,11 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
                 );
             }
             h.push_str("</table>");
-            for (row, _) in &lod {
+            for (row, c) in &lod {
                 let slug = bench::MethodSpec::parse(&row.spec).map(|s| s.slug()).unwrap_or_default();
-                for (k, what) in
-                    [("diff", "difference (magnified)"), ("disparity-t", "refraction disparity"), ("disparity-r", "reflection disparity")]
+                // Each difference image is scaled to its own largest difference: say which.
+                let diff = format!("difference to {} (magnified: black = {:.1} %)", esc(&c.against), 100.0 * c.max_pixel_diff);
+                for (k, what) in [("diff", diff.as_str()), ("disparity-t", "refraction disparity"), ("disparity-r", "reflection disparity")]
                 {
                     let _ = write!(
                         h,
@@ -692,7 +698,7 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
         }
         let prof: Vec<_> = r.rows.iter().filter_map(|row| row.stats.cone_profile.as_ref().map(|p| (row, p))).collect();
         if !prof.is_empty() {
-            h.push_str("<h3>Where the cone tracer's work goes</h3><p>Per cone kind: traversal thread-seconds (wall-clock time on each thread, summed over the threads; shading excluded), tests per cone (instance, node, triangle-bound, triangle and surfel tests) and the kind's share of the frame's tests. The heat maps show the tests per pixel, every cone a pixel spawned included (log scale, magma: black none, pale yellow the most).</p><table><tr><th>method</th><th>primary</th><th>shadow of primary</th><th>reflected / refracted</th><th>shadow of secondary</th><th>tests per pixel: median / p95 / max</th><th>top 5 % pixels' share</th></tr>");
+            h.push_str("<h3>Where the cone tracer's work goes</h3><p>Per cone kind: traversal thread-seconds (wall-clock time on each thread, summed over the threads; shading excluded), tests per cone (instance, node, triangle-bound, triangle and surfel tests) and the kind's share of the frame's tests. The heat maps show the tests per pixel, every cone a pixel spawned included (log scale, magma: black none, pale yellow the most in that map; each map has its own scale).</p><table><tr><th>method</th><th>primary</th><th>shadow of primary</th><th>reflected / refracted</th><th>shadow of secondary</th><th>tests per pixel: median / p95 / max</th><th>top 5 % pixels' share</th></tr>");
             for (row, p) in &prof {
                 let _ = write!(h, "<tr><td>{}</td>", esc(&row.spec));
                 for cell in p.cells() {
@@ -701,13 +707,15 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
                 h.push_str("</tr>");
             }
             h.push_str("</table>");
-            for (row, _) in &prof {
+            for (row, p) in &prof {
                 let slug = bench::MethodSpec::parse(&row.spec).map(|s| s.slug()).unwrap_or_default();
+                // Each map is scaled to its own largest count: the colours of two maps differ.
                 let _ = write!(
                     h,
-                    "<figure><img src=\"{}\"><figcaption>{} — tests per pixel</figcaption></figure>",
+                    "<figure><img src=\"{}\"><figcaption>{} — tests per pixel (pale yellow = {}, this map's most)</figcaption></figure>",
                     dir.join(format!("{}-{}-cost.png", job.scene, slug)).display(),
-                    esc(&row.spec)
+                    esc(&row.spec),
+                    p.pixel_tests.max
                 );
             }
         }
@@ -822,6 +830,45 @@ mod tests {
         assert!(target_rows(&[], &[]).is_empty());
         let md = targets_markdown(&t);
         assert!(md.lines().count() == t.len() + 2 && md.contains("| Wand & Straßer | multires frame"), "{md}");
+    }
+
+    /// The page says what each per-image scale means and gives the CPU time saved (the
+    /// one-thread rows' robust figure, in bench.md but missing from the page); a method faster
+    /// than the sweep's 1 spp is said so, not "-".
+    #[test]
+    fn page_states_scales_cpu_time_and_faster_than_one_spp() {
+        let job = |scene: &'static str, sweep: Vec<String>| Job {
+            scene,
+            width: 4,
+            height: 4,
+            methods: String::new(),
+            reference: None,
+            sweep,
+            regions: vec![],
+        };
+        let mut lod = row("chessboard", "lod:bvh:spp=4", stats("lod", "bvh", 1.0, &[]));
+        lod.lod_vs_full = Some(bench::LodComparison {
+            against: "whitted:bvh:spp=4".into(),
+            triangle_test_reduction: Some(0.215),
+            time_reduction: 0.151,
+            cpu_time_reduction: 0.172,
+            max_pixel_diff: 0.329,
+            max_at: [0, 0],
+            p99_pixel_diff: 0.09,
+            mean_pixel_diff: 0.0048,
+            max_diff_full_lod_pixels: 0.063,
+            floor: None,
+        });
+        let mut w = row("spheres", "whitted:embree", stats("whitted", "embree", 0.08, &[]));
+        w.flip = Some(0.03);
+        w.equal_time.push(bench::equal_time(&[(0.5, 1.0, 0.033), (1.0, 2.0, 0.026)], 0.08, 0.03, "distributed:octree"));
+        let h = index_html(
+            &[(job("chessboard", vec![]), report(vec![lod])), (job("spheres", vec!["distributed:octree".into()]), report(vec![w]))],
+            "",
+        );
+        assert!(h.contains("<th>CPU time saved</th>") && h.contains("<td>17.2 %</td>"), "CPU time column");
+        assert!(h.contains("difference to whitted:bvh:spp=4 (magnified: black = 32.9 %)"), "diff caption");
+        assert!(h.contains("<td>faster than its 1 spp</td><td>&lt; 1</td>"), "faster than 1 spp");
     }
 
     #[test]
