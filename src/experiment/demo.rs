@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 pub struct DemoArgs {
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
-    /// Smaller images and fewer reference samples (a minute instead of several).
+    /// Smaller images, fewer reference samples and frames (about 4 minutes on 2 cores instead of about 15).
     #[arg(long)]
     pub quick: bool,
     #[arg(long, default_value_t = 0)]
@@ -99,12 +99,17 @@ pub fn run(a: &DemoArgs) -> Result<()> {
 }
 
 fn run_in(a: &DemoArgs) -> Result<()> {
+    // The plots need a font: say so before minutes of rendering, not after.
+    super::plot::check_font()?;
     crate::film::io::create_out_dir(&a.out)?;
     crate::film::io::check_writable_dir(&a.out)?;
     let mut sections = Vec::new();
+    // What could not run here (meshes missing): named on the page, not only on stderr.
+    let mut skipped = Vec::new();
     for job in jobs(a.quick) {
-        if crate::scene::builtin::get(job.scene).is_err() {
-            eprintln!("demo: skipping '{}' (not available: run tools/setup for its meshes)", job.scene);
+        if let Err(e) = crate::scene::builtin::get(job.scene) {
+            eprintln!("demo: skipping '{}' ({e})", job.scene);
+            skipped.push(format!("{} ({e})", job.scene));
             continue;
         }
         eprintln!(
@@ -135,13 +140,18 @@ fn run_in(a: &DemoArgs) -> Result<()> {
         bench::print_table(&report)?;
         sections.push((job, report));
     }
-    let (deform, deform_rows) = deform_section(a)?;
+    let (deform, deform_rows) = deform_section(a, &mut skipped)?;
     let reports: Vec<&BenchReport> = sections.iter().map(|(_, r)| r).collect();
     let targets = target_rows(&reports, &deform_rows);
     let md = targets_markdown(&targets);
     let p = a.out.join("targets.md");
     crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, md).map_err(|e| Error::io(&p, e)))?;
-    let mut html = index_html(&sections, &targets_html(&targets));
+    let mut top = run_line(a);
+    if !skipped.is_empty() {
+        let _ = write!(top, "<p><b>Not run here</b> (missing meshes: <code>tools/setup</code>): {}.</p>", esc(&skipped.join("; ")));
+    }
+    top.push_str(&targets_html(&targets));
+    let mut html = index_html(&sections, &top);
     html = html.replace("</body></html>", &format!("{deform}</body></html>"));
     let p = a.out.join("index.html");
     crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, html).map_err(|e| Error::io(&p, e)))?;
@@ -152,7 +162,7 @@ fn run_in(a: &DemoArgs) -> Result<()> {
 /// Adams et al.: every built-in sequence in the four update modes (same recorded motion;
 /// [`super::deform_bench`]), the per-frame time curves (the paper's Fig. 5), radius ratios
 /// (Fig. 3), test counts with and without the per-ray cache.
-fn deform_section(a: &DemoArgs) -> Result<(String, Vec<super::deform_bench::DeformRow>)> {
+fn deform_section(a: &DemoArgs, skipped: &mut Vec<String>) -> Result<(String, Vec<super::deform_bench::DeformRow>)> {
     let (w, h, frames, detail) = if a.quick { (192, 144, 8, 0.15) } else { (384, 288, 16, 0.4) };
     // The last two: the paper's unordered descent without and with the per-ray cache (of an
     // ancestor 8 levels above the hit leaf; the leaf itself misses under this motion), where
@@ -168,8 +178,17 @@ fn deform_section(a: &DemoArgs) -> Result<(String, Vec<super::deform_bench::Defo
     for seq in crate::deform::Sequence::BUILTIN {
         match super::deform_bench::run(&[seq.to_string()], &specs, w, h, a.threads, 1, Some(&dir), false) {
             Ok(r) => rows.extend(r),
-            Err(e) => eprintln!("demo: skipping {seq} ({e})"),
+            // A sequence whose mesh is missing is skipped; any other failure (a write, a
+            // plot) is the demo's.
+            Err(e) if is_missing_asset(&e) => {
+                eprintln!("demo: skipping {seq} ({e}: run tools/setup)");
+                skipped.push(format!("{seq} ({e})"));
+            }
+            Err(e) => return Err(e),
         }
+    }
+    if !rows.is_empty() {
+        bench::write_report(&dir, &deform_report(w, h, rows.clone()))?;
     }
     // Each sequence ran on its own (so that one failing is skipped): the Fig. 3 plot of all.
     super::deform_bench::radius_plot(&dir, &rows)?;
@@ -265,7 +284,9 @@ fn size_section(a: &DemoArgs, dir: &Path, detail: f32) -> Result<String> {
         for &(w, h) in sizes {
             match super::deform_bench::run(&[seq.to_string()], &specs, w, h, a.threads, 1, None, true) {
                 Ok(r) => rows.extend(r),
-                Err(e) => eprintln!("demo: skipping {seq} at {w}x{h} ({e})"),
+                // Said once, above.
+                Err(e) if is_missing_asset(&e) => {}
+                Err(e) => return Err(e),
             }
         }
     }
@@ -273,8 +294,11 @@ fn size_section(a: &DemoArgs, dir: &Path, detail: f32) -> Result<String> {
         return Ok(String::new());
     }
     super::deform_bench::size_plot(&sdir, &rows)?;
-    let mut h = String::from(
-        "<h3>Speed-up against the image size</h3><p>Naive, lazy-cache and auto (per frame a rebuild or the lazy update, whichever was cheaper when last tried: the heuristic the paper's §6 asks for), 16 frames at each size (same detail); speed-ups over naive. The rebuild costs the same at every size, the rays do not: the lazy update gains most where few rays are traced, and the paper's 2–3× (at 512×384 with its 2005 tracer) is reached here only at small images. Same as <code>lodtrace bench SEQ --sizes 96x72,192x144,... --methods surfel:update=naive,surfel:update=lazy-cache,surfel:update=auto</code>.</p><table><tr><th>sequence</th><th>update</th>",
+    bench::write_report(&sdir, &deform_report(sizes[0].0, sizes[0].1, rows.clone()))?;
+    let list: Vec<String> = sizes.iter().map(|(w, h)| format!("{w}x{h}")).collect();
+    let mut h = format!(
+        "<h3>Speed-up against the image size</h3><p>Naive, lazy-cache and auto (per frame a rebuild or the lazy update, whichever was cheaper when last tried: the heuristic the paper's §6 asks for), 16 frames at each size (same detail); speed-ups over naive (16 frames here, so a column at the size of the table above need not match its figure). The rebuild costs the same at every size, the rays do not: the lazy update gains most where few rays are traced; the paper's 2–3× was measured at 512×384 with its 2005 tracer. Same as <code>lodtrace bench SEQ --sizes {} --methods surfel:update=naive,surfel:update=lazy-cache,surfel:update=auto</code>.</p><table><tr><th>sequence</th><th>update</th>",
+        list.join(","),
     );
     for (w, hh) in sizes {
         let _ = write!(h, "<th>{w}×{hh}</th>");
@@ -525,6 +549,35 @@ fn targets_markdown(rows: &[TargetRow]) -> String {
     s
 }
 
+/// An error that means "this scene's or sequence's mesh is not installed" (`tools/setup`):
+/// a built-in scene's message, or a mesh file under the assets folder that is not there.
+fn is_missing_asset(e: &Error) -> bool {
+    match e {
+        Error::Scene(m) => m.contains("run tools/setup"),
+        Error::Io { path, source } => {
+            source.kind() == std::io::ErrorKind::NotFound && path.starts_with(crate::scene::builtin::assets_dir())
+        }
+        _ => false,
+    }
+}
+
+/// A report holding deforming-sequence rows only, for `bench.json` and `bench.md`.
+fn deform_report(width: u32, height: u32, deform: Vec<super::deform_bench::DeformRow>) -> BenchReport {
+    BenchReport { width, height, simd: crate::core::SIMD_LEVEL, reference: None, rows: Vec::new(), deform }
+}
+
+/// How this page was made: quick or full, SIMD level, threads (timings depend on all three).
+fn run_line(a: &DemoArgs) -> String {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads = if a.threads == 0 { format!("{cores} threads (all cores)") } else { format!("{} threads of {cores} cores", a.threads) };
+    format!(
+        "<p>This run: <code>lodtrace demo{}</code>, lodtrace {}, SIMD {}, {threads} unless a spec says <code>threads=</code>. Each folder has the tables as <code>bench.md</code> and every figure in <code>bench.json</code>; the targets table below is also <code>targets.md</code>.</p>",
+        if a.quick { " --quick" } else { "" },
+        env!("CARGO_PKG_VERSION"),
+        crate::core::SIMD_LEVEL
+    )
+}
+
 fn esc(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
@@ -763,6 +816,19 @@ mod tests {
             radius_ratios: Vec::new(),
             image: None,
         }
+    }
+
+    /// Only a missing mesh skips a sequence; a failed write stops the demo (it was skipped
+    /// too, and the page lost the sequence without an error).
+    #[test]
+    fn only_missing_meshes_are_skipped() {
+        let nf = || std::io::Error::from(std::io::ErrorKind::NotFound);
+        assert!(is_missing_asset(&Error::io(crate::scene::builtin::assets_dir().join("armadillo.off"), nf())));
+        assert!(is_missing_asset(&Error::Scene("scene 'complex' needs the mesh x (not found): run tools/setup".into())));
+        assert!(!is_missing_asset(&Error::io("/tmp/out/deform/x.png", nf())));
+        let full = std::io::Error::new(std::io::ErrorKind::StorageFull, "disk full");
+        assert!(!is_missing_asset(&Error::io(crate::scene::builtin::assets_dir().join("armadillo.off"), full)));
+        assert!(!is_missing_asset(&Error::Image("plot: no font".into())));
     }
 
     #[test]
