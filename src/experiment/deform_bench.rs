@@ -405,7 +405,7 @@ pub fn size_plot(out: &Path, rows: &[DeformRow]) -> Result<()> {
             continue;
         }
         let name = format!("{} {}", r.scene, names[rows.iter().position(|x| x.spec == r.spec).unwrap_or(0)]);
-        let p = (((r.width as f64) * (r.height as f64)).log2(), r.speedup_vs_first);
+        let p = ((r.width as f64) * (r.height as f64), r.speedup_vs_first);
         match series.iter_mut().find(|s| s.0 == name) {
             Some(s) => s.1.push(p),
             None => series.push((name, vec![p])),
@@ -420,18 +420,11 @@ pub fn size_plot(out: &Path, rows: &[DeformRow]) -> Result<()> {
     plot::line_chart_fmt(
         &out.join("speedup-vs-size.png"),
         &format!("Speed-up over {first} by image size"),
-        "pixels per frame (log scale)",
+        "pixels per frame",
         "speed-up (x)",
         &series,
-        false,
-        &|v| {
-            let n = v.exp2();
-            if n >= 1e6 {
-                format!("{:.1} M", n / 1e6)
-            } else {
-                format!("{:.0} k", n / 1e3)
-            }
-        },
+        true,
+        &|n| if n >= 1e6 { format!("{} M", plot::fmt_axis(n / 1e6)) } else { format!("{} k", plot::fmt_axis(n / 1e3)) },
         target,
     )
 }

@@ -12,6 +12,7 @@
 
 use crate::error::{Error, Result};
 use crate::film::io;
+use plotters::coord::combinators::BindKeyPoints;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
@@ -325,6 +326,20 @@ pub fn legend_grid(labels: &[&str], width: u32) -> (u32, u32) {
     (cols, (labels.len() as u32).div_ceil(cols))
 }
 
+/// Ticks of a logarithmic axis over `lo..hi` (both > 0): 1, 2, 5 times the powers of ten,
+/// or every power of ten where that gives more than 12.
+pub fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    if !(lo > 0.0 && hi > lo && hi.is_finite()) {
+        return Vec::new();
+    }
+    let (a, b) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
+    let mults: &[f64] = if 3 * (b - a) > 12 { &[1.0] } else { &[1.0, 2.0, 5.0] };
+    (a..=b)
+        .flat_map(|k| mults.iter().map(move |m| m * 10f64.powi(k)))
+        .filter(|&t| t >= lo * (1.0 - 1e-9) && t <= hi * (1.0 + 1e-9))
+        .collect()
+}
+
 /// A line chart, one line (with point markers and a legend entry) per named series.
 /// Non-finite points are skipped.
 pub fn line_chart(path: &Path, title: &str, xlabel: &str, ylabel: &str, series: &[(String, Vec<(f64, f64)>)]) -> Result<()> {
@@ -411,7 +426,9 @@ pub fn line_chart_fmt(
             }};
         }
         if log_x {
-            draw!(builder.build_cartesian_2d((x0..x1).log_scale(), y0..y1).map_err(|x| e(&x))?);
+            // plotters' own log-axis ticks left everything below 1 unlabelled.
+            let ticks = log_ticks(x0, x1);
+            draw!(builder.build_cartesian_2d((x0..x1).log_scale().with_key_points(ticks), y0..y1).map_err(|x| e(&x))?);
         } else {
             draw!(builder.build_cartesian_2d(x0..x1, y0..y1).map_err(|x| e(&x))?);
         }
@@ -477,6 +494,17 @@ mod tests {
         assert!(blue(90, 250, 40, 120) > 100, "left part hidden");
         assert!(blue(600, 780, 40, 120) > 100, "right part hidden");
         std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn log_ticks_label_below_one() {
+        let t = log_ticks(0.16, 9.0);
+        assert_eq!(t.len(), 5, "{t:?}");
+        for (a, b) in t.iter().zip([0.2, 0.5, 1.0, 2.0, 5.0]) {
+            assert!((a - b).abs() < 1e-12, "{t:?}");
+        }
+        assert_eq!(log_ticks(1.0, 1e9).len(), 10, "powers of ten only over many decades");
+        assert!(log_ticks(0.0, 1.0).is_empty());
     }
 
     #[test]
