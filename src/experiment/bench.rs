@@ -485,6 +485,15 @@ pub fn equal_time(sweep: &[(f64, f64, f64)], t: f64, flip: f64, name: &str) -> E
     }
 }
 
+/// A traversal counter for the table, or "–" where the back-end does not count it: Embree's
+/// traversal is opaque, and its rows carry 0 (not a measurement) for every test counter.
+pub fn counted(stats: &run::Stats, key: &str) -> String {
+    if stats.accel == AccelKind::Embree.name() {
+        return "–".into();
+    }
+    stats.counters.get(key).copied().unwrap_or(0).to_string()
+}
+
 /// A share as "12.3 %", or "–" where it was not measured.
 pub fn pct_or_dash(x: Option<f64>) -> String {
     x.map_or("–".into(), |v| format!("{:.1} %", 100.0 * v))
@@ -984,13 +993,18 @@ fn finish_row(
     })
 }
 
-fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
+/// `bench.json` (every figure) and `bench.md` (the tables) of `report` in `out`.
+pub fn write_report(out: &Path, report: &BenchReport) -> Result<()> {
     let json = serde_json::to_string_pretty(report).expect("report serialises") + "\n";
     let p = out.join("bench.json");
     crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, json).map_err(|e| Error::io(&p, e)))?;
     let p = out.join("bench.md");
     let md = table_string(report);
-    crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, md).map_err(|e| Error::io(&p, e)))?;
+    crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, md).map_err(|e| Error::io(&p, e)))
+}
+
+fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
+    write_report(out, report)?;
     let mut bars: Vec<(String, f64)> = report.rows.iter().map(|r| (format!("{} {}", r.scene, r.spec), r.stats.render_seconds)).collect();
     bars.extend(report.deform.iter().map(|r| (format!("{} {} {}x{}", r.scene, r.spec, r.width, r.height), r.render_seconds)));
 
@@ -1028,15 +1042,20 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
             }
             curves.append(&mut per);
             let per = curves;
-            // Fast, noisy renders sit top left and the converged sweep bottom right.
+            // Fast, noisy renders sit top left and the converged sweep bottom right. Times
+            // spanning more than a decade go on a log axis: on a linear one the fast methods
+            // crowded into one spot at the left edge.
+            let ts = per.iter().flat_map(|c| c.1.iter().map(|p| p.0)).filter(|t| *t > 0.0);
+            let (tl, th) = ts.fold((f64::INFINITY, 0.0f64), |(a, b), t| (a.min(t), b.max(t)));
             super::plot::line_chart_fmt(
                 &out.join(format!("{sc}-equal-time.png")),
                 &format!("{sc}: mean FLIP against the reference vs render time"),
                 "render time (s)",
                 "mean FLIP",
                 &per,
-                plotters::chart::SeriesLabelPosition::MiddleRight,
+                th / tl > 8.0,
                 &super::plot::fmt_axis,
+                None,
             )?;
         } else {
             scatter.extend(rows.filter_map(|r| r.flip.map(|f| (sc.to_string(), r.spec.clone(), r.stats.render_seconds, f))));
@@ -1104,8 +1123,8 @@ pub fn table_string(report: &BenchReport) -> String {
             f(r.rmse, 4),
             f(r.psnr, 2),
             f(r.flip, 4),
-            r.stats.counters.get("triangle_tests").copied().unwrap_or(0),
-            r.stats.counters.get("node_tests").copied().unwrap_or(0),
+            counted(&r.stats, "triangle_tests"),
+            counted(&r.stats, "node_tests"),
         ));
     }
     if let Some(first) = report.rows.iter().find(|r| !r.regions.is_empty()) {
@@ -1276,9 +1295,78 @@ pub fn print_table(report: &BenchReport) -> Result<()> {
     crate::error::print_stdout(&table_string(report)).map(|_| ())
 }
 
+/// Test fixtures: a row's stats and a row without errors, for the table and demo tests.
+#[cfg(test)]
+pub(crate) mod fixtures {
+    use super::*;
+
+    pub fn stats(method: &str, accel: &str, seconds: f64, counters: &[(&str, u64)]) -> run::Stats {
+        run::Stats {
+            scene: "s".into(),
+            method: method.into(),
+            accel: accel.into(),
+            width: 4,
+            height: 4,
+            spp: 1,
+            threads: 2,
+            build_seconds: 0.0,
+            render_seconds: seconds,
+            render_cpu_seconds: 2.0 * seconds,
+            mrays_per_second: 1.0,
+            triangles_instanced: 0,
+            triangles_unique: 0,
+            accel_bytes: 0,
+            mesh_bytes: 0,
+            peak_rss_bytes: 0,
+            simd: "sse2",
+            finished: true,
+            hierarchy: None,
+            lod: None,
+            counters: counters.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+            cone_profile: None,
+        }
+    }
+
+    pub fn row(scene: &str, spec: &str, stats: run::Stats) -> BenchRow {
+        BenchRow {
+            scene: scene.into(),
+            spec: spec.into(),
+            stats,
+            speedup_vs_first: 1.0,
+            rmse: None,
+            psnr: None,
+            flip: None,
+            regions: Vec::new(),
+            image: None,
+            lod_vs_full: None,
+            equal_time: Vec::new(),
+            sweep: None,
+        }
+    }
+
+    pub fn report(rows: Vec<BenchRow>) -> BenchReport {
+        BenchReport { width: 4, height: 4, simd: "sse2", reference: None, rows, deform: Vec::new() }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Embree does not count its tests: its rows read "–", not a measured 0 (a reader took
+    /// the 0 for "no triangle tests"); the CWBVH's counts stay.
+    #[test]
+    fn uncounted_tests_show_as_a_dash() {
+        let tests = [("triangle_tests", 0), ("node_tests", 0)];
+        let rows = vec![
+            fixtures::row("s", "whitted:embree", fixtures::stats("whitted", "embree", 1.0, &tests)),
+            fixtures::row("s", "whitted:bvh", fixtures::stats("whitted", "bvh", 2.0, &[("triangle_tests", 7), ("node_tests", 9)])),
+        ];
+        let t = table_string(&fixtures::report(rows));
+        let line = |spec: &str| t.lines().find(|l| l.starts_with(&format!("| s | {spec} |"))).unwrap().to_string();
+        assert!(line("whitted:embree").ends_with("| – | – |"), "{}", line("whitted:embree"));
+        assert!(line("whitted:bvh").ends_with("| 7 | 9 |"), "{}", line("whitted:bvh"));
+    }
     #[test]
     fn parses_specs() {
         let v = parse_list("whitted:bvh,distributed:embree:spp=16:vt=0,whitted:bvh:threads=1:packet=1").unwrap();

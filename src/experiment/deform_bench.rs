@@ -273,8 +273,10 @@ pub fn radius_plot(out: &Path, rows: &[DeformRow]) -> Result<()> {
 /// Fig. 5 (time per frame) and the bounding-volume tests per frame of one sequence's rows.
 fn plots(out: &Path, rows: &[DeformRow]) -> Result<()> {
     let Some(seq) = rows.first().map(|r| r.scene.clone()) else { return Ok(()) };
+    // The legend names the update mode as the tables do, not the whole spec.
+    let names = short_labels(rows);
     let series = |f: &dyn Fn(&DeformRow) -> Vec<f64>| -> Vec<(String, Vec<(f64, f64)>)> {
-        rows.iter().map(|r| (r.spec.clone(), f(r).into_iter().enumerate().map(|(i, y)| (i as f64, y)).collect())).collect()
+        rows.iter().zip(&names).map(|(r, n)| (n.clone(), f(r).into_iter().enumerate().map(|(i, y)| (i as f64, y)).collect())).collect()
     };
     plot::line_chart(
         &out.join(format!("{seq}-frame-times.png")),
@@ -396,13 +398,14 @@ pub fn size_table(rows: &[DeformRow]) -> String {
 /// gains most (the paper's 2–3× regime).
 pub fn size_plot(out: &Path, rows: &[DeformRow]) -> Result<()> {
     let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    let names = short_labels(rows);
     for r in rows {
         let first = rows.iter().find(|f| f.scene == r.scene && (f.width, f.height) == (r.width, r.height)).map(|f| f.spec.as_str());
         if first == Some(r.spec.as_str()) {
             continue;
         }
-        let name = format!("{} {}", r.scene, r.spec);
-        let p = (((r.width as f64) * (r.height as f64)).log2(), r.speedup_vs_first);
+        let name = format!("{} {}", r.scene, names[rows.iter().position(|x| x.spec == r.spec).unwrap_or(0)]);
+        let p = ((r.width as f64) * (r.height as f64), r.speedup_vs_first);
         match series.iter_mut().find(|s| s.0 == name) {
             Some(s) => s.1.push(p),
             None => series.push((name, vec![p])),
@@ -411,23 +414,44 @@ pub fn size_plot(out: &Path, rows: &[DeformRow]) -> Result<()> {
     if series.is_empty() {
         return Ok(());
     }
-    let first = rows.first().map(|r| r.spec.as_str()).unwrap_or("");
+    let first = names.first().cloned().unwrap_or_default();
+    // The paper's target for the lazy update against the rebuild (Adams et al. §6).
+    let target = (first == "naive").then_some((2.0, "paper: lazy-cache ≥ 2× naive"));
     plot::line_chart_fmt(
         &out.join("speedup-vs-size.png"),
         &format!("Speed-up over {first} by image size"),
-        "pixels per frame (log scale)",
+        "pixels per frame",
         "speed-up (x)",
         &series,
-        plotters::prelude::SeriesLabelPosition::UpperRight,
-        &|v| {
-            let n = v.exp2();
-            if n >= 1e6 {
-                format!("{:.1} M", n / 1e6)
-            } else {
-                format!("{:.0} k", n / 1e3)
-            }
-        },
+        true,
+        &|n| if n >= 1e6 { format!("{} M", plot::fmt_axis(n / 1e6)) } else { format!("{} k", plot::fmt_axis(n / 1e3)) },
+        target,
     )
+}
+
+/// Legend names of `rows`: [`update_label`] where that tells the specs apart, else the specs
+/// (`bench` may compare two specs of one mode, e.g. at two detail levels).
+fn short_labels(rows: &[DeformRow]) -> Vec<String> {
+    let short: Vec<String> = rows.iter().map(|r| update_label(&r.update, &r.spec)).collect();
+    let ambiguous = rows.iter().enumerate().any(|(i, r)| rows.iter().enumerate().any(|(j, o)| short[i] == short[j] && r.spec != o.spec));
+    if ambiguous {
+        rows.iter().map(|r| r.spec.clone()).collect()
+    } else {
+        short
+    }
+}
+
+/// A row's update mode as the tables and legends show it: the mode, and the cache ablation
+/// switches of its spec (`lazy-cache, unordered, cache 8 up`), not the whole spec.
+pub fn update_label(update: &str, spec: &str) -> String {
+    let mut l = update.to_string();
+    if spec.contains("ordered=0") {
+        l.push_str(", unordered");
+    }
+    if let Some(n) = spec.split(':').find_map(|k| k.strip_prefix("cache_up=")) {
+        l.push_str(&format!(", cache {n} up"));
+    }
+    l
 }
 
 /// Checks a `surfel` spec's options before any work.
@@ -456,6 +480,45 @@ pub fn validate(spec: &MethodSpec) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn legends_use_short_labels_unless_ambiguous() {
+        let row = |spec: &str, update: &str| DeformRow {
+            scene: "bend".into(),
+            spec: spec.into(),
+            width: 1,
+            height: 1,
+            update: update.into(),
+            surfels: 0,
+            frames: 1,
+            threads: 1,
+            build_seconds: 0.0,
+            render_seconds: 0.0,
+            ms_per_frame: 1.0,
+            speedup_vs_first: 1.0,
+            per_round_speedups: Vec::new(),
+            update_ms_per_frame: 0.0,
+            rays_ms_per_frame: None,
+            sphere_tests_per_frame: 0.0,
+            leaf_tests_per_frame: 0.0,
+            mls_runs_per_frame: 0.0,
+            mls_iterations_mean: 0.0,
+            cache_lookups: 0,
+            cache_hits: 0,
+            inner_nodes_updated_per_frame: 0.0,
+            root_radius_ratio: None,
+            mean_radius_ratio: None,
+            same_image_as_first: true,
+            per_frame_ms: Vec::new(),
+            per_frame_sphere_tests: Vec::new(),
+            radius_ratios: Vec::new(),
+            image: None,
+        };
+        let a = [row("surfel:update=naive:frames=8", "naive"), row("surfel:update=lazy-cache:ordered=0:cache_up=8:frames=8", "lazy-cache")];
+        assert_eq!(short_labels(&a), ["naive", "lazy-cache, unordered, cache 8 up"]);
+        let b = [row("surfel:update=lazy:detail=0.2", "lazy"), row("surfel:update=lazy:detail=0.4", "lazy")];
+        assert_eq!(short_labels(&b), ["surfel:update=lazy:detail=0.2", "surfel:update=lazy:detail=0.4"]);
+    }
 
     /// Each round pairs the specs' runs: a round in a slow phase (all three 2× slower) gives
     /// the same ratios as a fast one, while the per-spec bests may come from different phases.

@@ -12,6 +12,7 @@
 
 use crate::error::{Error, Result};
 use crate::film::io;
+use plotters::coord::combinators::BindKeyPoints;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
@@ -53,6 +54,11 @@ fn ensure_font() -> Result<()> {
     })
     .clone()
     .map_err(Error::Image)
+}
+
+/// Fails now, with the error a plot would give later, when no font can be loaded.
+pub fn check_font() -> Result<()> {
+    ensure_font()
 }
 
 /// Draws into an 800x500 RGB buffer with `draw`, then writes it to `path` as PNG, atomically.
@@ -286,75 +292,228 @@ pub fn scatter_chart(path: &Path, title: &str, xlabel: &str, ylabel: &str, point
     })
 }
 
+/// Line colours: Tableau 10 (distinct on white; `Palette99`'s third colour, a pale yellow,
+/// was unreadable on white), then `Palette99` beyond ten series.
+pub fn series_color(k: usize) -> RGBAColor {
+    const T10: [(u8, u8, u8); 10] = [
+        (31, 119, 180),
+        (255, 127, 14),
+        (44, 160, 44),
+        (214, 39, 40),
+        (148, 103, 189),
+        (140, 86, 75),
+        (227, 119, 194),
+        (127, 127, 127),
+        (188, 189, 34),
+        (23, 190, 207),
+    ];
+    match T10.get(k) {
+        Some(&(r, g, b)) => RGBColor(r, g, b).to_rgba(),
+        None => Palette99::pick(k).to_rgba(),
+    }
+}
+
+/// Legend layout below a plot `width` pixels wide: (columns, rows) for `labels`, each column
+/// as wide as the longest label needs (about 7.5 pixels a character at 14 px, plus the
+/// 30-pixel swatch).
+pub fn legend_grid(labels: &[&str], width: u32) -> (u32, u32) {
+    if labels.is_empty() {
+        return (0, 0);
+    }
+    let longest = labels.iter().map(|l| l.chars().count()).max().unwrap_or(1) as u32;
+    let col = longest * 15 / 2 + 40;
+    let cols = ((width.saturating_sub(60)) / col).clamp(1, labels.len() as u32);
+    (cols, (labels.len() as u32).div_ceil(cols))
+}
+
+/// Ticks of a logarithmic axis over `lo..hi` (both > 0): 1, 2, 5 times the powers of ten,
+/// or every power of ten where that gives more than 12.
+pub fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    if !(lo > 0.0 && hi > lo && hi.is_finite()) {
+        return Vec::new();
+    }
+    let (a, b) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
+    let mults: &[f64] = if 3 * (b - a) > 12 { &[1.0] } else { &[1.0, 2.0, 5.0] };
+    (a..=b)
+        .flat_map(|k| mults.iter().map(move |m| m * 10f64.powi(k)))
+        .filter(|&t| t >= lo * (1.0 - 1e-9) && t <= hi * (1.0 + 1e-9))
+        .collect()
+}
+
 /// A line chart, one line (with point markers and a legend entry) per named series.
 /// Non-finite points are skipped.
 pub fn line_chart(path: &Path, title: &str, xlabel: &str, ylabel: &str, series: &[(String, Vec<(f64, f64)>)]) -> Result<()> {
-    line_chart_fmt(path, title, xlabel, ylabel, series, SeriesLabelPosition::UpperLeft, &fmt_axis)
+    line_chart_fmt(path, title, xlabel, ylabel, series, false, &fmt_axis, None)
 }
 
-/// [`line_chart`] with the legend box at `legend` (where the data leaves room) and the x-axis
-/// labels from `xfmt` ([`fmt_axis`], or e.g. x = log₂ n labelled as n for a logarithmic axis).
+/// [`line_chart`] with a logarithmic x axis (`log_x`, positive x only), the x-axis labels from
+/// `xfmt` ([`fmt_axis`], or e.g. x = log₂ n labelled as n), and a dashed horizontal line at
+/// `hline` = (y, label), e.g. a paper's target. The legend sits below the plot area, never
+/// over the curves (inside it, it hid the curves it named); the image stays 800×500.
+/// A one-point series (a single measurement) gets a marker in the legend, not a line.
+#[allow(clippy::too_many_arguments)]
 pub fn line_chart_fmt(
     path: &Path,
     title: &str,
     xlabel: &str,
     ylabel: &str,
     series: &[(String, Vec<(f64, f64)>)],
-    legend: SeriesLabelPosition,
+    log_x: bool,
     xfmt: &dyn Fn(f64) -> String,
+    hline: Option<(f64, &str)>,
 ) -> Result<()> {
-    let pts = || series.iter().flat_map(|s| s.1.iter()).filter(|p| p.0.is_finite() && p.1.is_finite());
+    let pts = || series.iter().flat_map(|s| s.1.iter()).filter(|p| p.0.is_finite() && p.1.is_finite() && (!log_x || p.0 > 0.0));
     if pts().next().is_none() {
         return Err(Error::Usage(format!("{}: line chart needs at least one finite point", path.display())));
     }
-    let range = |f: fn(&(f64, f64)) -> f64| {
-        let lo = pts().map(f).fold(f64::INFINITY, f64::min);
-        let hi = pts().map(f).fold(f64::NEG_INFINITY, f64::max);
+    let lohi = |f: fn(&(f64, f64)) -> f64| (pts().map(f).fold(f64::INFINITY, f64::min), pts().map(f).fold(f64::NEG_INFINITY, f64::max));
+    let pad = |(lo, hi): (f64, f64)| {
         let pad = if hi > lo { 0.05 * (hi - lo) } else { lo.abs().max(1.0) * 0.5 };
         (lo - pad, hi + pad)
     };
-    let (x0, x1) = range(|p| p.0);
-    let (y0, y1) = range(|p| p.1);
+    let (x0, x1) = if log_x {
+        let (a, b) = pad(lohi(|p| p.0.ln()));
+        (a.exp(), b.exp())
+    } else {
+        pad(lohi(|p| p.0))
+    };
+    let (mut ylo, mut yhi) = lohi(|p| p.1);
+    if let Some((y, _)) = hline.filter(|h| h.0.is_finite()) {
+        (ylo, yhi) = (ylo.min(y), yhi.max(y));
+    }
+    let (y0, y1) = pad((ylo, yhi));
+    let labels: Vec<&str> = series.iter().map(|s| s.0.as_str()).filter(|l| !l.is_empty()).collect();
+    let (cols, rows) = legend_grid(&labels, WIDTH);
+    let legend_h = if rows == 0 { 0 } else { 12 + 20 * rows };
     render(path, |root| {
         let e = |e: &dyn std::fmt::Display| e.to_string();
-        let mut chart = ChartBuilder::on(root)
-            .caption(title, (FAMILY, 24))
-            .margin(15)
-            .x_label_area_size(50)
-            .y_label_area_size(70)
-            .build_cartesian_2d(x0..x1, y0..y1)
-            .map_err(|x| e(&x))?;
-        chart
-            .configure_mesh()
-            .max_light_lines(2)
-            .x_desc(xlabel)
-            .y_desc(ylabel)
-            .x_label_formatter(&|v| xfmt(*v))
-            .y_label_formatter(&|v| fmt_axis(*v))
-            .label_style((FAMILY, 14))
-            .axis_desc_style((FAMILY, 16))
-            .draw()
-            .map_err(|x| e(&x))?;
-        for (k, (name, data)) in series.iter().enumerate() {
-            let color = Palette99::pick(k).to_rgba();
-            let data: Vec<(f64, f64)> = data.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite()).collect();
-            chart
-                .draw_series(LineSeries::new(data.clone(), color.stroke_width(2)))
-                .map_err(|x| e(&x))?
-                .label(name.as_str())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
-            chart.draw_series(data.iter().map(|&p| Circle::new(p, 3, color.filled()))).map_err(|x| e(&x))?;
+        let (plot, legend) = root.split_vertically(HEIGHT - legend_h);
+        let mut builder = ChartBuilder::on(&plot);
+        builder.caption(title, (FAMILY, 24)).margin(15).x_label_area_size(50).y_label_area_size(70);
+        macro_rules! draw {
+            ($chart:expr) => {{
+                let mut chart = $chart;
+                chart
+                    .configure_mesh()
+                    .max_light_lines(2)
+                    .x_desc(if log_x { format!("{xlabel}, log scale") } else { xlabel.to_string() })
+                    .y_desc(ylabel)
+                    .x_label_formatter(&|v| xfmt(*v))
+                    .y_label_formatter(&|v| fmt_axis(*v))
+                    .label_style((FAMILY, 14))
+                    .axis_desc_style((FAMILY, 16))
+                    .draw()
+                    .map_err(|x| e(&x))?;
+                if let Some((y, label)) = hline.filter(|h| h.0.is_finite()) {
+                    let grey = RGBColor(90, 90, 90);
+                    let n = 60;
+                    let dashes = (0..n).step_by(2).map(|i| {
+                        let a =
+                            |j: usize| if log_x { x0 * (x1 / x0).powf(j as f64 / n as f64) } else { x0 + (x1 - x0) * j as f64 / n as f64 };
+                        PathElement::new(vec![(a(i), y), (a(i + 1), y)], grey.stroke_width(1))
+                    });
+                    chart.draw_series(dashes).map_err(|x| e(&x))?;
+                    let style = TextStyle::from((FAMILY, 13).into_font()).color(&grey).pos(Pos::new(HPos::Left, VPos::Bottom));
+                    chart.draw_series(std::iter::once(Text::new(label.to_string(), (x0, y), style))).map_err(|x| e(&x))?;
+                }
+                for (k, (_, data)) in series.iter().enumerate() {
+                    let color = series_color(k);
+                    let data: Vec<(f64, f64)> =
+                        data.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite() && (!log_x || p.0 > 0.0)).collect();
+                    chart.draw_series(LineSeries::new(data.clone(), color.stroke_width(2))).map_err(|x| e(&x))?;
+                    chart.draw_series(data.iter().map(|&p| Circle::new(p, 4, color.filled()))).map_err(|x| e(&x))?;
+                }
+            }};
         }
-        if series.iter().any(|s| !s.0.is_empty()) {
-            chart
-                .configure_series_labels()
-                .label_font((FAMILY, 14))
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .position(legend)
-                .draw()
-                .map_err(|x| e(&x))?;
+        if log_x {
+            // plotters' own log-axis ticks left everything below 1 unlabelled.
+            let ticks = log_ticks(x0, x1);
+            draw!(builder.build_cartesian_2d((x0..x1).log_scale().with_key_points(ticks), y0..y1).map_err(|x| e(&x))?);
+        } else {
+            draw!(builder.build_cartesian_2d(x0..x1, y0..y1).map_err(|x| e(&x))?);
+        }
+        if cols > 0 {
+            let col_w = (WIDTH - 60) / cols;
+            let mut k_label = 0u32;
+            for (k, (name, data)) in series.iter().enumerate() {
+                if name.is_empty() {
+                    continue;
+                }
+                let color = series_color(k);
+                let (cx, cy) = (40 + col_w as i32 * (k_label % cols) as i32, 10 + 20 * (k_label / cols) as i32);
+                k_label += 1;
+                if data.len() == 1 {
+                    legend.draw(&Circle::new((cx + 10, cy), 4, color.filled())).map_err(|x| e(&x))?;
+                } else {
+                    legend.draw(&PathElement::new(vec![(cx, cy), (cx + 20, cy)], color.stroke_width(2))).map_err(|x| e(&x))?;
+                }
+                let style = TextStyle::from((FAMILY, 14).into_font()).pos(Pos::new(HPos::Left, VPos::Center));
+                legend.draw(&Text::new(name.clone(), (cx + 28, cy), style)).map_err(|x| e(&x))?;
+            }
         }
         Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn legend_grid_fits_the_labels() {
+        assert_eq!(legend_grid(&[], 800), (0, 0));
+        assert_eq!(legend_grid(&["a", "b"], 800), (2, 1));
+        // Eight raw deforming-sequence specs: one per row would take half the image.
+        let long = ["surfel:update=lazy-cache:ordered=0:cache_up=8:frames=8:detail=0.15"; 8];
+        assert_eq!(legend_grid(&long, 800), (1, 8));
+        let short = ["naive", "lazy", "lazy-cache", "refit", "lazy, unordered", "lazy-cache, unordered, cache 8 up"];
+        let (c, r) = legend_grid(&short, 800);
+        assert!(c >= 2 && r <= 3, "{c}x{r}");
+    }
+
+    /// The legend no longer covers the curves: a series running through the top-left and
+    /// top-right corners of the data (where the legend box used to sit) shows there.
+    #[test]
+    fn legend_leaves_the_curves_visible() {
+        let d = std::env::temp_dir().join(format!("lodtrace-plot-legend-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        let p = d.join("l.png");
+        let series = vec![
+            ("top".to_string(), vec![(0.0, 10.0), (5.0, 10.0), (10.0, 10.0)]),
+            ("bottom".to_string(), vec![(0.0, 0.0), (10.0, 0.0)]),
+            ("a measurement".to_string(), vec![(5.0, 5.0)]),
+        ];
+        line_chart_fmt(&p, "t", "x", "y", &series, false, &fmt_axis, Some((2.0, "target"))).unwrap();
+        let img = image::open(&p).unwrap().into_rgb8();
+        assert_eq!(img.dimensions(), (WIDTH, HEIGHT));
+        let c = series_color(0).rgb();
+        let blue = |x0: u32, x1: u32, y0: u32, y1: u32| {
+            (x0..x1).flat_map(|x| (y0..y1).map(move |y| (x, y))).filter(|&(x, y)| img.get_pixel(x, y).0 == [c.0, c.1, c.2]).count()
+        };
+        // The top line runs at the top of the plot area, across its whole width.
+        assert!(blue(90, 250, 40, 120) > 100, "left part hidden");
+        assert!(blue(600, 780, 40, 120) > 100, "right part hidden");
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn log_ticks_label_below_one() {
+        let t = log_ticks(0.16, 9.0);
+        assert_eq!(t.len(), 5, "{t:?}");
+        for (a, b) in t.iter().zip([0.2, 0.5, 1.0, 2.0, 5.0]) {
+            assert!((a - b).abs() < 1e-12, "{t:?}");
+        }
+        assert_eq!(log_ticks(1.0, 1e9).len(), 10, "powers of ten only over many decades");
+        assert!(log_ticks(0.0, 1.0).is_empty());
+    }
+
+    #[test]
+    fn log_x_chart_draws() {
+        let d = std::env::temp_dir().join(format!("lodtrace-plot-log-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        let s = vec![("s".to_string(), vec![(0.05, 0.1), (0.5, 0.05), (5.0, 0.02)]), ("p".to_string(), vec![(0.1, 0.09)])];
+        line_chart_fmt(&d.join("g.png"), "t", "time (s)", "y", &s, true, &fmt_axis, None).unwrap();
+        assert!(d.join("g.png").is_file());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
 }
