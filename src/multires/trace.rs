@@ -309,17 +309,16 @@ impl TraceParams {
         if !(self.depth_tol.is_finite() && self.depth_tol > 0.0 && self.depth_tol <= 100.0) {
             return bad(format!("--depth-tolerance {} out of range (0, 100]", self.depth_tol));
         }
-        if !(self.cone_scale.is_finite() && self.cone_scale > 0.0 && self.cone_scale <= 16.0) {
-            return bad(format!("--cone-scale {} out of range (0, 16]", self.cone_scale));
-        }
-        if !(self.lens_scale.is_finite() && self.lens_scale > 0.0 && self.lens_scale <= 16.0) {
-            return bad(format!("--lens-scale {} out of range (0, 16]", self.lens_scale));
-        }
-        if !(self.rough_scale.is_finite() && self.rough_scale > 0.0 && self.rough_scale <= 16.0) {
-            return bad(format!("--rough-scale {} out of range (0, 16]", self.rough_scale));
-        }
-        if !(self.light_scale.is_finite() && self.light_scale > 0.0 && self.light_scale <= 16.0) {
-            return bad(format!("--light-scale {} out of range (0, 16]", self.light_scale));
+        // The four footprint scales share one range.
+        for (name, v) in [
+            ("--cone-scale", self.cone_scale),
+            ("--lens-scale", self.lens_scale),
+            ("--rough-scale", self.rough_scale),
+            ("--light-scale", self.light_scale),
+        ] {
+            if !(v.is_finite() && v > 0.0 && v <= 16.0) {
+                return bad(format!("{name} {v} out of range (0, 16]"));
+            }
         }
         if self.max_fragments < 2 || self.max_fragments > 256 {
             return bad(format!("--max-fragments {} out of range [2, 256]", self.max_fragments));
