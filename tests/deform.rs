@@ -815,6 +815,65 @@ fn csg_head_hits_stay_on_the_solid() {
     assert!(dc.clipped > 0);
 }
 
+/// The early clip (`TraceParams::clip_early`: an ellipse hit whose surfel's whole leaf ball
+/// is clipped is rejected without the MLS iteration) changes no hit and no shadow-ray answer,
+/// ray by ray and in packets, on the deforming heads (three clipped surfaces per head), and
+/// it saves MLS runs there.
+#[test]
+fn early_clip_keeps_every_hit() {
+    let opts = SequenceOptions { detail: 0.03, ..Default::default() };
+    let mut seq = Sequence::builtin("heads", &opts).unwrap();
+    let rec = seq.record(10).unwrap();
+    let tracer = |early: bool| {
+        let mut t =
+            DeformTracer::new(&seq.scene, UpdateMode::LazyCache, TraceParams { clip_early: early, ..TraceParams::default() }).unwrap();
+        t.set_cache_slots(40 * 30);
+        t
+    };
+    let (mut on, mut off) = (tracer(true), tracer(false));
+    let (mut dc_on, mut dc_off) = (DeformCounters::default(), DeformCounters::default());
+    let f = seq.camera.frame(40, 30);
+    for frame in rec.frames.iter().step_by(3) {
+        on.begin_frame(frame).unwrap();
+        off.begin_frame(frame).unwrap();
+        let (a, b) = (render(&on, &seq.camera, 40, 30, &mut dc_on), render(&off, &seq.camera, 40, 30, &mut dc_off));
+        same_hits(&a, &b).unwrap();
+        // Packets and shadow rays: from each hit towards a point above the scene, and from
+        // points around the heads through them.
+        let mut ctr = Counters::default();
+        let mut rays: Vec<Ray> =
+            a.iter().flatten().map(|h| Ray::new(h.p + h.n * 1e-3, (seq.camera.eye + Vec3::Y * 3.0 - h.p).normalize())).collect();
+        rays.extend((0..800u32).map(|p| Ray::new(seq.camera.eye, f.pixel_center_dir(p % 40, p / 40 % 30))));
+        for chunk in rays.chunks(8) {
+            let slots = [None; 8];
+            let (mut d1, mut d2) = (DeformCounters::default(), DeformCounters::default());
+            let (h1, h2) = (
+                on.intersect_x8(chunk, &slots[..chunk.len()], &mut ctr, &mut d1),
+                off.intersect_x8(chunk, &slots[..chunk.len()], &mut ctr, &mut d2),
+            );
+            same_hits(&h1[..chunk.len()], &h2[..chunk.len()]).unwrap();
+            let m = ((1u16 << chunk.len()) - 1) as u8;
+            assert_eq!(on.occluded_x8(chunk, m, &mut ctr, &mut d1), off.occluded_x8(chunk, m, &mut ctr, &mut d2));
+            for r in chunk {
+                assert_eq!(on.occluded(r, &mut ctr), off.occluded(r, &mut ctr));
+            }
+        }
+    }
+    eprintln!(
+        "early clip: MLS runs {} + {} rejected early against {}; clipped after MLS {} against {}",
+        dc_on.mls_runs, dc_on.clipped_early, dc_off.mls_runs, dc_on.clipped, dc_off.clipped
+    );
+    assert!(dc_on.clipped_early > 0 && dc_off.clipped_early == 0, "{} / {}", dc_on.clipped_early, dc_off.clipped_early);
+    assert!(
+        dc_on.mls_runs + dc_on.clipped_early == dc_off.mls_runs,
+        "MLS runs {} + {} early against {}",
+        dc_on.mls_runs,
+        dc_on.clipped_early,
+        dc_off.mls_runs
+    );
+    assert!(dc_on.clipped < dc_off.clipped, "clipped after MLS: {} against {}", dc_on.clipped, dc_off.clipped);
+}
+
 /// Per-frame figures for one sequence (ignored by default):
 /// `DEFORM_SEQ=armadillo-ball DEFORM_DETAIL=1 DEFORM_FRAMES=30 DEFORM_W=256 DEFORM_H=192 \
 ///  cargo test --release --test deform measure -- --ignored --nocapture`
