@@ -686,6 +686,22 @@ fn simulation_energy_bounded() {
     assert_eq!(a, b);
 }
 
+/// Simulation nodes on a 7³ grid inside a ball of radius `r` around `c` (123 nodes).
+fn node_ball(c: Vec3, r: f32) -> Vec<Vec3> {
+    let mut x = Vec::new();
+    for i in -3..=3 {
+        for j in -3..=3 {
+            for l in -3..=3 {
+                let p = Vec3::new(i as f32, j as f32, l as f32) * (r / 3.0);
+                if p.length() <= r {
+                    x.push(c + p);
+                }
+            }
+        }
+    }
+    x
+}
+
 /// Collisions do not inject energy: a soft ball (overlapping clusters) dropped with
 /// restitution 1 and no damping must never hold more kinetic plus gravitational energy than
 /// it was dropped with (its elastic energy starts at zero). Until stop 51 a
@@ -693,18 +709,7 @@ fn simulation_energy_bounded() {
 /// substep reflected as if it had hit the floor at that speed: 24 % above the drop energy.
 #[test]
 fn elastic_bounce_does_not_gain_energy() {
-    let r = 0.3f32;
-    let mut x = Vec::new();
-    for i in -3..=3 {
-        for j in -3..=3 {
-            for l in -3..=3 {
-                let p = Vec3::new(i as f32, j as f32, l as f32) * (r / 3.0);
-                if p.length() <= r {
-                    x.push(Vec3::new(0.0, 1.0, 0.0) + p);
-                }
-            }
-        }
-    }
+    let x = node_ball(Vec3::new(0.0, 1.0, 0.0), 0.3);
     {
         let stiffness = 0.3f32;
         let n = x.len();
@@ -1236,19 +1241,8 @@ fn a_small_collection_keeps_the_others_neighbourhoods() {
 /// where nothing dissipates it (free flight, elastic bounces of a deformable ball).
 #[test]
 fn shape_matching_energy_stays_bounded() {
-    let r = 0.3f32;
     let c = Vec3::new(0.0, 1.0, 0.0);
-    let mut x = Vec::new();
-    for i in -3..=3 {
-        for j in -3..=3 {
-            for l in -3..=3 {
-                let p = Vec3::new(i as f32, j as f32, l as f32) * (r / 3.0);
-                if p.length() <= r {
-                    x.push(c + p);
-                }
-            }
-        }
-    }
+    let x = node_ball(c, 0.3);
     for floor in [false, true] {
         for e in [0.0f32, 1.0] {
             for (stiffness, clusters) in [(0.3f32, 16usize), (0.8, 16), (1.0, 16), (1.0, 0)] {
