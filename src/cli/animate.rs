@@ -38,18 +38,20 @@ pub enum Nearest {
 pub struct AnimateArgs {
     /// Built-in sequence (armadillo-ball, bend, heads, elastic-balls), a mesh file (.off/.obj) or a point file (.ply: x y z nx ny nz, optional radius).
     pub scene: String,
-    #[arg(long)]
+    /// Frames to render (default: 90 for a built-in sequence, 60 for a mesh or point file).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     pub frames: Option<u32>,
     /// Hierarchy update: rebuild every frame (naive), lazy (§4.1), lazy with per-ray caching (§4.2.2), an obvhs BVH2 refitted every frame (refit), or per frame naive or lazy, whichever was cheaper when last tried (auto; the paper's §6 heuristic question).
     #[arg(long, default_value = "lazy-cache")]
     pub update: String,
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u32).range(1..=16384))]
     pub width: u32,
-    #[arg(long, default_value_t = 384)]
+    #[arg(long, default_value_t = 384, value_parser = clap::value_parser!(u32).range(1..=16384))]
     pub height: u32,
     /// Folder for the frames (frame_0000.png, ...); none = no images.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Statistics as JSON: per-frame times and work counts, radius ratios per level, totals.
     #[arg(long)]
     pub stats: Option<PathBuf>,
     /// Surfel and node counts relative to the paper's models (1 ≈ paper size).
@@ -58,6 +60,7 @@ pub struct AnimateArgs {
     /// No shadow rays.
     #[arg(long)]
     pub no_shadows: bool,
+    /// Worker threads (0 = one per core).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
     /// Rays per packet: 8 traces each 4×2 pixel tile's primary rays, then their shadow rays,
@@ -68,7 +71,7 @@ pub struct AnimateArgs {
     /// Lazy modes: the first visit of an inner node over at most this many surfels bounds it
     /// and its whole subtree from their deformed surfels (the leaf balls' box centre, the exact
     /// reach) instead of by Eq. 9 node by node; 0 = Eq. 9 everywhere, the paper (at most 2^24).
-    #[arg(long, default_value_t = 4096)]
+    #[arg(long, default_value_t = 4096, value_parser = clap::value_parser!(u32).range(0..=16_777_216))]
     pub exact_below: u32,
     /// Per-ray cache (`--update lazy-cache`, §4.2.2): cache the ancestor this many levels
     /// above the leaf of each ray's closest hit instead of the leaf itself (0, the paper's
@@ -239,7 +242,7 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
         }
     }
     if a.width == 0 || a.height == 0 || a.width > 16384 || a.height > 16384 {
-        return Err(Error::Usage(format!("image size {}x{} out of range", a.width, a.height)));
+        return Err(Error::Usage(format!("image size {}x{} out of range (each side 1..=16384)", a.width, a.height)));
     }
     crate::baseline::render::check_pixels(a.width, a.height)?;
     if !(a.detail.is_finite() && a.detail > 0.0 && a.detail <= 10.0) {

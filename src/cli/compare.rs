@@ -35,7 +35,9 @@ pub struct CompareArgs {
     #[arg(long)]
     pub json: bool,
     /// Report the error inside a pixel rectangle, `NAME=X0,Y0,X1,Y1` (half-open, rows from the
-    /// top; NAME= is optional), repeatable: mean FLIP, share of the total FLIP error, RMSE.
+    /// top; NAME= is optional), repeatable: mean FLIP, share of the total FLIP error, RMSE,
+    /// luminance bias against the reference and the smooth share of the squared error
+    /// (scales of 8 pixels or more: bias rather than noise or aliasing).
     #[arg(long = "region", value_name = "NAME=X0,Y0,X1,Y1")]
     pub regions: Vec<String>,
 }

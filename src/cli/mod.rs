@@ -46,11 +46,18 @@ pub enum Command {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
+    /// Conventional ray tracing, one ray per sample (the baselines).
     Whitted,
+    /// Distributed ray tracing: adaptive supersampling, soft shadows, glossy, depth of field.
     Distributed,
+    /// Wand & Straßer's multi-resolution point-sample cone tracer.
     Multires,
+    /// Classic cone tracing: the multires tracer without its points.
     Cone,
+    /// Papaioannou et al.'s per-ray level of detail from ray disparity.
     Lod,
+    /// Adams et al.'s surfel ray tracer: the first frame of a deforming sequence, or of a mesh
+    /// (.obj/.off) or point file (.ply) sampled into surfels (`lodtrace animate` renders all frames).
     Surfel,
 }
 
@@ -70,10 +77,13 @@ impl Method {
 /// Camera overrides, shared by the commands that render.
 #[derive(Args, Debug, Clone, Default)]
 pub struct CameraArgs {
+    /// Camera position `X,Y,Z` (default: the scene's).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub eye: Option<glam::Vec3>,
+    /// Point the camera looks at, `X,Y,Z` (default: the scene's).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub look: Option<glam::Vec3>,
+    /// Camera up vector, `X,Y,Z` (default: the scene's).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub up: Option<glam::Vec3>,
     /// Vertical field of view in degrees.
@@ -83,7 +93,8 @@ pub struct CameraArgs {
 
 #[derive(Args, Debug, Clone)]
 pub struct RenderArgs {
-    /// Built-in scene name, .obj/.off mesh, or .toml scene file.
+    /// Built-in scene name, .obj/.off mesh, or .toml scene file; with `--method surfel`, a
+    /// built-in sequence (`lodtrace animate --help`), a mesh or a .ply point file.
     pub scene: String,
     #[arg(long, value_enum, default_value = "whitted")]
     pub method: Method,
@@ -104,6 +115,7 @@ pub struct RenderArgs {
     /// per pixel, log-scale heat map or counts).
     #[arg(long, value_parser = parse_aov)]
     pub aov: Vec<(String, PathBuf)>,
+    /// Statistics as JSON: times, counters, hierarchy and per-cone-kind profile.
     #[arg(long)]
     pub stats: Option<PathBuf>,
     #[command(flatten)]
@@ -111,6 +123,7 @@ pub struct RenderArgs {
     /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
+    /// Seed of the random sampling (jitter, distributed rays): same seed, same image.
     #[arg(long, default_value_t = 0)]
     pub seed: u32,
     /// Packet width for primary rays: 1 (single rays) or 8.

@@ -80,7 +80,8 @@ pub struct BenchArgs {
     pub sweep_max_spp: u32,
     /// Split each row's error by image region, `NAME=X0,Y0,X1,Y1` (pixels, half-open, rows
     /// from the top), repeatable, as `lodtrace compare --region`: mean FLIP, share of the
-    /// image's FLIP error, RMSE per region. Needs `--reference`.
+    /// image's FLIP error, RMSE, luminance bias and smooth share per region. Needs
+    /// `--reference`.
     #[arg(long = "region", value_name = "NAME=X0,Y0,X1,Y1")]
     pub regions: Vec<String>,
     /// Deforming sequences (`surfel` specs) only: run every spec at each of these image
@@ -89,6 +90,7 @@ pub struct BenchArgs {
     /// against the rays per frame; each size's images and per-frame plots go to `OUT/WxH/`.
     #[arg(long, value_name = "WxH,...", allow_hyphen_values = true)]
     pub sizes: Option<String>,
+    /// No progress bars or per-run lines on stderr; the tables still go to stdout.
     #[arg(long)]
     pub quiet: bool,
 }
@@ -162,8 +164,7 @@ impl MethodSpec {
                     v.parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0).ok_or_else(|| bad(format!("bad value '{v}' for {k}")))
                 };
                 // Counts are whole numbers: `k=2.5` is an error, not k = 2.
-                let int =
-                    |v: &str| v.parse::<u32>().map_err(|_| bad(format!("bad value '{v}' for {k}: a whole number in 0..={}", u32::MAX)));
+                let int = |v: &str| v.parse::<u32>().map_err(|_| bad(format!("bad value '{v}' for {k}: a whole number")));
                 // Switches are 0 or 1: `spread=2` is a typo, not "on".
                 let on = |v: &str| match v {
                     "0" => Ok(false),
@@ -275,7 +276,7 @@ impl MethodSpec {
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, mip, primary, budget, eigen, tri, stri, facing, split, term, pw, spread, groups, agg, plane, tight, mask; lod: f, a, thres, sel, select, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, warm, cache_up, ordered, top, nearest)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, lens, rough, light, mip, primary, budget, eigen, tri, stri, facing, split, term, pw, spread, groups, agg, plane, tight, mask; lod: f, a, thres, sel, select, selon, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, warm, cache_up, ordered, top, nearest)"
                         )))
                     }
                 }

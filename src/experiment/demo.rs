@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 pub struct DemoArgs {
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
-    /// Smaller images, fewer reference samples and frames (about 4 minutes on 2 cores instead of about 15).
+    /// Smaller images, fewer reference samples and frames: about 1 minute on 2 cores instead of about 4.5 (AMD EPYC; 1–4 and 11–13 minutes on a slower machine).
     #[arg(long)]
     pub quick: bool,
     #[arg(long, default_value_t = 0)]
@@ -633,6 +633,15 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
                     row.stats.render_seconds,
                     row.flip.map(|v| format!("{v:.4}")).unwrap_or("-".into())
                 );
+                // Its FLIP map against the reference, written beside it by the bench.
+                if let (Some(_), Ok(spec)) = (row.flip, bench::MethodSpec::parse(&row.spec)) {
+                    let _ = write!(
+                        h,
+                        "<figure><img src=\"{}\"><figcaption>{} — FLIP error map against the reference (magma: black 0, pale yellow 1)</figcaption></figure>",
+                        dir.join(format!("{}-{}-flip.png", job.scene, spec.slug())).display(),
+                        esc(&row.spec)
+                    );
+                }
             }
         }
         if let Some(first) = r.rows.iter().find(|row| !row.regions.is_empty()) {
@@ -737,8 +746,11 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
                 let slug = bench::MethodSpec::parse(&row.spec).map(|s| s.slug()).unwrap_or_default();
                 // Each difference image is scaled to its own largest difference: say which.
                 let diff = format!("difference to {} (magnified: black = {:.1} %)", esc(&c.against), 100.0 * c.max_pixel_diff);
-                for (k, what) in [("diff", diff.as_str()), ("disparity-t", "refraction disparity"), ("disparity-r", "reflection disparity")]
-                {
+                for (k, what) in [
+                    ("diff", diff.as_str()),
+                    ("disparity-t", "refraction disparity (black where no ray refracts)"),
+                    ("disparity-r", "reflection disparity (black where no ray reflects)"),
+                ] {
                     let _ = write!(
                         h,
                         "<figure><img src=\"{}\"><figcaption>{} — {}</figcaption></figure>",

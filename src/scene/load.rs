@@ -17,7 +17,7 @@ pub fn load_scene(spec: &str) -> Result<Scene> {
         }
         Some("toml") => super::tomlscene::load(p)?,
         Some("ply") => {
-            return Err(Error::parse(p, "point files (.ply) are surfel models for `lodtrace animate`; render takes .obj, .off or .toml"))
+            return Err(Error::parse(p, "point files (.ply) are surfel models: render them with `--method surfel` or `lodtrace animate`; the other methods take .obj, .off or .toml"))
         }
         _ => super::builtin::get(spec)?,
     };
