@@ -164,7 +164,8 @@ impl MethodSpec {
                     v.parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0).ok_or_else(|| bad(format!("bad value '{v}' for {k}")))
                 };
                 // Counts are whole numbers: `k=2.5` is an error, not k = 2.
-                let int = |v: &str| v.parse::<u32>().map_err(|_| bad(format!("bad value '{v}' for {k}: a whole number in 0..={}", u32::MAX)));
+                let int =
+                    |v: &str| v.parse::<u32>().map_err(|_| bad(format!("bad value '{v}' for {k}: a whole number in 0..={}", u32::MAX)));
                 // Switches are 0 or 1: `spread=2` is a typo, not "on".
                 let on = |v: &str| match v {
                     "0" => Ok(false),
