@@ -1095,11 +1095,26 @@ fn audit_cases_end_cleanly() {
         assert!(err.contains("is not a folder"), "{err}");
         assert_eq!(std::fs::read_to_string(d.join("file")).unwrap(), "keep");
     }
+    // ... and a folder named like an image is refused rather than created; a folder that
+    // cannot be created says so.
+    for cmd in [&["bench", "plane", "--methods", "whitted"][..], &["animate", "bend", "--frames", "1", "--detail", "0.1"]] {
+        let (code, _, err) = lodtrace(&[cmd, &["--width", "16", "--height", "12", "--quiet", "--out", &p("frames.png")]].concat());
+        assert_eq!(code, 2, "{cmd:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains("names a folder"), "{err}");
+        assert!(!d.join("frames.png").exists(), "{cmd:?} created frames.png");
+        let (code, _, err) = lodtrace(&[cmd, &["--width", "16", "--height", "12", "--quiet", "--out", "/proc/lodtrace-x"]].concat());
+        assert_eq!(code, 2, "{cmd:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains("cannot create the output folder"), "{err}");
+    }
     for args in [
         vec!["render", "cube", "--width", "32768", "--height", "32768", "--out", &png],
         vec!["animate", "heads", "--frames", "1", "--width", "16384", "--height", "16384"],
         // A negative number is a value with a range error, not clap's "unexpected argument".
         vec!["render", "plane", "--fovy", "-1", "--out", &png],
+        vec!["render", "plane", "--width", "-5", "--out", &png],
+        vec!["bench", "plane", "--methods", "whitted", "--height", "0", "--out", &an],
         vec!["animate", "bend", "--frames", "2", "--detail", "0.1", "--width", "16", "--height", "12", "--out", &an, "--stats", &an_frame],
     ] {
         let (code, _, err) = lodtrace(&[&args[..], &["--quiet"]].concat());

@@ -100,9 +100,9 @@ pub struct RenderArgs {
     pub method: Method,
     #[arg(long, value_enum, default_value = "embree")]
     pub accel: AccelKind,
-    #[arg(long, default_value_t = 640)]
+    #[arg(long, default_value_t = 640, value_parser = clap::value_parser!(u32).range(1..=32768))]
     pub width: u32,
-    #[arg(long, default_value_t = 480)]
+    #[arg(long, default_value_t = 480, value_parser = clap::value_parser!(u32).range(1..=32768))]
     pub height: u32,
     /// Samples per pixel (whitted: jittered when > 1; distributed: the maximum per pixel).
     #[arg(long, default_value_t = 1)]

@@ -54,9 +54,9 @@ pub struct BenchArgs {
     /// Output folder for bench.json, the plot and the images (created if missing).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    #[arg(long, default_value_t = 640)]
+    #[arg(long, default_value_t = 640, value_parser = clap::value_parser!(u32).range(1..=32768))]
     pub width: u32,
-    #[arg(long, default_value_t = 480)]
+    #[arg(long, default_value_t = 480, value_parser = clap::value_parser!(u32).range(1..=32768))]
     pub height: u32,
     /// Default thread count for methods that don't set `threads=` (0 = all cores).
     #[arg(long, default_value_t = 0)]

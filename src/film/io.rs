@@ -58,16 +58,26 @@ fn record_written(path: &Path) {
     }
 }
 
-/// Fails early, before any work, when a file cannot be created in `dir` (a folder that is
-/// read-only or, like `/proc`, takes no new files): creates and removes a probe file there.
-/// Creates an output folder (and its parents); a path that exists as a file is named as such.
+/// Creates an output folder (and its parents). A path that exists as a file, or whose name
+/// ends like an image or data file (`--out frames.png`: the commands that take a folder would
+/// otherwise create a folder of that name), is refused with a usage error; a folder that
+/// cannot be created says so in one line.
 pub fn create_out_dir(dir: &Path) -> Result<()> {
     if dir.exists() && !dir.is_dir() {
         return Err(Error::Usage(format!("{}: exists and is not a folder (--out names a folder here)", dir.display())));
     }
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))
+    if !dir.exists() {
+        let ext = dir.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+        if matches!(ext.as_str(), "png" | "exr" | "jpg" | "jpeg" | "ppm" | "json" | "md" | "html" | "svg") {
+            return Err(Error::Usage(format!("{}: --out names a folder here (the files go inside it), not a .{ext} file", dir.display())));
+        }
+    }
+    std::fs::create_dir_all(dir)
+        .map_err(|e| Error::io(dir, std::io::Error::new(e.kind(), format!("cannot create the output folder ({e})"))))
 }
 
+/// Fails early, before any work, when a file cannot be created in `dir` (a folder that is
+/// read-only or, like `/proc`, takes no new files): creates and removes a probe file there.
 pub fn check_writable_dir(dir: &Path) -> Result<()> {
     let probe = dir.join(format!(".lodtrace-probe.{}", std::process::id()));
     match std::fs::File::create(&probe) {
