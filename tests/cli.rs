@@ -668,7 +668,15 @@ fn animate_cache_ablation_keeps_the_frames() {
     assert_eq!(up["trace_params"]["ordered"], false);
     assert_eq!(leaf["trace_params"]["cache_up"], 0);
     // The switch only exists for the cache, and within bounds.
-    for bad in [&["--update", "lazy", "--cache-up", "2"][..], &["--cache-up", "65"][..]] {
+    // So do the others, each only where it applies (a run would otherwise record a switch
+    // it never used).
+    for bad in [
+        &["--update", "lazy", "--cache-up", "2"][..],
+        &["--cache-up", "65"][..],
+        &["--update", "naive", "--exact-below", "0"][..],
+        &["--update", "refit", "--exact-below", "64"][..],
+        &["--update", "refit", "--unordered"][..],
+    ] {
         let mut a = vec!["animate", "bend", "--frames", "1", "--width", "8", "--height", "8"];
         a.extend_from_slice(bad);
         let (code, _, err) = lodtrace(&a);
@@ -823,6 +831,9 @@ fn bench_deforming_sequences() {
         "whitted:bvh:warm=1",
         "surfel:update=lazy:cache_up=2",
         "surfel:cache_up=65",
+        "surfel:update=naive:exact=0",
+        "surfel:update=refit:exact=10",
+        "surfel:update=refit:ordered=0",
         "surfel:top=2",
         "whitted:bvh:top=0",
     ] {

@@ -70,9 +70,10 @@ pub struct AnimateArgs {
     pub packet: u32,
     /// Lazy modes: the first visit of an inner node over at most this many surfels bounds it
     /// and its whole subtree from their deformed surfels (the leaf balls' box centre, the exact
-    /// reach) instead of by Eq. 9 node by node; 0 = Eq. 9 everywhere, the paper (at most 2^24).
-    #[arg(long, default_value_t = 4096, value_parser = clap::value_parser!(u32).range(0..=16_777_216))]
-    pub exact_below: u32,
+    /// reach) instead of by Eq. 9 node by node; 0 = Eq. 9 everywhere, the paper (at most 2^24;
+    /// default 4096).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=16_777_216))]
+    pub exact_below: Option<u32>,
     /// Per-ray cache (`--update lazy-cache`, §4.2.2): cache the ancestor this many levels
     /// above the leaf of each ray's closest hit instead of the leaf itself (0, the paper's
     /// choice; at most 64). Under motion a surfel leaves the ray within a frame or two, a
@@ -248,8 +249,8 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
     if !(a.detail.is_finite() && a.detail > 0.0 && a.detail <= 10.0) {
         return Err(Error::Usage(format!("--detail {} out of range (0, 10]", a.detail)));
     }
-    if a.exact_below > crate::deform::trace::MAX_EXACT_BELOW {
-        return Err(Error::Usage(format!("--exact-below {}: at most {}", a.exact_below, crate::deform::trace::MAX_EXACT_BELOW)));
+    if let Some(e) = a.exact_below.filter(|&e| e > crate::deform::trace::MAX_EXACT_BELOW) {
+        return Err(Error::Usage(format!("--exact-below {e}: at most {}", crate::deform::trace::MAX_EXACT_BELOW)));
     }
     if a.cache_up > crate::deform::trace::MAX_CACHE_UP {
         return Err(Error::Usage(format!("--cache-up {}: at most {}", a.cache_up, crate::deform::trace::MAX_CACHE_UP)));
@@ -259,6 +260,12 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
     }
     if a.cache_up > 0 && mode != UpdateMode::LazyCache {
         return Err(Error::Usage(format!("--cache-up is an option of --update lazy-cache; --update {} would ignore it", mode.name())));
+    }
+    if a.exact_below.is_some() && matches!(mode, UpdateMode::Naive | UpdateMode::Refit) {
+        return Err(Error::Usage(format!("--exact-below is an option of the lazy updates; --update {} would ignore it", mode.name())));
+    }
+    if a.unordered && mode == UpdateMode::Refit {
+        return Err(Error::Usage("--unordered orders the sphere tree's traversal; --update refit (an obvhs BVH2) would ignore it".into()));
     }
     if a.packet != 1 && a.packet != 8 {
         return Err(Error::Usage(format!("--packet {}: 1 or 8", a.packet)));
@@ -322,7 +329,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         &seq.scene,
         mode,
         TraceParams {
-            exact_below: a.exact_below,
+            exact_below: a.exact_below.unwrap_or(crate::deform::trace::TraceParams::default().exact_below),
             cache_up: a.cache_up,
             ordered: !a.unordered,
             instance_tree: !a.no_instance_tree,

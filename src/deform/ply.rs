@@ -239,4 +239,24 @@ mod tests {
         let n = m.surfels.normal(3);
         assert!((n - Vec3::new(1.0, 1.0, 0.0).normalize()).length() < 1e-6, "{n}");
     }
+
+    /// A radius wider than the whole model (a unit mix-up) is refused; one within it loads.
+    #[test]
+    fn absurd_radius_is_refused() {
+        let with_r = |r: f32| {
+            let t = ply_text(&rows()).replace("property float nz\n", "property float nz\nproperty float radius\n");
+            let mut lines: Vec<String> = t.lines().map(String::from).collect();
+            let body = lines.iter().position(|l| l == "end_header").unwrap() + 1;
+            for l in &mut lines[body..] {
+                *l = format!("{l} {}", if l.starts_with("7 ") { r } else { 0.5 });
+            }
+            lines.join("\n") + "\n"
+        };
+        // The rows span 19 × 36.1 units.
+        assert!(read_ply(&mut with_r(30.0).as_bytes(), Path::new("t.ply")).is_ok());
+        match read_ply(&mut with_r(1e20).as_bytes(), Path::new("t.ply")) {
+            Err(DeformError::BadSurfel { index: 7, msg }) => assert!(msg.contains("wider than the whole model"), "{msg}"),
+            e => panic!("{:?}", e.map(|m| m.len())),
+        }
+    }
 }

@@ -78,6 +78,16 @@ impl SurfelSoa {
 
     /// [`validate`](Self::validate) without the duplicate check.
     pub fn validate_values(&mut self) -> Result<(), DeformError> {
+        // A splat wider than the whole model is a unit mix-up (1e20 made the object vanish
+        // from every frame, 1e10 garbled it); the bound is the positions' box diagonal.
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for i in 0..self.len() {
+            let p = self.pos(i);
+            if p.is_finite() {
+                (lo, hi) = (lo.min(p), hi.max(p));
+            }
+        }
+        let diag = if lo.x <= hi.x { (hi - lo).length() } else { 0.0 };
         for i in 0..self.len() {
             let p = self.pos(i);
             if !p.is_finite() {
@@ -103,6 +113,15 @@ impl SurfelSoa {
             self.nz[i] = n.z;
             if !(self.r[i].is_finite() && self.r[i] > 0.0) {
                 return Err(DeformError::BadSurfel { index: i, msg: format!("radius {}", self.r[i]) });
+            }
+            if diag > 0.0 && self.r[i] > diag {
+                return Err(DeformError::BadSurfel {
+                    index: i,
+                    msg: format!(
+                        "radius {:e} is wider than the whole model ({diag:e} across): radii are in the positions' units",
+                        self.r[i]
+                    ),
+                });
             }
         }
         Ok(())

@@ -139,7 +139,12 @@ pub fn run(
                     no_shadows: !s.shadows,
                     threads: spec.threads.unwrap_or(threads),
                     packet: spec.packet,
-                    exact_below: s.exact_below,
+                    // `validate` refused an explicit `exact=` for the modes that have no lazy
+                    // update; their default is not passed on (animate would refuse it).
+                    exact_below: match crate::cli::animate::parse_mode(&s.update) {
+                        Ok(crate::deform::UpdateMode::Naive | crate::deform::UpdateMode::Refit) => None,
+                        _ => Some(s.exact_below),
+                    },
                     cache_up: s.cache_up,
                     unordered: !s.ordered,
                     no_instance_tree: !s.top,
@@ -470,6 +475,14 @@ pub fn validate(spec: &MethodSpec) -> Result<()> {
     }
     if s.cache_up > 0 && mode != crate::deform::UpdateMode::LazyCache {
         return bad("cache_up is a key of update=lazy-cache".into());
+    }
+    use crate::deform::UpdateMode::{Naive, Refit};
+    let has = |key: &str| spec.text.split(':').any(|k| k.starts_with(key));
+    if has("exact=") && matches!(mode, Naive | Refit) {
+        return bad(format!("exact is a key of the lazy updates; update={} would ignore it", mode.name()));
+    }
+    if has("ordered=") && mode == Refit {
+        return bad("ordered is a key of the sphere tree's traversal; update=refit (an obvhs BVH2) would ignore it".into());
     }
     if s.frames == Some(0) || s.frames.is_some_and(|f| f > 100_000) {
         return bad("frames out of range".into());
