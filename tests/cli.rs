@@ -1254,6 +1254,17 @@ fn stop_38_bad_inputs_are_one_line_exit_2() {
         assert!(!err.contains("panicked"), "{kd}: {err}");
         assert_eq!(err.contains("materials not loaded"), warns, "{kd}: {err}");
     }
+    // A bare OBJ is shaded with its MTL materials (until stop 54 they were validated, then
+    // left unused: the mesh came out grey).
+    std::fs::write(p("red.mtl"), "newmtl red\nKd 1 0 0\n").unwrap();
+    std::fs::write(p("red.obj"), format!("mtllib red.mtl\nusemtl red\n{quad}")).unwrap();
+    let (code, _, err) = lodtrace(&["render", &p("red.obj"), "--width", "32", "--height", "24", "--quiet", "--out", &p("red.png")]);
+    assert_eq!(code, 0, "{err}");
+    let img = image::open(p("red.png")).unwrap().to_rgb8();
+    // Lit surface (brighter than the background's 63–80): red, never grey.
+    let lit: Vec<[u8; 3]> = img.pixels().map(|q| q.0).filter(|q| q.iter().any(|&c| c > 100)).collect();
+    let red = lit.iter().filter(|q| q[1] < 10 && q[2] < 10).count();
+    assert!(red > 20 && red == lit.len(), "{red} red of {} lit pixels", lit.len());
     // Models too small for f32 or for the ray offsets, and too large for the automatic light,
     // are refused with one line (stop 46's sweep: a cow at 1e-5 vanished and a PLY sphere of
     // radius 1e-30 gave NaN radius ratios, both exit 0; a mesh at 1e7 blamed a light the

@@ -1,5 +1,6 @@
 //! Loading scenes: built-in names, bare meshes (.obj with MTL via tobj, .off), and TOML
-//! scene files. A bare mesh is framed automatically, grey diffuse, with a default light.
+//! scene files. A bare mesh is framed automatically, lit by a default light, grey diffuse
+//! unless its OBJ file names MTL materials.
 
 use super::{Camera, Light, Material, Mesh, Scene, Target};
 use crate::error::{Error, Result};
@@ -11,10 +12,19 @@ pub fn load_scene(spec: &str) -> Result<Scene> {
     let p = Path::new(spec);
     let ext = p.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
     let mut scene = match ext.as_deref() {
-        Some("obj") | Some("off") => {
-            let mesh = load_mesh(p, 0)?;
-            bare_mesh_scene(mesh)?
+        Some("obj") => {
+            // Its MTL materials (if any) follow the default grey at index 0.
+            let (mut mesh, mtls) = load_obj(p, 1)?;
+            if mtls.is_empty() {
+                mesh.mat.iter_mut().for_each(|x| *x = 0);
+            }
+            let mut s = bare_mesh_scene(mesh)?;
+            for m in mtls {
+                s.add_material(m);
+            }
+            s
         }
+        Some("off") => bare_mesh_scene(load_off(p, 0)?)?,
         Some("toml") => super::tomlscene::load(p)?,
         Some("ply") => {
             return Err(Error::parse(p, "point files (.ply) are surfel models: render them with `--method surfel` or `lodtrace animate`; the other methods take .obj, .off or .toml"))
@@ -291,7 +301,8 @@ fn material_from_mtl(path: &Path, m: &tobj::Material) -> Result<Material> {
     })
 }
 
-/// A scene holding one mesh, grey diffuse, on no floor, framed so the whole mesh fits the
+/// A scene holding one mesh, grey diffuse (material 0; the caller appends an OBJ's MTL
+/// materials), on no floor, framed so the whole mesh fits the
 /// view, lit by a light above and behind the camera.
 pub fn bare_mesh_scene(mesh: Mesh) -> Result<Scene> {
     let mut s = Scene::empty(&mesh.name);
