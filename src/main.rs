@@ -9,6 +9,8 @@ fn main() {
     unsafe {
         libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
     }
+    #[cfg(unix)]
+    interrupts();
     let cli = match lodtrace::cli::Cli::try_parse() {
         Ok(c) => c,
         Err(e) => match e.kind() {
@@ -36,4 +38,39 @@ fn main() {
         },
     };
     std::process::exit(lodtrace::cli::run(cli));
+}
+
+/// Ctrl-C and SIGTERM end a run as a failed run ends: its outputs and the folders it created
+/// are removed ([`lodtrace::film::io::remove_outputs_of_interrupted_run`]), one line says so,
+/// and the exit code is 128 + the signal. The signals are blocked here, before any other
+/// thread exists (threads inherit the mask), and taken by one thread with `sigwait`, so the
+/// clean-up runs as ordinary code, not in a signal handler.
+#[cfg(unix)]
+fn interrupts() {
+    // SAFETY: plain libc calls on a local signal set, before any other thread starts.
+    let set = unsafe {
+        let mut set: libc::sigset_t = std::mem::zeroed();
+        libc::sigemptyset(&mut set);
+        libc::sigaddset(&mut set, libc::SIGINT);
+        libc::sigaddset(&mut set, libc::SIGTERM);
+        if libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut()) != 0 {
+            return;
+        }
+        set
+    };
+    std::thread::spawn(move || {
+        let mut sig: libc::c_int = 0;
+        // SAFETY: `set` is an initialised signal set; `sig` receives the signal number.
+        if unsafe { libc::sigwait(&set, &mut sig) } != 0 {
+            return;
+        }
+        let n = lodtrace::film::io::remove_outputs_of_interrupted_run();
+        let what = if sig == libc::SIGINT { "interrupted" } else { "terminated" };
+        if n > 0 {
+            eprintln!("\nlodtrace: error: {what}; removed the {n} outputs this run had written");
+        } else {
+            eprintln!("\nlodtrace: error: {what}");
+        }
+        std::process::exit(128 + sig);
+    });
 }

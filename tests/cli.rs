@@ -1507,3 +1507,47 @@ fn debug_pixel_explains_the_rendered_pixel() {
     assert_eq!(code, 2);
     one_error_line(&err);
 }
+
+/// Ctrl-C (SIGINT) and SIGTERM end a run as a failed run ends: one error line, exit 128 +
+/// the signal, no outputs left behind: the folder the run created is removed, and in a
+/// folder that existed only the run's own files go (stop 54: an interrupted bench left its
+/// images without `bench.json`).
+#[cfg(unix)]
+#[test]
+fn interrupted_runs_leave_no_outputs() {
+    let d = tmp("interrupt");
+    let exe = env!("CARGO_BIN_EXE_lodtrace");
+    for (sig, code, fresh) in [(libc::SIGINT, 130, true), (libc::SIGTERM, 143, false)] {
+        let out = d.join(if fresh { "new/frames" } else { "old" });
+        if !fresh {
+            std::fs::create_dir_all(&out).unwrap();
+            std::fs::write(out.join("keep.txt"), "earlier run").unwrap();
+        }
+        let child = Command::new(exe)
+            .args(["animate", "bend", "--frames", "400", "--detail", "0.05", "--width", "32", "--height", "24", "--quiet"])
+            .arg("--out")
+            .arg(&out)
+            .stderr(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        // Wait until frames are being written, then interrupt.
+        let t0 = std::time::Instant::now();
+        while !out.join("frame_0002.png").exists() {
+            assert!(t0.elapsed().as_secs() < 120, "no frames written");
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        // SAFETY: sending a signal to our own child process.
+        assert_eq!(unsafe { libc::kill(child.id() as libc::pid_t, sig) }, 0);
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(code), "{err}");
+        one_error_line(&err);
+        if fresh {
+            assert!(!d.join("new").exists(), "the folder the run created is still there");
+        } else {
+            let left: Vec<_> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name()).collect();
+            assert_eq!(left, vec![std::ffi::OsString::from("keep.txt")], "left behind");
+        }
+    }
+}

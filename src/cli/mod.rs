@@ -206,6 +206,9 @@ pub fn run(cli: Cli) -> i32 {
         }
         Err(e) => {
             crate::error::discard_warnings();
+            // An error caused by an interrupt's clean-up (its folder removed under a writer)
+            // is not reported: the signal thread reports the interrupt and ends the process.
+            crate::film::io::halt_if_interrupted();
             eprintln!("lodtrace: error: {e}");
             2
         }

@@ -18,6 +18,7 @@ use std::path::{Path, PathBuf};
 
 /// Writes via `write` to a temporary file beside `path`, then renames it into place.
 pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    halt_if_interrupted();
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     match std::fs::metadata(dir) {
         Ok(m) if m.is_dir() => {}
@@ -31,17 +32,80 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Res
     let name = path.file_name().ok_or_else(|| Error::Usage(format!("{}: not a file name", path.display())))?;
     let ext = path.extension().map(|e| e.to_string_lossy().to_string()).unwrap_or_default();
     let tmp: PathBuf = dir.join(format!(".{}.{}.tmp.{}", name.to_string_lossy(), std::process::id(), ext));
-    let r = write(&tmp);
-    if r.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-        return r;
+    if let Ok(mut t) = TEMPS.lock() {
+        t.push(std::path::absolute(&tmp).unwrap_or_else(|_| tmp.clone()));
     }
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::io(path, e)
-    })?;
+    let r = write(&tmp);
+    let r = match r {
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(e)
+        }
+        // An interrupted run renames nothing into place ([`remove_outputs_of_interrupted_run`]).
+        Ok(()) if INTERRUPTED.load(std::sync::atomic::Ordering::SeqCst) => {
+            let _ = std::fs::remove_file(&tmp);
+            halt_if_interrupted();
+            unreachable!("halted")
+        }
+        Ok(()) => std::fs::rename(&tmp, path).map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            Error::io(path, e)
+        }),
+    };
+    if let Ok(mut t) = TEMPS.lock() {
+        let a = std::path::absolute(&tmp).unwrap_or_else(|_| tmp.clone());
+        if let Some(i) = t.iter().rposition(|x| *x == a) {
+            t.swap_remove(i);
+        }
+    }
+    r?;
     record_written(path);
     Ok(())
+}
+
+/// After SIGINT or SIGTERM a writer waits here for the signal thread to end the process
+/// (`main`), rather than fail and let the command report an error of its own.
+pub fn halt_if_interrupted() {
+    while INTERRUPTED.load(std::sync::atomic::Ordering::SeqCst) {
+        std::thread::sleep(std::time::Duration::from_secs(1));
+    }
+}
+
+/// Temporary files [`write_atomic`] is writing now (absolute paths).
+static TEMPS: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+/// Set once SIGINT or SIGTERM arrived: no output is renamed into place after it.
+static INTERRUPTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+/// The output folders of the [`discard_dir_on_error`] scopes running now: (the folder,
+/// its top-most ancestor that did not exist before the run, the scope's first entry in
+/// `WRITTEN`).
+#[allow(clippy::type_complexity)]
+static SCOPES: std::sync::Mutex<Vec<(Option<PathBuf>, Option<PathBuf>, usize)>> = std::sync::Mutex::new(Vec::new());
+
+/// On SIGINT or SIGTERM (`main` calls this from its signal thread, then exits): what a
+/// failed run does, for every run in progress. The files written into the running scopes'
+/// folders and the folders they created are removed, as are temporary files being
+/// written; nothing is renamed into place afterwards. Returns the number of outputs removed.
+pub fn remove_outputs_of_interrupted_run() -> usize {
+    INTERRUPTED.store(true, std::sync::atomic::Ordering::SeqCst);
+    let mut removed = 0;
+    if let Ok(t) = TEMPS.lock() {
+        for p in t.iter() {
+            let _ = std::fs::remove_file(p);
+        }
+    }
+    let scopes = SCOPES.lock().map(|s| s.clone()).unwrap_or_default();
+    let written = WRITTEN.lock().map(|w| w.1.clone()).unwrap_or_default();
+    for (abs, fresh, start) in scopes {
+        if let Some(a) = &abs {
+            for p in written.iter().skip(start).filter(|p| p.starts_with(a)) {
+                removed += std::fs::remove_file(p).is_ok() as usize;
+            }
+        }
+        if let Some(d) = fresh {
+            let _ = std::fs::remove_dir_all(d);
+        }
+    }
+    removed
 }
 
 /// Files written by [`write_atomic`] while a [`discard_dir_on_error`] scope runs (absolute
@@ -183,7 +247,15 @@ pub fn discard_dir_on_error<T>(dir: Option<&Path>, f: impl FnOnce() -> Result<T>
         w.0 += 1;
         w.1.len()
     });
+    if let Ok(mut sc) = SCOPES.lock() {
+        sc.push((abs.clone(), fresh.clone(), *start.as_ref().unwrap_or(&0)));
+    }
     let r = f();
+    if let Ok(mut sc) = SCOPES.lock() {
+        if let Some(i) = sc.iter().rposition(|x| x.0 == abs && x.1 == fresh) {
+            sc.remove(i);
+        }
+    }
     let mine: Vec<PathBuf> = match WRITTEN.lock() {
         Ok(mut w) => {
             let v = if r.is_err() { start.map(|s| w.1[s.min(w.1.len())..].to_vec()).unwrap_or_default() } else { Vec::new() };
