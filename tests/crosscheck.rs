@@ -418,3 +418,43 @@ fn filtered_queries_keep_hits_tied_with_rejected_ones() {
         assert_eq!((through, only_bad), (0, 0), "{}: rays through the floor (Skip, Only)", be.name());
     }
 }
+
+/// Rendering uses Embree's robust (watertight) mode (stop 54): primary rays at the shared
+/// edge of two floor triangles 1.25e5 units wide, from a few units away, all hit the floor.
+/// Embree's fast mode let some through (this test fails with it) (a user's "infinite ground" showed background pixels
+/// on its seam); `LODTRACE_EMBREE_FAST=1` brings that mode back.
+#[test]
+fn embree_renders_watertight_across_a_huge_floors_seam() {
+    let d = std::env::temp_dir().join(format!("lodtrace-seam-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    let p = d.join("seam.toml");
+    std::fs::write(
+        &p,
+        "name = \"seam\"\n[camera]\neye = [0, 2, 6]\nlook = [0, 0, 0]\nfovy = 45\n[materials.white]\ncolor = 0.8\n\
+         [meshes.board]\ngenerator = \"checkerboard\"\nn = 8\nsize = 1e6\nmaterial = \"white\"\n\
+         [[instances]]\ntarget = \"board\"\ntranslate = [0, -1, 0]\n[[lights]]\ntype = \"point\"\npos = [5, 4, 6]\nintensity = 15\n",
+    )
+    .unwrap();
+    let s = load_scene(p.to_str().unwrap()).unwrap();
+    let _ = std::fs::remove_dir_all(&d);
+    if std::env::var("LODTRACE_EMBREE_FAST").is_ok_and(|v| v == "1") {
+        return;
+    }
+    let e = EmbreeAccel::build(&s).unwrap();
+    assert!(e.is_robust());
+    let mut c = Counters::default();
+    // The primary rays of the columns next to the seam (x = 0) at 512×384 and 1024×768, all
+    // of which meet the floor (the horizon is above row 150 of 384).
+    let mut missed = Vec::new();
+    for (w, h) in [(512u32, 384u32), (1024, 768)] {
+        let fr = s.camera.frame(w, h);
+        for i in w / 2 - 3..w / 2 + 3 {
+            for j in h / 2..h {
+                if e.intersect1(&Ray::new(fr.eye, fr.pixel_center_dir(i, j)), &mut c).is_none() {
+                    missed.push((w, i, j));
+                }
+            }
+        }
+    }
+    assert!(missed.is_empty(), "rays through the seam missed the floor: {missed:?}");
+}
