@@ -19,9 +19,10 @@
 //! Robust mode (`RTC_SCENE_FLAG_ROBUST`, watertight triangle test) is used by `verify` and,
 //! since stop 54, for rendering too: Embree's default fast mode let primary rays through the
 //! shared edge of two floor triangles 1e5 units wide seen from a few units away (a user's
-//! "infinite ground": two background pixels on the seam of a 512×384 frame). Robust mode cost
-//! about 6 % of a Whitted `complex` frame (0.195–0.216 s against 0.184–0.200 s, three runs
-//! each, 640×480). `LODTRACE_EMBREE_FAST=1` renders in fast mode, which `verify --accel
+//! "infinite ground": two background pixels on the seam of a 512×384 frame). Robust mode costs
+//! `complex` at 640×480 about 8 % of a Whitted frame (0.175 / 0.168 s against 0.157 / 0.160 s)
+//! and 12 % of a distributed one at `spp=16` (1.830 / 1.792 s against 1.619 / 1.623 s; `bench
+//! --repeat 3`, two runs each, alternating). `LODTRACE_EMBREE_FAST=1` renders in fast mode, which `verify --accel
 //! embree` checks against the robust mode. The ISA can be pinned with the environment
 //! variable `LODTRACE_EMBREE_ISA` (e.g. `sse4.2`, `avx2`), passed as Embree's `isa=` device
 //! option; memory is counted by a device memory-monitor callback.
