@@ -1551,3 +1551,50 @@ fn interrupted_runs_leave_no_outputs() {
         }
     }
 }
+
+/// Stop 54's second review (a researcher benchmarking their own scene): metrics that cannot
+/// see HDR values say so, a distributed first pass above the maximum is refused, surfels
+/// from a scene file get an error naming what they take, and a surfel run's set-up time is
+/// reported.
+#[test]
+fn stop_54_researcher_review() {
+    let d = tmp("stop54");
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let small = ["--width", "32", "--height", "24", "--quiet"];
+    // Two depth maps of different views: FLIP and SSIM see them clamped to 1 (identical).
+    for (eye, f) in [("0,1,5", "d1.exr"), ("1,2,6", "d2.exr")] {
+        let (code, _, err) = lodtrace(
+            &[&["render", "spheres", "--eye", eye, "--out", &p("x.png"), "--aov", &format!("depth={}", p(f))][..], &small].concat(),
+        );
+        assert_eq!(code, 0, "{err}");
+    }
+    let (code, out, err) = lodtrace(&["compare", &p("d1.exr"), &p("d2.exr")]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("FLIP and SSIM see display values clamped"), "{out}\n{err}");
+    let (code, _, err) = lodtrace(&["compare", &p("x.png"), &p("x.png")]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!err.contains("clamped"), "{err}");
+    // --first-pass-spp above --spp was capped silently.
+    let (code, _, err) = lodtrace(
+        &[&["render", "spheres", "--method", "distributed", "--spp", "1", "--first-pass-spp", "4", "--out", &p("y.png")][..], &small]
+            .concat(),
+    );
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains("exceeds --spp"), "{err}");
+    // A scene file for surfels: the error says what they take.
+    std::fs::write(p("s.toml"), "name = \"s\"\n").unwrap();
+    let (code, _, err) = lodtrace(&[&["render", &p("s.toml"), "--method", "surfel", "--out", &p("z.png")][..], &small].concat());
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains(".ply point file") && err.contains("scene files"), "{err}");
+    // Sampling a mesh into surfels and building the rest hierarchy is timed.
+    let mesh = format!("{}/assets/cow.off", env!("CARGO_MANIFEST_DIR"));
+    if std::path::Path::new(&mesh).exists() {
+        let (code, _, err) =
+            lodtrace(&[&["animate", &mesh, "--frames", "1", "--detail", "0.05", "--stats", &p("a.json")][..], &small].concat());
+        assert_eq!(code, 0, "{err}");
+        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(p("a.json")).unwrap()).unwrap();
+        assert!(v["setup_seconds"].as_f64().unwrap() > 0.0, "{v}");
+    }
+}

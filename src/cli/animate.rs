@@ -176,6 +176,10 @@ pub struct AnimateStats {
     pub frames: u32,
     pub threads: usize,
     pub surfels: u64,
+    /// Making the sequence: loading or sampling the surfels, their neighbours, the simulation
+    /// nodes and the rest pose's sphere hierarchy (§4.1 build, Eq. 9 precomputation).
+    pub setup_seconds: f64,
+    /// The tracer's own set-up for the update mode (per-instance state, the refit BVH2).
     pub build_seconds: f64,
     pub simulate_seconds: f64,
     /// Total over all frames (update + rays).
@@ -297,6 +301,7 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
 fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<AnimateStats> {
     let opts =
         SequenceOptions { detail: a.detail, armadillo: crate::scene::builtin::assets_dir().join("armadillo.off"), ..Default::default() };
+    let t_setup = Instant::now();
     let mut seq = if Sequence::BUILTIN.contains(&a.scene.as_str()) {
         Sequence::builtin(&a.scene, &opts).map_err(derr)?
     } else {
@@ -316,10 +321,18 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply")) {
             Sequence::from_points(crate::deform::ply::load_ply(p).map_err(derr)?, &opts).map_err(derr)?
         } else {
+            if !["off", "obj"].iter().any(|x| p.extension().is_some_and(|e| e.eq_ignore_ascii_case(x))) {
+                return Err(Error::Usage(format!(
+                    "{}: deforming surfels (animate, --method surfel) come from a built-in sequence ({}), an .obj or .off mesh or a .ply point file; scene files (.toml) are for the other methods",
+                    a.scene,
+                    Sequence::BUILTIN.join(", ")
+                )));
+            }
             let mesh = crate::scene::load::load_mesh(p, 0)?;
             Sequence::from_mesh(&mesh, &opts).map_err(derr)?
         }
     };
+    let setup_seconds = t_setup.elapsed().as_secs_f64();
     let frames = a.frames.unwrap_or(seq.frames);
     let t0 = Instant::now();
     let rec = seq.record(frames).map_err(derr)?;
@@ -423,6 +436,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         frames,
         threads,
         surfels,
+        setup_seconds,
         build_seconds,
         simulate_seconds,
         render_seconds,

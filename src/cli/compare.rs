@@ -192,6 +192,15 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
         )));
     }
     let (w, h) = (wa, ha);
+    // FLIP and SSIM judge display values clamped to [0, 1]: above 1 (HDR highlights, depth
+    // AOVs) every value looks alike to them (two depth maps of different views: FLIP 0, SSIM 1).
+    let over = ia.iter().zip(&ib).filter(|(p, q)| p.max_element() > 1.0 || q.max_element() > 1.0).count();
+    if over * 100 > ia.len() {
+        crate::error::warn(format!(
+            "{:.1} % of the pixels exceed 1 (HDR or an AOV such as depth): FLIP and SSIM see display values clamped to [0, 1] and cannot tell those apart; judge by RMSE and PSNR",
+            100.0 * over as f64 / ia.len().max(1) as f64
+        ));
+    }
     let regions = parse_regions(&a.regions, w, h)?;
     let rmse = metrics::rmse(&ia, &ib, w, h);
     let psnr = metrics::psnr(&ia, &ib, w, h);

@@ -98,6 +98,17 @@ pub fn check_method_options(a: &RenderArgs) -> Result<()> {
     if m != Distributed && a.first_pass_spp != d.first_pass_spp {
         wrong.push(("--first-pass-spp", "--method distributed"));
     }
+    if m == Distributed && a.first_pass_spp != d.first_pass_spp && a.first_pass_spp > a.spp {
+        return Err(Error::Usage(format!(
+            "--first-pass-spp {} exceeds --spp {} (the per-pixel maximum, which caps it): raise --spp",
+            a.first_pass_spp, a.spp
+        )));
+    }
+    if m == Distributed && a.spp == 1 {
+        crate::error::warn(
+            "--method distributed with --spp 1 takes one sample per pixel (no supersampling, soft shadows or depth of field to speak of): give --spp N",
+        );
+    }
     if m != Distributed && a.variance_threshold != d.variance_threshold {
         wrong.push(("--variance-threshold", "--method distributed"));
     }
@@ -268,7 +279,7 @@ fn render_surfel(a: &RenderArgs, out: &Path) -> Result<()> {
         st.width,
         st.height,
         st.surfels,
-        st.build_seconds,
+        st.setup_seconds + st.build_seconds,
         st.render_seconds,
         out.display()
     );
