@@ -1265,6 +1265,20 @@ fn stop_38_bad_inputs_are_one_line_exit_2() {
     let lit: Vec<[u8; 3]> = img.pixels().map(|q| q.0).filter(|q| q.iter().any(|&c| c > 100)).collect();
     let red = lit.iter().filter(|q| q[1] < 10 && q[2] < 10).count();
     assert!(red > 20 && red == lit.len(), "{red} red of {} lit pixels", lit.len());
+    // A scene file's own material on that OBJ wins over its MTL (until stop 54 the triangles
+    // took the scene material's index plus their MTL index: "uses material 2, but there are
+    // only 2").
+    std::fs::write(
+        p("white.toml"),
+        "name = \"w\"\n[materials.white]\ncolor = 0.8\n[meshes.m]\nfile = \"red.obj\"\nmaterial = \"white\"\n\
+         [[instances]]\ntarget = \"m\"\n[[lights]]\ntype = \"point\"\npos = [0, 0, 5]\nintensity = 20\n",
+    )
+    .unwrap();
+    let (code, _, err) = lodtrace(&["render", &p("white.toml"), "--width", "32", "--height", "24", "--quiet", "--out", &p("w.png")]);
+    assert_eq!(code, 0, "{err}");
+    let img = image::open(p("w.png")).unwrap().to_rgb8();
+    assert!(!img.pixels().any(|q| q.0[0] > 100 && q.0[1] < 10), "the MTL's red showed through");
+    assert!(img.pixels().filter(|q| q.0.iter().all(|&c| c > 100)).count() > 20, "the white quad is not in view");
     // Models too small for f32 or for the ray offsets, and too large for the automatic light,
     // are refused with one line (stop 46's sweep: a cow at 1e-5 vanished and a PLY sphere of
     // radius 1e-30 gave NaN radius ratios, both exit 0; a mesh at 1e7 blamed a light the

@@ -306,7 +306,8 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         Sequence::builtin(&a.scene, &opts).map_err(derr)?
     } else {
         let p = std::path::Path::new(&a.scene);
-        let named_file = ["ply", "off", "obj"].iter().any(|x| p.extension().is_some_and(|e| e.eq_ignore_ascii_case(x)));
+        let has_ext = |xs: &[&str]| xs.iter().any(|x| p.extension().is_some_and(|e| e.eq_ignore_ascii_case(x)));
+        let named_file = has_ext(&["ply", "off", "obj"]);
         if named_file || p.exists() {
             // A file was meant: say what is wrong with it (missing, a folder, a FIFO).
             crate::error::check_input_file(p)?;
@@ -318,10 +319,10 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
                 Sequence::BUILTIN.join(", ")
             )));
         }
-        if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply")) {
+        if has_ext(&["ply"]) {
             Sequence::from_points(crate::deform::ply::load_ply(p).map_err(derr)?, &opts).map_err(derr)?
         } else {
-            if !["off", "obj"].iter().any(|x| p.extension().is_some_and(|e| e.eq_ignore_ascii_case(x))) {
+            if !has_ext(&["off", "obj"]) {
                 return Err(Error::Usage(format!(
                     "{}: deforming surfels (animate, --method surfel) come from a built-in sequence ({}), an .obj or .off mesh or a .ply point file; scene files (.toml) are for the other methods",
                     a.scene,

@@ -259,7 +259,7 @@ impl MethodSpec {
                     "frames" => spec.surfel.frames = Some(int(v)?),
                     "detail" => spec.surfel.detail = num(v)? as f32,
                     "shadows" => spec.surfel.shadows = on(v)?,
-                    "exact" => spec.surfel.exact_below = int(v)?,
+                    "exact" => spec.surfel.exact_below = Some(int(v)?),
                     "warm" => spec.surfel.warm = on(v)?,
                     "cache_up" => spec.surfel.cache_up = int(v)?,
                     "ordered" => spec.surfel.ordered = on(v)?,

@@ -27,8 +27,8 @@ pub struct SurfelSpec {
     pub frames: Option<u32>,
     pub detail: f32,
     pub shadows: bool,
-    /// `--exact-below` of `animate`.
-    pub exact_below: u32,
+    /// `--exact-below` of `animate` (`exact=N`; unset: animate's default, lazy modes only).
+    pub exact_below: Option<u32>,
     /// `--warm-pass` of `animate` (`warm=1`): also time each frame's rays with the hierarchy
     /// already updated, for the table's "rays ms/frame" column.
     pub warm: bool,
@@ -49,7 +49,7 @@ impl Default for SurfelSpec {
             frames: None,
             detail: 1.0,
             shadows: true,
-            exact_below: 4096,
+            exact_below: None,
             warm: false,
             cache_up: 0,
             ordered: true,
@@ -139,12 +139,7 @@ pub fn run(
                     no_shadows: !s.shadows,
                     threads: spec.threads.unwrap_or(threads),
                     packet: spec.packet,
-                    // `validate` refused an explicit `exact=` for the modes that have no lazy
-                    // update; their default is not passed on (animate would refuse it).
-                    exact_below: match crate::cli::animate::parse_mode(&s.update) {
-                        Ok(crate::deform::UpdateMode::Naive | crate::deform::UpdateMode::Refit) => None,
-                        _ => Some(s.exact_below),
-                    },
+                    exact_below: s.exact_below,
                     cache_up: s.cache_up,
                     unordered: !s.ordered,
                     no_instance_tree: !s.top,
@@ -468,7 +463,7 @@ pub fn validate(spec: &MethodSpec) -> Result<()> {
         return bad(format!("detail={} out of range (0, 10]", s.detail));
     }
     use crate::deform::trace::{MAX_CACHE_UP, MAX_EXACT_BELOW};
-    for (key, v, max) in [("exact", s.exact_below, MAX_EXACT_BELOW), ("cache_up", s.cache_up, MAX_CACHE_UP)] {
+    for (key, v, max) in [("exact", s.exact_below.unwrap_or(0), MAX_EXACT_BELOW), ("cache_up", s.cache_up, MAX_CACHE_UP)] {
         if v > max {
             return bad(format!("{key}={v} above {max}"));
         }
@@ -477,11 +472,10 @@ pub fn validate(spec: &MethodSpec) -> Result<()> {
         return bad("cache_up is a key of update=lazy-cache".into());
     }
     use crate::deform::UpdateMode::{Naive, Refit};
-    let has = |key: &str| spec.text.split(':').any(|k| k.starts_with(key));
-    if has("exact=") && matches!(mode, Naive | Refit) {
+    if s.exact_below.is_some() && matches!(mode, Naive | Refit) {
         return bad(format!("exact is a key of the lazy updates; update={} would ignore it", mode.name()));
     }
-    if has("ordered=") && mode == Refit {
+    if !s.ordered && mode == Refit {
         return bad("ordered is a key of the sphere tree's traversal; update=refit (an obvhs BVH2) would ignore it".into());
     }
     if s.frames == Some(0) || s.frames.is_some_and(|f| f > 100_000) {

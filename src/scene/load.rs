@@ -14,10 +14,7 @@ pub fn load_scene(spec: &str) -> Result<Scene> {
     let mut scene = match ext.as_deref() {
         Some("obj") => {
             // Its MTL materials (if any) follow the default grey at index 0.
-            let (mut mesh, mtls) = load_obj(p, 1)?;
-            if mtls.is_empty() {
-                mesh.mat.iter_mut().for_each(|x| *x = 0);
-            }
+            let (mesh, mtls) = load_obj_with_materials(p, 1)?;
             let mut s = bare_mesh_scene(mesh)?;
             for m in mtls {
                 s.add_material(m);
@@ -35,13 +32,18 @@ pub fn load_scene(spec: &str) -> Result<Scene> {
     Ok(scene)
 }
 
-/// Loads a mesh file; triangles get material `mat` (OBJ files with MTL materials get their own,
-/// see [`load_obj`]).
+/// Loads a mesh file; every triangle gets material `mat`, whatever an OBJ's MTL says (for
+/// those, [`load_obj_with_materials`]). Until stop 54 an OBJ's triangles got `mat` + their
+/// MTL index, so a scene file's `material = "white"` on such an OBJ named materials the scene
+/// does not have.
 pub fn load_mesh(path: &Path, mat: u32) -> Result<Mesh> {
     let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
     match ext.as_deref() {
         Some("off") => load_off(path, mat),
-        Some("obj") => load_obj(path, mat).map(|(m, _)| m),
+        Some("obj") => load_obj(path, mat).map(|(mut m, _)| {
+            m.mat.iter_mut().for_each(|x| *x = mat);
+            m
+        }),
         _ => Err(Error::parse(path, "unsupported mesh format (expected .obj or .off)")),
     }
 }
@@ -197,6 +199,17 @@ fn mtl_colours_complete(text: &[u8]) -> std::result::Result<Vec<u8>, tobj::LoadE
         out.push('\n');
     }
     Ok(out.into_bytes())
+}
+
+/// An OBJ with its MTL materials, for a scene that appends them after its first `base`
+/// materials: triangles take `base` + their MTL index; without an MTL, material 0 (the
+/// scene's default).
+pub fn load_obj_with_materials(path: &Path, base: u32) -> Result<(Mesh, Vec<Material>)> {
+    let (mut mesh, mtls) = load_obj(path, base)?;
+    if mtls.is_empty() {
+        mesh.mat.iter_mut().for_each(|x| *x = 0);
+    }
+    Ok((mesh, mtls))
 }
 
 /// OBJ via tobj (triangulated, single index). Returns the mesh and the MTL materials it uses;

@@ -510,14 +510,10 @@ impl Builder<'_> {
                 if is_obj && mat.is_none() {
                     // OBJ with MTL: its materials are appended after the scene's.
                     let base = s.materials.len() as u32;
-                    let (mut mesh, mtls) = super::load::load_obj(&p, base).map_err(wrap)?;
-                    if mtls.is_empty() {
-                        mesh.mat.iter_mut().for_each(|x| *x = 0);
-                    } else {
-                        for mut mm in mtls {
-                            mm.name = format!("{name}/{}", mm.name);
-                            s.add_material(mm);
-                        }
+                    let (mesh, mtls) = super::load::load_obj_with_materials(&p, base).map_err(wrap)?;
+                    for mut mm in mtls {
+                        mm.name = format!("{name}/{}", mm.name);
+                        s.add_material(mm);
                     }
                     Ok(mesh)
                 } else {
