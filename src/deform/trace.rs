@@ -1334,6 +1334,14 @@ impl DeformTracer {
         self.intersect_ex(ray, slot, ctr, &mut DeformCounters::default())
     }
 
+    /// The extent of the surfel whose leaf produced `hit` (its ellipse's longer semi-axis in
+    /// this frame): the local sample spacing, which sets how far a secondary ray must leave
+    /// the surface to clear the neighbouring splats (see `lodtrace animate`'s shading).
+    pub fn hit_extent(&self, hit: &SurfelHit) -> f32 {
+        let ii = &self.inst[hit.instance as usize];
+        self.surfel(ii, hit.surfel as usize).extent()
+    }
+
     /// [`intersect`](Self::intersect) with the tracer's own counters.
     pub fn intersect_ex(&self, ray: &Ray, slot: Option<u32>, ctr: &mut Counters, dc: &mut DeformCounters) -> Option<SurfelHit> {
         if !traceable(ray) || self.frame == 0 {
