@@ -1612,3 +1612,25 @@ fn stop_54_researcher_review() {
         assert!(v["setup_seconds"].as_f64().unwrap() > 0.0, "{v}");
     }
 }
+
+/// `--accel` (and a bench spec's accelerator) where a method does not take it: one line,
+/// exit 2, naming which methods take which structure and what the method traces instead
+/// (until stop 56 the cone tracers' message listed lod as taking every structure, and
+/// `--accel octree` with multires read as if the octree were not its own).
+#[test]
+fn accel_errors_say_which_method_takes_which_structure() {
+    let small = ["--width", "8", "--height", "6"];
+    for (m, own) in [("multires", "multi-resolution octree"), ("cone", "multi-resolution octree"), ("surfel", "sphere tree")] {
+        let (code, _, err) = lodtrace(&[&["render", "spheres", "--method", m, "--accel", "bvh"], &small[..]].concat());
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains("lod: embree, bvh") && err.contains(own) && err.lines().count() == 1, "{m}: {err}");
+    }
+    let (code, _, err) = lodtrace(&[&["render", "spheres", "--method", "lod", "--accel", "octree"], &small[..]].concat());
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("bvh or embree") && err.contains("whitted and distributed"), "{err}");
+    for (spec, own) in [("multires:bvh", "multi-resolution octree"), ("surfel:embree", "sphere tree")] {
+        let (code, _, err) = lodtrace(&["bench", "spheres", "--methods", spec, "--width", "8", "--height", "6"]);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains("lod: embree, bvh") && err.contains(own), "{spec}: {err}");
+    }
+}

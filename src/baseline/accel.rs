@@ -50,6 +50,9 @@ pub struct Hit {
     pub inst: u32,
 }
 
+/// Which methods take which [`AccelKind`] (one wording for `render`'s and `bench`'s errors).
+pub const ACCEL_USE: &str = "whitted and distributed: embree, bvh, octree; lod: embree, bvh";
+
 /// Which back-end to use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
 #[serde(rename_all = "lowercase")]

@@ -92,7 +92,12 @@ pub fn check_method_options(a: &RenderArgs) -> Result<()> {
     // The cone tracers trace their own octree, surfel its sphere tree: only the default
     // (which they do not use) passes unremarked.
     if matches!(m, Multires | Cone | Surfel) && a.accel != AccelKind::Embree {
-        wrong.push(("--accel", "the triangle tracers (whitted, distributed, lod)"));
+        return Err(Error::Usage(format!(
+            "--accel picks the triangle tracers' structure ({}); --method {} traces its own {}",
+            crate::baseline::accel::ACCEL_USE,
+            m.name(),
+            if m == Surfel { "sphere tree" } else { "multi-resolution octree" }
+        )));
     }
     let d = crate::baseline::render::RenderOpts::default();
     if m != Distributed && a.first_pass_spp != d.first_pass_spp {
@@ -187,7 +192,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     }
     if a.method == crate::cli::Method::Lod && a.accel == crate::baseline::accel::AccelKind::Octree {
         // Before loading, so that the error is the only line (no mesh warnings first).
-        return Err(Error::Usage("--method lod runs on --accel bvh or --accel embree".into()));
+        return Err(Error::Usage("--method lod runs on --accel bvh or embree; the octree serves whitted and distributed".into()));
     }
     let mut scene = crate::scene::load::load_scene(&a.scene)?;
     apply_camera(&mut scene, &a.camera)?;

@@ -304,16 +304,22 @@ impl MethodSpec {
                     "surfel"
                 }
                 "fps" | "vt" if method != Method::Distributed => "distributed",
-                "spp" | "depth" | "accel" if method == Method::Surfel => "the scene-file methods",
-                // The cone tracers trace their own octree.
-                "accel" if cone => "the triangle tracers (whitted, distributed, lod)",
+                "spp" | "depth" if method == Method::Surfel => "the scene-file methods",
+                "accel" if cone || method == Method::Surfel => {
+                    return Err(bad(format!(
+                        "the accelerator is the triangle tracers' choice ({}); {} traces its own {}",
+                        crate::baseline::accel::ACCEL_USE,
+                        method.name(),
+                        if cone { "multi-resolution octree" } else { "sphere tree" }
+                    )))
+                }
                 _ => continue,
             };
             return Err(bad(format!("{key} is a key of {of}; {} would ignore it", method.name())));
         }
         // Refused here, before any method of the list runs, not when its turn comes.
         if method == Method::Lod && spec.accel == AccelKind::Octree {
-            return Err(bad("lod runs on bvh or embree, not on the octree".into()));
+            return Err(bad("lod runs on bvh or embree; the octree serves whitted and distributed".into()));
         }
         Ok(spec)
     }

@@ -390,7 +390,7 @@ fn run_lod(scene: &Scene, accel_kind: AccelKind, opts: &RenderOpts, la: &LodArgs
     let (cp, lp) = la.params()?;
     opts.validate()?;
     if accel_kind == AccelKind::Octree {
-        return Err(Error::Usage("--method lod runs on --accel bvh or --accel embree".into()));
+        return Err(Error::Usage("--method lod runs on --accel bvh or embree; the octree serves whitted and distributed".into()));
     }
     let t0 = Instant::now();
     let ls = LodScenes::build(scene, &cp)?;
