@@ -261,7 +261,10 @@ pub fn scatter_chart(path: &Path, title: &str, xlabel: &str, ylabel: &str, point
             }};
         }
         if log_x {
-            draw!(builder.build_cartesian_2d((x0..x1).log_scale(), y0..y1).map_err(|x| e(&x))?);
+            // Own ticks, as in `line_chart_fmt`: plotters' crowded 4–9 at the right end of a
+            // sub-decade span and left everything below 1 unlabelled (stop 56).
+            let ticks = log_ticks(x0, x1);
+            draw!(builder.build_cartesian_2d((x0..x1).log_scale().with_key_points(ticks), y0..y1).map_err(|x| e(&x))?);
         } else {
             draw!(builder.build_cartesian_2d(x0..x1, y0..y1).map_err(|x| e(&x))?);
         }
