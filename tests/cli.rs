@@ -1620,8 +1620,11 @@ fn stop_54_researcher_review() {
 #[test]
 fn accel_errors_say_which_method_takes_which_structure() {
     let small = ["--width", "8", "--height", "6"];
-    for (m, own) in [("multires", "multi-resolution octree"), ("cone", "multi-resolution octree"), ("surfel", "sphere tree")] {
-        let (code, _, err) = lodtrace(&[&["render", "spheres", "--method", m, "--accel", "bvh"], &small[..]].concat());
+    // Also the default structure given explicitly (it was accepted silently until stop 56).
+    for (m, acc, own) in
+        [("multires", "bvh", "multi-resolution octree"), ("cone", "embree", "multi-resolution octree"), ("surfel", "octree", "sphere tree")]
+    {
+        let (code, _, err) = lodtrace(&[&["render", "spheres", "--method", m, "--accel", acc], &small[..]].concat());
         assert_eq!(code, 2, "{err}");
         assert!(err.contains("lod: embree, bvh") && err.contains(own) && err.lines().count() == 1, "{m}: {err}");
     }

@@ -98,8 +98,11 @@ pub struct RenderArgs {
     pub scene: String,
     #[arg(long, value_enum, default_value = "whitted")]
     pub method: Method,
-    #[arg(long, value_enum, default_value = "embree")]
-    pub accel: AccelKind,
+    /// Triangle tracers' acceleration structure [default: embree]: whitted and distributed
+    /// take embree, bvh or octree (the cone tracers' octree without points), lod embree or
+    /// bvh; multires and cone trace their own octree, surfel its sphere tree, and refuse it.
+    #[arg(long, value_enum)]
+    pub accel: Option<AccelKind>,
     #[arg(long, default_value_t = 640, value_parser = clap::value_parser!(u32).range(1..=32768))]
     pub width: u32,
     #[arg(long, default_value_t = 480, value_parser = clap::value_parser!(u32).range(1..=32768))]

@@ -53,7 +53,7 @@ pub fn opts_from(a: &RenderArgs) -> RenderOpts {
         variance_threshold: a.variance_threshold,
         aov: !a.aov.is_empty(),
         quiet: a.quiet,
-        label: format!("{} {}", a.method.name(), accel_name(a.method, a.accel)),
+        label: format!("{} {}", a.method.name(), accel_name(a.method, a.accel.unwrap_or(crate::baseline::accel::AccelKind::Embree))),
         ..Default::default()
     }
 }
@@ -77,7 +77,7 @@ pub fn check_method_options(a: &RenderArgs) -> Result<()> {
     use crate::cli::Method::*;
     let m = a.method;
     let cone = matches!(m, Multires | Cone);
-    let octree = matches!(m, Whitted | Distributed) && a.accel == AccelKind::Octree;
+    let octree = matches!(m, Whitted | Distributed) && a.accel == Some(AccelKind::Octree);
     let (build, trace) = a.multires.changed();
     let mut wrong: Vec<(&str, &str)> = Vec::new();
     if !cone && !octree {
@@ -91,7 +91,7 @@ pub fn check_method_options(a: &RenderArgs) -> Result<()> {
     }
     // The cone tracers trace their own octree, surfel its sphere tree: only the default
     // (which they do not use) passes unremarked.
-    if matches!(m, Multires | Cone | Surfel) && a.accel != AccelKind::Embree {
+    if matches!(m, Multires | Cone | Surfel) && a.accel.is_some() {
         return Err(Error::Usage(format!(
             "--accel picks the triangle tracers' structure ({}); --method {} traces its own {}",
             crate::baseline::accel::ACCEL_USE,
@@ -190,7 +190,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             return Err(Error::Usage("--debug-pixel writes no image, AOV or stats".into()));
         }
     }
-    if a.method == crate::cli::Method::Lod && a.accel == crate::baseline::accel::AccelKind::Octree {
+    if a.method == crate::cli::Method::Lod && a.accel == Some(crate::baseline::accel::AccelKind::Octree) {
         // Before loading, so that the error is the only line (no mesh warnings first).
         return Err(Error::Usage("--method lod runs on --accel bvh or embree; the octree serves whitted and distributed".into()));
     }
@@ -207,7 +207,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         print!("{}", run::explain_cone(&scene, a.method, &opts, &a.multires, px)?);
         return Ok(());
     }
-    let r = run::run(&scene, a.method, a.accel, &opts, &a.multires, &a.lod)?;
+    let r = run::run(&scene, a.method, a.accel.unwrap_or(crate::baseline::accel::AccelKind::Embree), &opts, &a.multires, &a.lod)?;
     // A failed write removes the outputs written before it.
     let mut outs = io::Outputs::default();
     outs.wrote(&out, io::write_beauty(&out, &r.out.film))?;
@@ -233,7 +233,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         };
         outs.wrote(p, w)?;
     }
-    let stats = r.stats(&scene, a.method, a.accel, &opts);
+    let stats = r.stats(&scene, a.method, a.accel.unwrap_or(crate::baseline::accel::AccelKind::Embree), &opts);
     if let Some(p) = &a.stats {
         let json = serde_json::to_string_pretty(&stats).expect("stats serialise") + "\n";
         outs.wrote(p, io::write_atomic(p, |tmp| std::fs::write(tmp, json.as_bytes()).map_err(|e| Error::io(p, e))))?;
