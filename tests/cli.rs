@@ -1205,7 +1205,7 @@ fn ignored_options_and_meaningless_values_are_refused() {
         (vec!["bench", "spheres", "--methods", "whitted:budget=5"], "budget"),
         (vec!["bench", "spheres", "--methods", "whitted:embree:k=8"], "k is a key"),
         (vec!["bench", "spheres", "--methods", "multires:f=12"], "f is a key"),
-        (vec!["bench", "spheres", "--methods", "cone:octree"], "accel is a key"),
+        (vec!["bench", "spheres", "--methods", "cone:octree"], "triangle tracers' choice"),
         (vec!["bench", "spheres", "--methods", "lod:frames=3"], "frames"),
         (vec!["bench", "bend", "--methods", "surfel:spp=4"], "spp"),
     ] {
