@@ -478,7 +478,12 @@ pub fn render(tr: &mut LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> Resul
     let start = Instant::now();
     let cpu0 = crate::baseline::render::process_cpu_seconds();
     let (film, counters, maps, p1) = pool.install(|| two_pass(tr, cam, opts));
-    Ok(LodRender { out: RenderOutput::timed(film, counters, start, cpu0, threads), maps, pass1_seconds: p1 })
+    let mut out = RenderOutput::timed(film, counters, start, cpu0, threads);
+    if opts.aov && opts.spp > 1 {
+        let ctx0 = &tr.ctxs[tr.level(&tr.root_state()) as usize];
+        pool.install(|| crate::baseline::render::aov_probes(ctx0, cam, &mut out.film));
+    }
+    Ok(LodRender { out, maps, pass1_seconds: p1 })
 }
 
 /// Both passes run over image rows in parallel (rayon's work stealing balances them), each
@@ -532,13 +537,7 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
                         let hit = ctx0.accel.intersect1(&ray, &mut c);
                         cells[i as usize * sppu + s as usize] = tr.pass1_cell(ray, hit, &mut c);
                     }
-                    if opts.aov {
-                        let ray = Ray::new(cam.eye, cam.pixel_center_dir(i, j));
-                        (depth[i as usize], normal[i as usize]) = match ctx0.accel.intersect1(&ray, &mut c) {
-                            Some(hh) => (hh.t, ctx0.surface(&ray, &hh).ns),
-                            None => (f32::INFINITY, Vec3::ZERO),
-                        };
-                    }
+                    // Depth and normal AOVs: `aov_probes`, after the timed render.
                 }
             }
             prog.tick();
