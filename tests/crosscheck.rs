@@ -128,6 +128,30 @@ fn verify_catches_broken_intersectors() {
     assert_eq!(verify_with(&s, &reference, &good, 5_000, 3).unwrap().mismatches(), 0);
 }
 
+/// A small triangle beside a huge floor: a candidate that loses every hit on it is caught
+/// by many mismatches, not excused as grazing. With every aimed ray starting about a scene
+/// diagonal (3e5 units) away, the float budget (1e-5 of the largest coordinate) was wider
+/// than the 2-unit triangle: 308 of its ~7,600 lost hits counted as mismatches, the rest as
+/// grazing (review finding, stop 56). Half the aimed rays now start at the triangle's scale.
+#[test]
+fn verify_checks_a_small_triangle_in_a_huge_scene_at_its_own_scale() {
+    let d = std::env::temp_dir().join(format!("lodtrace-floor-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    let obj = d.join("floor.obj");
+    std::fs::write(
+        &obj,
+        "v -100000 0 -100000\nv 100000 0 -100000\nv 100000 0 100000\nv -100000 0 100000\nv -1 0.5 -1\nv 1 0.5 -1\nv 0 2 1\nf 1 3 2\nf 1 4 3\nf 5 6 7\n",
+    )
+    .unwrap();
+    let s = scene(obj.to_str().unwrap());
+    let reference = EmbreeAccel::build_with(&s, true).unwrap();
+    let good = BvhAccel::build(&s).unwrap();
+    assert_eq!(verify_with(&s, &reference, &good, 20_000, 1).unwrap().mismatches(), 0);
+    let cand = Faulty { inner: BvhAccel::build(&s).unwrap(), fault: |h| (h.prim != 2).then_some(h) };
+    let rep = verify_with(&s, &reference, &cand, 20_000, 1).unwrap();
+    assert!(rep.mismatches() > 300, "a lost 2-unit triangle: only {} mismatches in 20,000 rays", rep.mismatches());
+}
+
 fn backends(s: &Scene) -> Vec<Box<dyn Accel + '_>> {
     vec![
         accel::build(AccelKind::Bvh, s).unwrap(),
