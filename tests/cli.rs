@@ -46,6 +46,11 @@ fn verify_passes_and_writes_json() {
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&j).unwrap()).unwrap();
     assert_eq!(v["candidate"], "bvh");
     assert_eq!(v["occlusion_mismatches"], 0);
+    // What reproduces and judges the run (stop 56).
+    assert_eq!(
+        (v["rays"].as_u64(), v["seed"].as_u64(), v["pass"].as_bool(), v["mismatches_total"].as_u64()),
+        (Some(5000), Some(1), Some(true), Some(0))
+    );
 }
 
 #[test]
@@ -72,6 +77,8 @@ fn bench_writes_table_json_images_and_plots() {
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("| spheres | whitted:bvh |"), "{out}");
     let v = json.unwrap();
+    // Whether times are best of N, and the thread setting (stop 56).
+    assert_eq!((v["repeat"].as_u64(), v["threads"].as_u64()), (Some(1), Some(0)));
     let rows = v["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 2);
     for r in rows {

@@ -310,7 +310,11 @@ pub fn verify_scene(scene: &Scene, kind: AccelKind, n: usize, seed: u32) -> Resu
         AccelKind::Embree => Box::new(EmbreeAccel::build_with(scene, false)?),
         _ => accel::build(kind, scene)?,
     };
-    verify_with(scene, &reference, cand.as_ref(), n, seed)
+    let mut rep = verify_with(scene, &reference, cand.as_ref(), n, seed)?;
+    if kind == AccelKind::Embree {
+        rep.candidate = "embree (fast mode)".into();
+    }
+    Ok(rep)
 }
 
 /// As [`verify_scene`] with both back-ends already built.

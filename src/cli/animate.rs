@@ -115,6 +115,7 @@ pub struct AnimateArgs {
     /// extra pass disturbs the caches: the timed frames of such a run are slower (≈ 5–15 %).
     #[arg(long)]
     pub warm_pass: bool,
+    /// No progress bar (the summary line on stderr stays).
     #[arg(long)]
     pub quiet: bool,
 }

@@ -14,6 +14,7 @@ pub struct VerifyArgs {
     /// Random and aimed rays (plus 64×64 camera rays and a few invalid rays).
     #[arg(long, default_value_t = 100_000)]
     pub rays: usize,
+    /// Seed of the ray sets (the same seed, scene and --rays give the same rays).
     #[arg(long, default_value_t = 1)]
     pub seed: u32,
     /// Also write the report as JSON.
@@ -41,7 +42,15 @@ pub fn run(a: &VerifyArgs) -> Result<i32> {
         t0.elapsed().as_secs_f64()
     ))?;
     if let Some(p) = &a.json {
-        let text = serde_json::to_string_pretty(&rep).map_err(|e| Error::Usage(e.to_string()))? + "\n";
+        // The report plus what reproduces and judges it.
+        let mut v = serde_json::to_value(&rep).map_err(|e| Error::Usage(e.to_string()))?;
+        if let Some(o) = v.as_object_mut() {
+            o.insert("rays".into(), a.rays.into());
+            o.insert("seed".into(), a.seed.into());
+            o.insert("mismatches_total".into(), rep.mismatches().into());
+            o.insert("pass".into(), (rep.mismatches() == 0).into());
+        }
+        let text = serde_json::to_string_pretty(&v).map_err(|e| Error::Usage(e.to_string()))? + "\n";
         crate::film::io::write_atomic(p, |tmp| std::fs::write(tmp, &text).map_err(|e| Error::io(p, e)))?;
     }
     Ok(if rep.mismatches() == 0 { 0 } else { 1 })

@@ -607,6 +607,11 @@ pub struct BenchReport {
     pub height: u32,
     /// SIMD level of the binary ([`crate::core::SIMD_LEVEL`]).
     pub simd: &'static str,
+    /// `--repeat`: every time is the best of this many renders (of this many rounds for the
+    /// deforming sequences).
+    pub repeat: u32,
+    /// `--threads` (0 = all cores); each row's `stats.threads` is the count it ran with.
+    pub threads: usize,
     pub reference: Option<String>,
     pub rows: Vec<BenchRow>,
     /// `surfel` specs on deforming sequences (Adams et al.).
@@ -755,7 +760,16 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             deform.extend(super::deform_bench::run(&a.scenes, &specs, w, h, a.threads, a.repeat, dir.as_deref(), a.quiet)?);
         }
         let (width, height) = sizes[0];
-        let report = BenchReport { width, height, simd: crate::core::SIMD_LEVEL, reference: None, rows: Vec::new(), deform };
+        let report = BenchReport {
+            width,
+            height,
+            simd: crate::core::SIMD_LEVEL,
+            repeat: a.repeat,
+            threads: a.threads,
+            reference: None,
+            rows: Vec::new(),
+            deform,
+        };
         if let Some(out) = &a.out {
             write_outputs(out, &report)?;
             if a.sizes.is_some() {
@@ -934,6 +948,8 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
         width: a.width,
         height: a.height,
         simd: crate::core::SIMD_LEVEL,
+        repeat: a.repeat,
+        threads: a.threads,
         reference: a.reference.clone(),
         rows,
         deform: Vec::new(),
@@ -1353,7 +1369,7 @@ pub(crate) mod fixtures {
     }
 
     pub fn report(rows: Vec<BenchRow>) -> BenchReport {
-        BenchReport { width: 4, height: 4, simd: "sse2", reference: None, rows, deform: Vec::new() }
+        BenchReport { width: 4, height: 4, simd: "sse2", repeat: 1, threads: 0, reference: None, rows, deform: Vec::new() }
     }
 }
 

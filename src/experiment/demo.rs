@@ -188,7 +188,7 @@ fn deform_section(a: &DemoArgs, skipped: &mut Vec<String>) -> Result<(String, Ve
         }
     }
     if !rows.is_empty() {
-        bench::write_report(&dir, &deform_report(w, h, rows.clone()))?;
+        bench::write_report(&dir, &deform_report(w, h, a.threads, rows.clone()))?;
     }
     // Each sequence ran on its own (so that one failing is skipped): the Fig. 3 plot of all.
     super::deform_bench::radius_plot(&dir, &rows)?;
@@ -294,7 +294,7 @@ fn size_section(a: &DemoArgs, dir: &Path, detail: f32) -> Result<String> {
         return Ok(String::new());
     }
     super::deform_bench::size_plot(&sdir, &rows)?;
-    bench::write_report(&sdir, &deform_report(sizes[0].0, sizes[0].1, rows.clone()))?;
+    bench::write_report(&sdir, &deform_report(sizes[0].0, sizes[0].1, a.threads, rows.clone()))?;
     let list: Vec<String> = sizes.iter().map(|(w, h)| format!("{w}x{h}")).collect();
     let mut h = format!(
         "<h3>Speed-up against the image size</h3><p>Naive, lazy-cache and auto (per frame a rebuild or the lazy update, whichever was cheaper when last tried: the heuristic the paper's §6 asks for), 16 frames at each size (same detail); speed-ups over naive (16 frames here, so a column at the size of the table above need not match its figure). The rebuild costs the same at every size, the rays do not: the lazy update gains most where few rays are traced; the paper's 2–3× was measured at 512×384 with its 2005 tracer. Same as <code>lodtrace bench SEQ --sizes {} --methods surfel:update=naive,surfel:update=lazy-cache,surfel:update=auto</code>.</p><table><tr><th>sequence</th><th>update</th>",
@@ -562,8 +562,8 @@ fn is_missing_asset(e: &Error) -> bool {
 }
 
 /// A report holding deforming-sequence rows only, for `bench.json` and `bench.md`.
-fn deform_report(width: u32, height: u32, deform: Vec<super::deform_bench::DeformRow>) -> BenchReport {
-    BenchReport { width, height, simd: crate::core::SIMD_LEVEL, reference: None, rows: Vec::new(), deform }
+fn deform_report(width: u32, height: u32, threads: usize, deform: Vec<super::deform_bench::DeformRow>) -> BenchReport {
+    BenchReport { width, height, simd: crate::core::SIMD_LEVEL, repeat: 1, threads, reference: None, rows: Vec::new(), deform }
 }
 
 /// How this page was made: quick or full, SIMD level, threads (timings depend on all three).
