@@ -1532,6 +1532,14 @@ fn stop_42_bad_inputs_are_one_line_exit_2() {
     assert!(err.contains("time budget"), "{err}");
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&st).unwrap()).unwrap();
     assert_eq!(v["finished"], false, "{v}");
+    // The per-pixel figures cover the traced pixels only (stop 56: the untraced ones' zeros
+    // were in them), and every traced pixel took at least its primary cone's tests.
+    let pt = &v["cone_profile"]["pixel_tests"];
+    let traced = pt["pixels"].as_u64().unwrap();
+    assert!(traced < 256 * 192, "{pt}");
+    if traced > 0 {
+        assert!(pt["median"].as_u64().unwrap() > 0 && pt["mean"].as_f64().unwrap() > 0.0, "{pt}");
+    }
 }
 
 /// `render --debug-pixel X,Y` explains one pixel of the cone tracers: its A-buffer as a

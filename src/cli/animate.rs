@@ -638,6 +638,7 @@ fn shadow_ray(p: Vec3, n: Vec3, ext: f32, light: Vec3) -> Option<(Ray, f32)> {
 
 fn shade(tr: &DeformTracer, ray: &Ray, slot: Option<u32>, sc: &ShadeCtx, c: &mut Counters, dc: &mut DeformCounters) -> Vec3 {
     c.add(Counter::rays_primary, 1);
+    c.add(Counter::samples, 1);
     let hit = tr.intersect_ex(ray, slot, c, dc);
     let Some((p, n, albedo, ext)) = surface(tr, ray, hit, sc) else {
         return BACKGROUND;
@@ -659,6 +660,7 @@ fn shade(tr: &DeformTracer, ray: &Ray, slot: Option<u32>, sc: &ShadeCtx, c: &mut
 /// rays, each as one packet. Same colours as `shade` ray by ray.
 fn shade_x8(tr: &DeformTracer, rays: &[Ray], slots: &[Option<u32>], sc: &ShadeCtx, c: &mut Counters, dc: &mut DeformCounters) -> [Vec3; 8] {
     c.add(Counter::rays_primary, rays.len() as u64);
+    c.add(Counter::samples, rays.len() as u64);
     let hits = tr.intersect_x8(rays, slots, c, dc);
     let mut out = [BACKGROUND; 8];
     let mut srays = [Ray::new(Vec3::ZERO, Vec3::X); 8];

@@ -36,6 +36,8 @@ pub struct ConeReport {
     pub profile: ConeProfile,
     /// Bounding-volume and primitive tests per pixel, row-major.
     pub pixel_tests: Vec<u32>,
+    /// Which pixels were traced (a time budget may stop the frame early).
+    pub traced: Vec<bool>,
 }
 
 /// One cone kind in `cone_profile.kinds`: how many cones, the CPU time inside their
@@ -60,6 +62,9 @@ pub struct ConeKindStats {
 /// How the tests spread over the pixels (each pixel with every cone it spawned).
 #[derive(Serialize, Debug, Clone, Default)]
 pub struct PixelTests {
+    /// Pixels traced (the figures below are over these only: a frame stopped by
+    /// `--time-budget` leaves the rest untraced, and their zeros made the median 0).
+    pub pixels: usize,
     pub mean: f64,
     pub median: u32,
     pub p95: u32,
@@ -119,7 +124,9 @@ impl ConeReport {
                 (kind.name().to_string(), st)
             })
             .collect();
-        ConeProfileStats { kinds, pixel_tests: pixel_tests(&self.pixel_tests) }
+        let traced: Vec<u32> =
+            self.pixel_tests.iter().zip(&self.traced).filter(|(_, &t)| t).map(|(&x, _)| x).collect();
+        ConeProfileStats { kinds, pixel_tests: pixel_tests(&traced) }
     }
 }
 
@@ -136,6 +143,7 @@ pub fn pixel_tests(v: &[u32]) -> PixelTests {
     let top = n.div_ceil(20);
     let top_sum: u64 = s[n - top..].iter().map(|&x| x as u64).sum();
     PixelTests {
+        pixels: n,
         mean: total as f64 / n as f64,
         median: at(0.5),
         p95: at(0.95),
@@ -290,7 +298,7 @@ fn run_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &MultiresArgs)
         finished: r.finished,
         hierarchy: Some(h),
         lod: None,
-        cones: Some(ConeReport { profile: r.profile, pixel_tests: r.pixel_tests }),
+        cones: Some(ConeReport { profile: r.profile, pixel_tests: r.pixel_tests, traced: r.traced }),
     })
 }
 

@@ -26,6 +26,8 @@ pub struct ConeRender {
     /// Bounding-volume and primitive tests per pixel, row-major ([`ConeProfile::tests`]):
     /// every cone the pixel's primary cone spawned included.
     pub pixel_tests: Vec<u32>,
+    /// Which pixels were traced (all unless the time budget ran out).
+    pub traced: Vec<bool>,
 }
 
 pub fn render(ms: &MultiresScene, tp: &TraceParams, cam: &CameraFrame, opts: &RenderOpts) -> Result<ConeRender> {
@@ -81,6 +83,7 @@ pub fn render(ms: &MultiresScene, tp: &TraceParams, cam: &CameraFrame, opts: &Re
     counters.add(Counter::trees_from_cache, ms.trees_from_cache() as u64);
     let mut profile = ConeProfile::default();
     let mut pixel_tests = vec![0u32; (w * h) as usize];
+    let mut traced = vec![false; (w * h) as usize];
     for (px, c, p) in results {
         counters.merge(&c);
         profile.merge(&p);
@@ -89,10 +92,11 @@ pub fn render(ms: &MultiresScene, tp: &TraceParams, cam: &CameraFrame, opts: &Re
             film.depth[k] = d;
             film.normal[k] = n;
             pixel_tests[k] = tests;
+            traced[k] = true;
         }
     }
     let finished = !abort.load(Ordering::Relaxed);
-    Ok(ConeRender { out: RenderOutput::timed(film, counters, start, cpu0, threads), finished, profile, pixel_tests })
+    Ok(ConeRender { out: RenderOutput::timed(film, counters, start, cpu0, threads), finished, profile, pixel_tests, traced })
 }
 
 /// One pixel's primary cone, traced alone (`lodtrace render --debug-pixel`): its result, the
