@@ -1030,11 +1030,22 @@ pub fn write_report(out: &Path, report: &BenchReport) -> Result<()> {
 fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
     write_report(out, report)?;
     let mut bars: Vec<(String, f64)> = report.rows.iter().map(|r| (format!("{} {}", r.scene, r.spec), r.stats.render_seconds)).collect();
-    bars.extend(report.deform.iter().map(|r| (format!("{} {} {}x{}", r.scene, r.spec, r.width, r.height), r.render_seconds)));
-
+    // Deforming sequences as the table gives them: time per frame (until stop 56 the bars
+    // were the totals over all frames beside the table's ms/frame), in ms when no frame
+    // renders share the chart; the size in brackets only when sizes vary.
     let sizes_vary = report.deform.iter().any(|r| (r.width, r.height) != (report.width, report.height));
-    let title = if sizes_vary { "Render time".to_string() } else { format!("Render time, {}x{}", report.width, report.height) };
-    super::plot::bar_chart(&out.join("bench-time.png"), &title, "seconds", &bars)?;
+    let ms = report.rows.is_empty();
+    bars.extend(report.deform.iter().map(|r| {
+        let size = if sizes_vary { format!(" ({}x{})", r.width, r.height) } else { String::new() };
+        (format!("{} {}{size}", r.scene, r.spec), if ms { r.ms_per_frame } else { r.ms_per_frame * 1e-3 })
+    }));
+    let size = if sizes_vary { String::new() } else { format!(", {}x{}", report.width, report.height) };
+    let (title, unit) = match (report.rows.is_empty(), report.deform.is_empty()) {
+        (true, false) => (format!("Render time per frame{size}"), "ms per frame"),
+        (false, false) => (format!("Render time (sequences: per frame){size}"), "seconds"),
+        _ => (format!("Render time{size}"), "seconds"),
+    };
+    super::plot::bar_chart(&out.join("bench-time.png"), &title, unit, &bars)?;
     // Error against the reference versus time, one curve per scene: the trade-off a
     // multi-resolution method is meant to win. With a sweep, each scene gets its own plot:
     // the sweep as a curve, every other method as a point on it or off it.

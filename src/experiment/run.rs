@@ -124,8 +124,7 @@ impl ConeReport {
                 (kind.name().to_string(), st)
             })
             .collect();
-        let traced: Vec<u32> =
-            self.pixel_tests.iter().zip(&self.traced).filter(|(_, &t)| t).map(|(&x, _)| x).collect();
+        let traced: Vec<u32> = self.pixel_tests.iter().zip(&self.traced).filter(|(_, &t)| t).map(|(&x, _)| x).collect();
         ConeProfileStats { kinds, pixel_tests: pixel_tests(&traced) }
     }
 }
