@@ -45,7 +45,15 @@ pub struct BenchArgs {
     /// Scenes (built-in names or files).
     #[arg(required = true)]
     pub scenes: Vec<String>,
-    /// Comma-separated method specs, e.g. `whitted:embree,whitted:bvh,distributed:embree:spp=16`.
+    /// Comma-separated method specs `METHOD[:ACCEL][:KEY=VALUE]...`, e.g.
+    /// `whitted:embree,whitted:bvh,distributed:embree:spp=16`. Methods: whitted, distributed,
+    /// multires, cone, lod, surfel; accelerators: embree, bvh, octree (whitted and
+    /// distributed), embree, bvh (lod). Keys: spp, threads, packet, fps, vt, depth; cone
+    /// tracers: k, c, clamp, clamp2, lod, dtol, cs, lens, rough, light, mip, primary, budget,
+    /// eigen, tri, stri, facing, split, term, pw, spread, groups, agg, plane, tight, mask;
+    /// lod: f, a, thres, sel, select, selon, levels, dist, force, net; surfel: update,
+    /// frames, detail, shadows, exact, warm, cache_up, ordered, top, nearest. Each key is the
+    /// `render`/`animate` option of the same meaning (README, "Using it").
     #[arg(long, required = true)]
     pub methods: String,
     /// Reference spec for the error columns, e.g. `distributed:embree:spp=256:vt=0`.
