@@ -1366,6 +1366,7 @@ pub(crate) mod fixtures {
             hierarchy: None,
             lod: None,
             counters: counters.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+            tests_counted: accel != "embree",
             cone_profile: None,
         }
     }

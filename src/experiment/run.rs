@@ -224,6 +224,9 @@ pub struct Stats {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub lod: Option<LodStats>,
     pub counters: BTreeMap<String, u64>,
+    /// False where Embree traced the rays: it does not report its node and triangle tests,
+    /// so `node_tests`, `instance_tests` and `triangle_tests` are 0 for "not counted".
+    pub tests_counted: bool,
     /// The cone tracers: the traversal work by cone kind and over the pixels.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cone_profile: Option<ConeProfileStats>,
@@ -457,6 +460,7 @@ impl RunResult {
             hierarchy: self.hierarchy.clone(),
             lod: self.lod.as_ref().map(|l| l.stats.clone()),
             counters: self.out.counters.to_map(),
+            tests_counted: !(matches!(method, Method::Whitted | Method::Distributed | Method::Lod) && accel_kind == AccelKind::Embree),
             cone_profile: self.cones.as_ref().map(|c| c.stats()),
         }
     }
