@@ -587,7 +587,8 @@ struct ShadeCtx<'a> {
 const BACKGROUND: Vec3 = Vec3::new(0.45, 0.5, 0.6);
 
 /// The visible point of a primary ray (surfel hit or collider): position, normal facing the
-/// ray, albedo; None for the background.
+/// ray, albedo and the hit surfel's extent (0 on a collider; [`SHADOW_OFFSET`]); None for
+/// the background.
 fn surface(tr: &DeformTracer, ray: &Ray, hit: Option<crate::deform::SurfelHit>, sc: &ShadeCtx) -> Option<(Vec3, Vec3, Vec3, f32)> {
     let t_s = hit.as_ref().map(|h| h.t).unwrap_or(f32::INFINITY);
     let (p, n, albedo, ext) = match (hit, hit_colliders(ray, sc.colliders, t_s)) {
