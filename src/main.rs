@@ -66,10 +66,14 @@ fn interrupts() {
         }
         let n = lodtrace::film::io::remove_outputs_of_interrupted_run();
         let what = if sig == libc::SIGINT { "interrupted" } else { "terminated" };
+        // A new line first only on a terminal, where a progress bar may be mid-line; a log
+        // file gets the one error line and nothing else.
+        use std::io::IsTerminal;
+        let nl = if std::io::stderr().is_terminal() { "\n" } else { "" };
         if n > 0 {
-            eprintln!("\nlodtrace: error: {what}; removed the {n} outputs this run had written");
+            eprintln!("{nl}lodtrace: error: {what}; removed the {n} outputs this run had written");
         } else {
-            eprintln!("\nlodtrace: error: {what}");
+            eprintln!("{nl}lodtrace: error: {what}");
         }
         std::process::exit(128 + sig);
     });

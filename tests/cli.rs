@@ -1628,6 +1628,8 @@ fn interrupted_runs_leave_no_outputs() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(code), "{err}");
         one_error_line(&err);
+        // stderr is a pipe, not a terminal: no blank line before the error (stop 57).
+        assert!(err.starts_with("lodtrace: error:"), "{err:?}");
         if fresh {
             assert!(!d.join("new").exists(), "the folder the run created is still there");
         } else {
@@ -1707,4 +1709,27 @@ fn accel_errors_say_which_method_takes_which_structure() {
         assert_eq!(code, 2, "{err}");
         assert!(err.contains("lod: embree, bvh") && err.contains(own), "{spec}: {err}");
     }
+}
+
+/// Stop 57: the adversarial review's misleading messages, each now naming what is wrong.
+#[test]
+fn stop_57_messages_name_the_problem() {
+    let d = tmp("stop57");
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let small = ["--width", "32", "--height", "24", "--quiet"];
+    std::fs::write(p("file"), "x").unwrap();
+    for (args, says) in [
+        // The parser's range, not u32's.
+        (vec!["render", "spheres", "--method", "multires", "--k", "-1", "--out", &p("a.png")], "2..=64"),
+        // A file where a folder should be.
+        (vec!["render", "spheres", "--out", &p("file/x.png")], "is a file, not a folder"),
+        // --stats naming the --out folder itself.
+        (vec!["animate", "bend", "--frames", "1", "--out", &p("frames"), "--stats", &p("frames")], "names the --out folder"),
+    ] {
+        let (code, _, err) = lodtrace(&[&args[..], &small[..]].concat());
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(says), "{args:?}: '{err}' lacks '{says}'");
+    }
+    assert!(!d.join("frames").exists(), "the refused animate made its folder");
 }

@@ -275,6 +275,13 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
     if a.packet != 1 && a.packet != 8 {
         return Err(Error::Usage(format!("--packet {}: 1 or 8", a.packet)));
     }
+    // `--stats` naming the `--out` folder itself: said as such (it read "is a folder" once the
+    // run had made the folder).
+    if let (Some(d), Some(p)) = (&a.out, &a.stats) {
+        if io::same_path(d, p) {
+            return Err(Error::Usage(format!("--stats {} names the --out folder; give it a file name (inside it is fine)", p.display())));
+        }
+    }
     let pool = crate::core::thread_pool(a.threads)?;
     let threads = pool.current_num_threads();
     // A failed run removes the output folder again if it created it.

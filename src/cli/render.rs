@@ -28,6 +28,12 @@ pub fn apply_camera(scene: &mut Scene, c: &CameraArgs) -> Result<()> {
 pub fn check_out_path(p: &Path) -> Result<()> {
     let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     if !dir.is_dir() {
+        // Name the culprit when a file stands where a folder should (`--out a.png/x.png`).
+        if let Some(f) = dir.ancestors().find(|a| !a.as_os_str().is_empty() && a.exists()) {
+            if !f.is_dir() {
+                return Err(Error::Usage(format!("{}: {} is a file, not a folder", p.display(), f.display())));
+            }
+        }
         return Err(Error::Usage(format!("{}: output folder does not exist", p.display())));
     }
     if p.is_dir() {

@@ -131,7 +131,10 @@ pub fn read_ply<R: std::io::BufRead>(r: &mut R, path: &Path) -> Result<SurfelMod
             None => get(e, "r", i)?,
         };
         has_r &= rad.is_some();
-        s.push(Vec3::new(v[0], v[1], v[2]), Vec3::new(v[3], v[4], v[5]), rad.unwrap_or(1.0));
+        // Without a radius the placeholder is the smallest positive one, which passes the
+        // radius checks of `validate` at any model scale (1.0 was "wider than the whole
+        // model" for models under a unit across); the k-NN radii below replace it.
+        s.push(Vec3::new(v[0], v[1], v[2]), Vec3::new(v[3], v[4], v[5]), rad.unwrap_or(f32::MIN_POSITIVE));
     }
     if s.len() < 4 {
         return Err(DeformError::TooSmall(format!("{}: {} points (need at least 4)", path.display(), s.len())));
@@ -180,6 +183,19 @@ mod tests {
         let m = read_ply(&mut ply_text(&rows()).as_bytes(), Path::new("t.ply")).unwrap();
         assert_eq!(m.len(), 20);
         assert!(m.surfels.r.iter().all(|r| *r > 0.0));
+    }
+
+    /// Without radii, a model of any scale loads (stop 57: one under a unit across was
+    /// refused, the placeholder radius 1 being "wider than the whole model"); its radii are
+    /// the 8th-neighbour distances, in the model's units.
+    #[test]
+    fn small_models_without_radii_load() {
+        for scale in [1e-3f32, 0.05, 1.0, 1e3] {
+            let r: Vec<[f32; 6]> = rows().iter().map(|r| [r[0] * scale, r[1] * scale, r[2], r[3], r[4], r[5]]).collect();
+            let m = read_ply(&mut ply_text(&r).as_bytes(), Path::new("t.ply")).unwrap_or_else(|e| panic!("scale {scale}: {e}"));
+            let (lo, hi) = m.surfels.r.iter().fold((f32::MAX, 0f32), |(a, b), &x| (a.min(x), b.max(x)));
+            assert!(lo >= 0.99 * scale && hi <= 40.0 * scale, "scale {scale}: radii {lo}..{hi}");
+        }
     }
 
     #[test]

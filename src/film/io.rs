@@ -162,6 +162,12 @@ fn key(p: &Path) -> std::path::PathBuf {
     }
 }
 
+/// Whether two paths name the same file once their folders are resolved (as
+/// [`check_distinct`] compares them).
+pub fn same_path(a: &Path, b: &Path) -> bool {
+    key(a) == key(b)
+}
+
 /// Paths must differ: two outputs of one run must not overwrite each other (or an input).
 /// Paths are compared with their folders resolved (`sub/../a.png` is `a.png`).
 pub fn check_distinct(paths: &[&Path]) -> Result<()> {

@@ -129,7 +129,7 @@ impl LodChain {
     pub fn cached(mesh: &Mesh, n_levels: u32) -> LodChain {
         let Some(dir) = cache_dir() else { return LodChain::build(mesh, n_levels) };
         let path = dir.join(format!("{:016x}.lod", chain_key(mesh, n_levels)));
-        if let Some(c) = std::fs::read(&path).ok().and_then(|b| decode_chain(&b, mesh, n_levels)) {
+        if let Some(c) = crate::core::cache::read_cache_file(&path).and_then(|b| decode_chain(&b, mesh, n_levels)) {
             return c;
         }
         let c = LodChain::build(mesh, n_levels);

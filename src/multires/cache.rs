@@ -56,7 +56,7 @@ pub fn cached_in(dir: Option<&Path>, mesh: &Mesh, mats: &[&Material], params: &B
     let t0 = Instant::now();
     let key = key(mesh, mats, params);
     let path = cache_path(dir, key);
-    if let Some(mut t) = std::fs::read(&path).ok().and_then(|b| decode(&b, key, mesh.tri_count(), params)) {
+    if let Some(mut t) = crate::core::cache::read_cache_file(&path).and_then(|b| decode(&b, key, mesh.tri_count(), params)) {
         t.tris = super::build::TriSoa::of(mesh, &t.tri_index);
         t.boxes = super::build::NodeBoxes::of(&t);
         t.stats.seconds = t0.elapsed().as_secs_f64();

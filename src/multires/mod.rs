@@ -36,7 +36,8 @@ pub struct MultiresArgs {
     /// Quantisation grid per octree node: k³ voxels (point spacing = node side / k).
     /// (The paper gives no value; 4 measured fastest on `spheres`: 256² frame 2.7 s vs 7.3 s at
     /// k = 8 and 27 s at k = 16, because large triangles then sit in smaller nodes.)
-    #[arg(long, default_value_t = 4)]
+    // Range checked by the parser too, so `--k -1` names 2..=64, not u32's range.
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(2..=64))]
     pub k: u32,
     /// Oversampling factor c of the point prefiltering (paper: typically 100).
     #[arg(long, default_value_t = 100.0)]

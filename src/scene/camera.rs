@@ -68,6 +68,16 @@ impl Camera {
         if let Some(why) = why {
             return Err(Error::Usage(format!("camera: {why}")));
         }
+        // A lens wider than 100 focal distances opens the defocus cone past 89.4°: every
+        // pixel is the whole scene averaged, and lens samples 1e30 away crossed Embree's
+        // ±1.8e18 ray-origin limit (stop 57's review: 1e30 was accepted).
+        let (far, lim) = (self.eye.abs().max_element(), 100.0 * super::MAX_COORD);
+        if self.aperture > 100.0 * self.focal_dist || far + self.aperture > lim {
+            return Err(Error::Usage(format!(
+                "camera: aperture {:e} is too wide (at most 100 × the focal distance {:e}, and eye ± aperture within ±{lim:e})",
+                self.aperture, self.focal_dist
+            )));
+        }
         Ok(())
     }
 
@@ -131,6 +141,9 @@ mod tests {
         assert!(msg(Camera { up: Vec3::Z, ..d }).contains("parallel"));
         assert!(msg(Camera { fovy: 0.0, ..d }).contains("fovy"));
         assert!(msg(Camera { aperture: -1.0, ..d }).contains("aperture"));
+        assert!(msg(Camera { aperture: 1e30, ..d }).contains("aperture 1e30 is too wide"));
+        assert!(msg(Camera { aperture: 600.0, focal_dist: 5.0, ..d }).contains("too wide"));
+        assert!(Camera { aperture: 400.0, focal_dist: 5.0, ..d }.validate().is_ok());
         assert!(msg(Camera { focal_dist: 0.0, ..d }).contains("focal distance"));
         assert!(msg(Camera { eye: Vec3::splat(1e30), ..d }).contains("beyond"));
     }

@@ -321,6 +321,37 @@ impl Scene {
         Ok((lo, hi))
     }
 
+    /// Errors when an instance is smaller than the hit-point offset at its position
+    /// (1e-4 × (1 + |p|), the tracers' `offset_eps`): such an instance has lost its shape to
+    /// f32 rounding (a unit cube translated to 1e8 collapses to a point, f32's spacing there
+    /// is 8) or shadows itself wrongly; before stop 57 it rendered as nothing with exit 0.
+    /// The bare-mesh loader applies a stricter bound of its own (ten offsets).
+    fn check_instance_scales(&self) -> Result<()> {
+        let mut cache: Vec<Option<(Vec3, Vec3)>> = vec![None; self.meshes.len()];
+        for l in self.leaf_instances()? {
+            let mesh = &self.meshes[l.mesh as usize];
+            if mesh.tri_count() == 0 {
+                continue;
+            }
+            let (a, b) = *cache[l.mesh as usize].get_or_insert_with(|| mesh.bounds());
+            let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+            for i in 0..8 {
+                let c = Vec3::select(glam::BVec3::new(i & 1 != 0, i & 2 != 0, i & 4 != 0), b, a);
+                let w = l.xform.transform_point3(c);
+                (lo, hi) = (lo.min(w), hi.max(w));
+            }
+            let far = lo.abs().max(hi.abs()).max_element();
+            let size = (hi - lo).length();
+            if !(size >= 1e-4 * (1.0 + far)) {
+                return Err(Error::Scene(format!(
+                    "an instance of mesh '{}' spans only {size:.3e} units at coordinates up to {far:.3e}: smaller than the ray offsets there (1e-4 × (1 + its largest coordinate)); move it nearer the origin or scale it up",
+                    mesh.name
+                )));
+            }
+        }
+        Ok(())
+    }
+
     /// Checks the scene is renderable: has geometry, materials in range, finite values.
     pub fn validate(&mut self) -> Result<()> {
         for m in &self.materials {
@@ -351,6 +382,7 @@ impl Scene {
                 self.name
             )));
         }
+        self.check_instance_scales()?;
         self.camera.validate()?;
         for (what, c) in [("background", self.background), ("ambient", self.ambient)] {
             if !c.is_finite() || c.abs().max_element() > MAX_INTENSITY {

@@ -691,6 +691,8 @@ rotate = [90, 0, 0]
             ("[materials.m]\nior = -1.5\n", "ior must be positive"),
             ("[meshes.a]\ngenerator = \"cube\"\n[[instances]]\ntarget = \"a\"\nscale = [1e-30, 1, 1]\n", "[1e-30, 1e0, 1e0]"),
             ("[meshes.a\n", "line 1"),
+            // A unit cube at 1e8 collapses to a point in f32 (rendered empty, exit 0, before stop 57).
+            ("[meshes.a]\ngenerator = \"cube\"\n[[instances]]\ntarget = \"a\"\ntranslate = [1e8, 0, 0]\n", "smaller than the ray offsets"),
         ];
         for (text, needle) in cases {
             let e = parse(text).expect_err(text).to_string();
