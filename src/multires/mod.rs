@@ -125,6 +125,9 @@ pub struct MultiresArgs {
     pub primary_only: bool,
     /// Early ray termination: `paper` stops a cone once the alpha of all its fragments reaches
     /// one (§4.4); `final` waits until those fragments lie wholly before the traversal front.
+    /// With `--method cone` on wide cones (shadow and secondary cones, depth of field) `final`
+    /// can take minutes: without points nothing ends a cone's descent before the triangles
+    /// it overlaps, all of them (`complex` 64×48: 160 s); `--time-budget` bounds it.
     #[arg(long, value_enum, default_value = "paper")]
     pub termination: trace::Termination,
     /// Shade every fragment by its single averaged normal, as the paper (default: aggregates
