@@ -169,7 +169,14 @@ fn finish_mesh(path: &Path, mut mesh: Mesh) -> Result<Mesh> {
     if dup > 0 {
         crate::error::warn(format!("{}: skipped {dup} duplicate triangles (same vertices, winding and material)", path.display()));
     }
-    if !mesh.has_normals() || !(0..mesh.vertex_count() as u32).all(|i| mesh.normal(i).is_finite()) {
+    // Normals missing for some vertices (an OBJ mixing `f 1//1 …` with `f 2 4 3` gives those
+    // zero normals, which shaded them black), zero or non-finite: all are computed from the
+    // faces instead.
+    let unit = |n: Vec3| n.is_finite() && n.length_squared() > 0.25;
+    if !mesh.has_normals() || !(0..mesh.vertex_count() as u32).all(|i| unit(mesh.normal(i))) {
+        if mesh.has_normals() {
+            crate::error::warn(format!("{}: some vertex normals are missing or zero; computing all from the faces", path.display()));
+        }
         mesh.compute_normals();
     }
     Ok(mesh)
@@ -366,4 +373,29 @@ pub fn frame_bounds(lo: Vec3, hi: Vec3, fovy: f32) -> Camera {
     let dist = r / (fovy.to_radians() * 0.5).sin() * 1.05;
     let dir = Vec3::new(0.35, 0.3, 1.0).normalize();
     Camera { eye: c + dir * dist, look: c, up: Vec3::Y, fovy, aperture: 0.0, focal_dist: dist }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Stop 57: a zero `vn` passed the finiteness check and shaded its vertices black; faces
+    /// without normal indices beside faces with them load with unit normals too.
+    #[test]
+    fn zero_or_missing_normals_are_computed() {
+        let dir = std::env::temp_dir().join(format!("lodtrace-load-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("mixed.obj");
+        std::fs::write(&p, "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\nf 2 4 3\n").unwrap();
+        let zero = dir.join("zero.obj");
+        std::fs::write(&zero, "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nvn 0 0 0\nf 1//1 2//2 3//1\n").unwrap();
+        for p in [&p, &zero] {
+            let (m, _) = load_obj(p, 0).unwrap();
+            for i in 0..m.vertex_count() as u32 {
+                let n = m.normal(i);
+                assert!((n.length() - 1.0).abs() < 1e-4, "{}: vertex {i}: normal {n}", p.display());
+            }
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
