@@ -205,6 +205,17 @@ fn decode_chain(b: &[u8], mesh: &Mesh, n_levels: u32) -> Option<LodChain> {
         if m.tris.is_empty() {
             return None;
         }
+        // Values a simplification of `mesh` can hold (stop 57: a forged or damaged file's NaN
+        // vertex or foreign material was trusted): finite numbers, the mesh's own materials.
+        let fin = |v: &[f32]| v.iter().all(|x| x.is_finite());
+        let max_mat = mesh.mat.iter().copied().max().unwrap_or(0);
+        let e = *errors.last()?;
+        if ![&m.px, &m.py, &m.pz, &m.nx, &m.ny, &m.nz].iter().all(|v| fin(v))
+            || !(e.is_finite() && e >= 0.0)
+            || m.mat.iter().any(|&x| x > max_mat)
+        {
+            return None;
+        }
         levels.push(m);
     }
     (at == b.len()).then_some(LodChain { levels, errors })
@@ -410,6 +421,13 @@ mod tests {
         let n = bad.len();
         bad[n - 8..n - 4].copy_from_slice(&u32::MAX.to_le_bytes());
         let _ = decode_chain(&bad, &m, 5); // never panics
+                                           // A NaN vertex or a material the mesh does not have (stop 57).
+        let mut nan = c.clone();
+        nan.levels[2].py[0] = f32::NAN;
+        assert!(decode_chain(&encode_chain(&nan), &m, 5).is_none(), "NaN vertex");
+        let mut foreign = c.clone();
+        foreign.levels[1].mat[0] = 7;
+        assert!(decode_chain(&encode_chain(&foreign), &m, 5).is_none(), "foreign material");
         assert_ne!(chain_key(&m, 5), chain_key(&m, 6));
     }
 

@@ -326,6 +326,17 @@ pub fn decode(b: &[u8], key: u64, n_tris: usize, params: &BuildParams) -> Option
             return None;
         }
     }
+    // Values: every float finite (a forged file with a NaN sphere or range was trusted before
+    // stop 57; the builder never writes one), radii ≥ 0 or −∞ (an empty child slot, which no
+    // cone hits), ranges ordered.
+    let fin = |v: &[f32]| v.iter().all(|x| x.is_finite());
+    let radius = |r: f32| (r.is_finite() && r >= 0.0) || r == f32::NEG_INFINITY;
+    if !(fin(&nodes.cx) && fin(&nodes.cy) && fin(&nodes.cz) && nodes.r.iter().all(|&r| radius(r)))
+        || !nodes.grid_lo.iter().all(|p| p.is_finite())
+        || !(color_hi.is_finite() && props.iter().all(|p| p.lo.is_finite() && p.hi.is_finite() && p.lo <= p.hi))
+    {
+        return None;
+    }
     let g = 2 * k * super::build::codes_per_voxel(k); // position codes per axis, margin included
     if points.qx.iter().chain(&points.qy).chain(&points.qz).any(|&q| q as u32 >= g) {
         return None;
@@ -440,6 +451,16 @@ mod tests {
         let last = bad.nodes.len() - 1;
         bad.nodes.pt_count[last] = bad.points.len() as u32 + 1;
         assert!(decode(&encode(&bad, key), key, mesh.tri_count(), &p).is_none());
+        // Non-finite values with a valid checksum (stop 57).
+        let mut bad = t.clone();
+        bad.nodes.r[last] = f32::NAN;
+        assert!(decode(&encode(&bad, key), key, mesh.tri_count(), &p).is_none(), "NaN radius");
+        let mut bad = t.clone();
+        bad.nodes.cx[0] = f32::INFINITY;
+        assert!(decode(&encode(&bad, key), key, mesh.tri_count(), &p).is_none(), "infinite centre");
+        let mut bad = t.clone();
+        bad.ranges.props[2].hi = f32::NAN;
+        assert!(decode(&encode(&bad, key), key, mesh.tri_count(), &p).is_none(), "NaN property range");
     }
 
     /// The whole scene (instances with material overrides): the second build reads every tree
