@@ -160,7 +160,22 @@ fn finish_mesh(path: &Path, mut mesh: Mesh) -> Result<Mesh> {
     }
     let bad = mesh.remove_degenerate();
     if mesh.tris.is_empty() {
-        return Err(Error::parse(path, "every triangle is degenerate or non-finite"));
+        // Say how large the mesh is: a model a few 1e-20 across has distinct vertices but
+        // triangle areas that underflow f32 (stop 57: "degenerate" alone read as a bad file).
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for i in 0..mesh.vertex_count() as u32 {
+            let p = mesh.pos(i);
+            if p.is_finite() {
+                (lo, hi) = (lo.min(p), hi.max(p));
+            }
+        }
+        let size = (hi - lo).max_element(); // not the diagonal: its square underflows too
+        let why = if size > 0.0 && size < 1e-15 {
+            format!("every triangle has zero area in f32: the mesh spans only {size:.3e} units; scale it up")
+        } else {
+            "every triangle is degenerate or non-finite".to_string()
+        };
+        return Err(Error::parse(path, why));
     }
     if bad > 0 {
         crate::error::warn(format!("{}: skipped {bad} degenerate or non-finite triangles", path.display()));
@@ -396,6 +411,21 @@ mod tests {
                 assert!((n.length() - 1.0).abs() < 1e-4, "{}: vertex {i}: normal {n}", p.display());
             }
         }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A mesh too small for f32 triangle areas says so, not only "degenerate".
+    #[test]
+    fn a_microscopic_mesh_is_told_to_scale_up() {
+        let dir = std::env::temp_dir().join(format!("lodtrace-load-tiny-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("tiny.obj");
+        std::fs::write(&p, "v 0 0 0\nv 1e-25 0 0\nv 0 1e-25 0\nf 1 2 3\n").unwrap();
+        let e = load_obj(&p, 0).unwrap_err().to_string();
+        assert!(e.contains("spans only 1.000e-25 units; scale it up"), "{e}");
+        std::fs::write(&p, "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n").unwrap();
+        let e = load_obj(&p, 0).unwrap_err().to_string();
+        assert!(e.contains("every triangle is degenerate"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
