@@ -321,8 +321,8 @@ impl Scene {
         Ok((lo, hi))
     }
 
-    /// Errors when an instance is smaller than the hit-point offset at its position
-    /// (1e-4 × (1 + |p|), the tracers' `offset_eps`): such an instance has lost its shape to
+    /// Errors when an instance is smaller than the relative part of the hit-point offset at
+    /// its position (1e-4 × |p| of `surface_eps`' 1e-4 × (1 + |p|)): such an instance has lost its shape to
     /// f32 rounding (a unit cube translated to 1e8 collapses to a point, f32's spacing there
     /// is 8) or shadows itself wrongly; before stop 57 it rendered as nothing with exit 0.
     /// The bare-mesh loader applies a stricter bound of its own (ten offsets).
@@ -342,9 +342,12 @@ impl Scene {
             }
             let far = lo.abs().max(hi.abs()).max_element();
             let size = (hi - lo).length();
-            if !(size >= 1e-4 * (1.0 + far)) {
+            // The relative part only: a whole scene at a tiny scale near the origin is the
+            // intersectors' business (`verify` checks them at 1e-6), the absolute part of the
+            // offset its renderers' (the bare-mesh loader refuses such a mesh).
+            if !(size >= 1e-4 * far) {
                 return Err(Error::Scene(format!(
-                    "an instance of mesh '{}' spans only {size:.3e} units at coordinates up to {far:.3e}: smaller than the ray offsets there (1e-4 × (1 + its largest coordinate)); move it nearer the origin or scale it up",
+                    "an instance of mesh '{}' spans only {size:.3e} units at coordinates up to {far:.3e}: smaller than the ray offsets that far out (1e-4 × its largest coordinate); move it nearer the origin or scale it up",
                     mesh.name
                 )));
             }
