@@ -52,7 +52,7 @@ pub fn warn(msg: impl Into<String>) {
 pub fn flush_warnings() {
     let msgs = PENDING.lock().map(|mut p| std::mem::take(&mut *p)).unwrap_or_default();
     for m in msgs {
-        eprintln!("lodtrace: warning: {m}");
+        crate::status!("lodtrace: warning: {m}");
     }
 }
 
@@ -77,14 +77,47 @@ pub fn print_stdout(text: &str) -> Result<bool> {
     }
 }
 
+/// The input files this process has read (resolved paths): meshes, scenes, material
+/// libraries, point files, images.
+static INPUTS: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+
+/// Whether `path` (resolved, links followed) is a file this process read as input: the last
+/// guard before an output replaces it (an OBJ's `mtllib mats.json` against `--stats
+/// mats.json`, a mesh linked into `--out` under a frame's name), for inputs that only
+/// loading finds.
+pub fn is_input(path: &std::path::Path) -> bool {
+    match (std::fs::canonicalize(path), INPUTS.lock()) {
+        (Ok(c), Ok(v)) => v.contains(&c),
+        _ => false,
+    }
+}
+
 /// An input must be a regular file (symbolic links followed): a FIFO would block the read
 /// forever and `/dev/zero` would fill the memory before any parser could object.
+/// Every input is noted ([`is_input`]): no output of the run may replace it.
 pub fn check_input_file(path: &std::path::Path) -> Result<()> {
     let m = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
     if m.is_file() {
+        if let (Ok(c), Ok(mut v)) = (std::fs::canonicalize(path), INPUTS.lock()) {
+            if !v.contains(&c) {
+                v.push(c);
+            }
+        }
         Ok(())
     } else {
         let what = if m.is_dir() { "a folder" } else { "not a regular file" };
         Err(Error::io(path, std::io::Error::new(std::io::ErrorKind::InvalidInput, what)))
     }
+}
+
+/// `eprintln!` that cannot panic: a status or error line to standard error, dropped when
+/// that fails (`2> /dev/full`). A run's outcome is its exit code and its files; a status
+/// line that cannot be shown must not turn a finished run into a panic that leaves its
+/// outputs half-kept.
+#[macro_export]
+macro_rules! status {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr().lock(), $($t)*);
+    }};
 }

@@ -14,12 +14,23 @@ fn main() {
     let cli = match lodtrace::cli::Cli::try_parse() {
         Ok(c) => c,
         Err(e) => match e.kind() {
-            ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => e.exit(),
+            ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
+                // `e.exit()` ignores a failed write (`--help > /dev/full` exited 0).
+                use std::io::Write as _;
+                match e.print().and_then(|_| std::io::stdout().flush()) {
+                    Ok(()) => std::process::exit(0),
+                    Err(err) if err.kind() == std::io::ErrorKind::BrokenPipe => std::process::exit(0),
+                    Err(err) => {
+                        lodtrace::status!("lodtrace: error: <stdout>: {err}");
+                        std::process::exit(2);
+                    }
+                }
+            }
             ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
                 // No subcommand: one line naming them, not the whole help on stderr.
                 let cmd = <lodtrace::cli::Cli as clap::CommandFactory>::command();
                 let subs: Vec<&str> = cmd.get_subcommands().map(|c| c.get_name()).filter(|n| *n != "help").collect();
-                eprintln!("lodtrace: error: give a subcommand ({}); `lodtrace --help` describes them", subs.join(", "));
+                lodtrace::status!("lodtrace: error: give a subcommand ({}); `lodtrace --help` describes them", subs.join(", "));
                 std::process::exit(2);
             }
             _ => {
@@ -32,7 +43,7 @@ fn main() {
                     .filter(|l| !l.is_empty() && !l.starts_with("tip:"))
                     .collect();
                 let msg = parts.join(" ");
-                eprintln!("lodtrace: error: {}", msg.trim_start_matches("error: "));
+                lodtrace::status!("lodtrace: error: {}", msg.trim_start_matches("error: "));
                 std::process::exit(2);
             }
         },
@@ -71,9 +82,9 @@ fn interrupts() {
         use std::io::IsTerminal;
         let nl = if std::io::stderr().is_terminal() { "\n" } else { "" };
         if n > 0 {
-            eprintln!("{nl}lodtrace: error: {what}; removed the {n} outputs this run had written");
+            lodtrace::status!("{nl}lodtrace: error: {what}; removed the {n} outputs this run had written");
         } else {
-            eprintln!("{nl}lodtrace: error: {what}");
+            lodtrace::status!("{nl}lodtrace: error: {what}");
         }
         std::process::exit(128 + sig);
     });

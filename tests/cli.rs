@@ -1733,3 +1733,107 @@ fn stop_57_messages_name_the_problem() {
     }
     assert!(!d.join("frames").exists(), "the refused animate made its folder");
 }
+
+/// Stop 58 (an adversarial review of compare, bench and render): outputs that would
+/// overwrite an input through a symbolic link, or each other, and options that would be
+/// ignored, are refused with one line that names them.
+#[test]
+fn stop_58_refusals_name_the_problem() {
+    let d = tmp("stop58");
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let small = ["--width", "32", "--height", "24", "--quiet"];
+    let (code, _, err) = lodtrace(&[&["render", "spheres", "--out", &p("a.png")][..], &small[..]].concat());
+    assert_eq!(code, 0, "{err}");
+    std::fs::copy(p("a.png"), p("b.png")).unwrap();
+    std::os::unix::fs::symlink(p("a.png"), p("alink.png")).unwrap();
+    let a_before = std::fs::read(p("a.png")).unwrap();
+    for (args, says) in [
+        // The diff map over the target of a link given as A.
+        (vec!["compare", &p("alink.png"), &p("b.png"), "--diff", &p("a.png")], "given twice"),
+        (vec!["render", "spheres", "--aov", &format!("depth={}", p("d1.exr")), "--aov", &format!("depth={}", p("d2.exr"))], "given twice"),
+        (vec!["render", "spheres", "--stats", &p("s.png")], "name it .json"),
+        (vec!["render", "spheres", "--method", "multires", "--packet", "1"], "--packet"),
+        (vec!["render", "spheres", "--method", "cone", "--seed", "3"], "--seed"),
+        (vec!["render", "spheres", "--method", "cone", "--debug-pixel", "3,3", "--spp", "4"], "--spp 1"),
+        (vec!["render", "spheres", "--method", "cone", "--debug-pixel", "3,3", "--threads", "1"], "--threads"),
+        (vec!["bench", "spheres", "--methods", "whitted,whitted", "--out", &p("b1")], "given twice"),
+        (vec!["bench", "spheres", "--methods", "multires:c=0", "--out", &p("b2")], "method spec 'multires:c=0'"),
+        (
+            vec![
+                "bench",
+                "spheres",
+                "--methods",
+                "whitted,distributed:spp=4",
+                "--sweep",
+                "distributed",
+                "--reference",
+                "distributed:spp=8",
+            ],
+            "is a point of --sweep",
+        ),
+        (vec!["bench", "spheres", "--methods", "whitted", "--sweep-max-spp", "8"], "there is none"),
+        (vec!["bench", "bend", "--methods", "surfel", "--region", "r=0,0,4,4"], "no reference image"),
+    ] {
+        let extra: &[&str] = if args[0] == "compare" { &[] } else { &small };
+        let (code, _, err) = lodtrace(&[&args[..], extra].concat());
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(says), "{args:?}: '{err}' lacks '{says}'");
+    }
+    assert_eq!(std::fs::read(p("a.png")).unwrap(), a_before, "the input was overwritten");
+    for f in ["d1.exr", "d2.exr", "s.png", "b1", "b2"] {
+        assert!(!d.join(f).exists(), "a refused run wrote {f}");
+    }
+}
+
+/// Stop 58's second review: no output may replace a file the run reads, whichever way the
+/// two names meet (a symbolic link into `--out` under a frame's name, an OBJ's `mtllib` not
+/// named `.mtl`); a chain of groups deeper than any stack is refused, not a crash; OBJ
+/// polylines are no surface; point radii a millionth of the model are refused.
+#[test]
+fn stop_58_inputs_survive_and_odd_geometry_is_refused() {
+    let d = tmp("stop58b");
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let small = ["--width", "32", "--height", "24", "--quiet"];
+    let tet = "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+    std::fs::create_dir_all(d.join("o")).unwrap();
+    std::fs::write(p("o/frame_0000.png"), tet).unwrap();
+    std::os::unix::fs::symlink(p("o/frame_0000.png"), p("link.off")).unwrap();
+    std::fs::write(p("mats.json"), "newmtl red\nKd 1 0 0\n").unwrap();
+    std::fs::write(p("tri.obj"), "mtllib mats.json\nusemtl red\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    std::fs::write(p("outline.obj"), "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nl 1 2 3 4\n").unwrap();
+    let mut chain = String::from("[meshes.a]\ngenerator = \"cube\"\n");
+    let n = 100_000;
+    for l in 1..=n {
+        let target = if l == n { "a".to_string() } else { format!("g{:06}", l + 1) };
+        chain += &format!("[[groups.g{l:06}.instances]]\ntarget = \"{target}\"\n");
+    }
+    chain += "[[instances]]\ntarget = \"g000001\"\n";
+    std::fs::write(p("chain.toml"), chain).unwrap();
+    let mut ply = String::from("ply\nformat ascii 1.0\nelement vertex 500\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty float radius\nend_header\n");
+    for i in 0..500 {
+        let z = 1.0 - 2.0 * (i as f64 + 0.5) / 500.0;
+        let (r, t) = ((1.0 - z * z).sqrt(), i as f64 * 2.4);
+        let (x, y) = (r * t.cos(), r * t.sin());
+        ply += &format!("{x} {y} {z} {x} {y} {z} 1e-30\n");
+    }
+    std::fs::write(p("tiny.ply"), ply).unwrap();
+    for (args, says) in [
+        (vec!["animate", &p("link.off") as &str, "--frames", "1", "--out", &p("o")], "read it as an input"),
+        (vec!["render", &p("tri.obj"), "--out", &p("tri.png"), "--stats", &p("mats.json")], "read it as an input"),
+        (vec!["render", &p("chain.toml"), "--out", &p("chain.png")], "deeper than 64"),
+        (vec!["render", &p("outline.obj"), "--out", &p("outline.png")], "no faces"),
+        (vec!["animate", &p("tiny.ply"), "--frames", "1"], "millionth"),
+        (vec!["render", "bend", "--method", "surfel", "--seed", "3", "--out", &p("s.png")], "--seed"),
+    ] {
+        let (code, _, err) = lodtrace(&[&args[..], &small[..]].concat());
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(says), "{args:?}: '{err}' lacks '{says}'");
+    }
+    assert_eq!(std::fs::read_to_string(p("link.off")).unwrap(), tet, "the mesh was overwritten");
+    assert_eq!(std::fs::read_to_string(p("mats.json")).unwrap(), "newmtl red\nKd 1 0 0\n", "the MTL was overwritten");
+    for f in ["tri.png", "chain.png", "outline.png", "s.png"] {
+        assert!(!d.join(f).exists(), "a refused run wrote {f}");
+    }
+}

@@ -216,13 +216,13 @@ pub fn run(a: &AnimateArgs) -> Result<()> {
     if a.warm_pass {
         let warm: f64 = stats.per_frame.iter().filter_map(|r| r.warm_seconds).sum();
         let n = stats.frames.max(1) as f64;
-        eprintln!(
+        crate::status!(
             "warm pass (same rays, hierarchy already updated): {:.1} ms/frame; update cost {:.1} ms/frame",
             1e3 * warm / n,
             1e3 * (stats.render_seconds - warm) / n
         );
     }
-    eprintln!(
+    crate::status!(
         "{}: {} frames {}x{} --update {}: {:.3} s in all, {:.1} ms/frame ({} surfels)",
         stats.scene,
         stats.frames,
@@ -233,7 +233,44 @@ pub fn run(a: &AnimateArgs) -> Result<()> {
         1e3 * stats.render_seconds / stats.frames.max(1) as f64,
         stats.surfels
     );
+    if let Some(d) = &a.out {
+        let stale = stale_frames(d, stats.frames as usize, a.cost);
+        if let Some(first) = stale.first() {
+            crate::status!(
+                "lodtrace: warning: {} holds {} frame file{} of an earlier run ({first}{}): this run wrote frames 0-{}",
+                d.display(),
+                stale.len(),
+                if stale.len() == 1 { "" } else { "s" },
+                if stale.len() > 1 { ", ..." } else { "" },
+                stats.frames.saturating_sub(1)
+            );
+        }
+    }
     Ok(())
+}
+
+/// The `frame_NNNN.png` (and `cost_NNNN.png`) files in `dir` that a run of `frames` frames
+/// (with `--cost` or not) did not write: an earlier, longer run's, which a viewer of the
+/// folder would take for this one's. Left in place (they are the user's), named in a warning.
+fn stale_frames(dir: &std::path::Path, frames: usize, cost: bool) -> Vec<String> {
+    let Ok(rd) = std::fs::read_dir(dir) else { return Vec::new() };
+    let mut v: Vec<String> = rd
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| {
+            let (prefix, wrote) = if let Some(r) = n.strip_prefix("frame_") {
+                (r, true)
+            } else if let Some(r) = n.strip_prefix("cost_") {
+                (r, cost)
+            } else {
+                return false;
+            };
+            let Some(digits) = prefix.strip_suffix(".png") else { return false };
+            let Ok(i) = digits.parse::<usize>() else { return false };
+            digits.len() >= 4 && digits.bytes().all(|b| b.is_ascii_digit()) && !(wrote && i < frames)
+        })
+        .collect();
+    v.sort();
+    v
 }
 
 /// Runs the animation; writes frames and stats as asked; returns the statistics.
@@ -292,7 +329,7 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
         }
         // After the folder exists: `--stats` may go inside it.
         if let Some(p) = &a.stats {
-            super::render::check_out_path(p)?;
+            super::render::check_json_path(p, "--stats")?;
             io::check_outputs_apart_from_scene(&a.scene, &[p])?;
             // Nor may it be one of the frames (`frame_NNNN.png` in `--out`).
             if let (Some(d), Some(name)) = (&a.out, p.file_name().and_then(|f| f.to_str())) {
@@ -311,7 +348,15 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         SequenceOptions { detail: a.detail, armadillo: crate::scene::builtin::assets_dir().join("armadillo.off"), ..Default::default() };
     let t_setup = Instant::now();
     let mut seq = if Sequence::BUILTIN.contains(&a.scene.as_str()) {
-        Sequence::builtin(&a.scene, &opts).map_err(derr)?
+        Sequence::builtin(&a.scene, &opts).map_err(derr).map_err(|e| match e {
+            // A built-in sequence's mesh missing: say how to get it (as the built-in scenes do).
+            Error::Io { path, source } if source.kind() == std::io::ErrorKind::NotFound => Error::Usage(format!(
+                "{}: missing; the {} sequence needs it: run tools/setup (or set LODTRACE_ASSETS to a folder holding it)",
+                path.display(),
+                a.scene
+            )),
+            e => e,
+        })?
     } else {
         let p = std::path::Path::new(&a.scene);
         let has_ext = |xs: &[&str]| xs.iter().any(|x| p.extension().is_some_and(|e| e.eq_ignore_ascii_case(x)));
@@ -703,6 +748,21 @@ fn shade_x8(tr: &DeformTracer, rays: &[Ray], slots: &[Option<u32>], sc: &ShadeCt
 
 #[cfg(test)]
 mod tests {
+
+    /// The earlier run's frames beyond this run's, and its cost maps when this run made
+    /// none, are named; this run's own files and other files are not.
+    #[test]
+    fn stale_frames_are_the_earlier_runs_only() {
+        let d = std::env::temp_dir().join(format!("lodtrace-stale-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        for f in ["frame_0000.png", "frame_0001.png", "frame_0002.png", "cost_0000.png", "frame_12.png", "notes.txt", "frame_0003.exr"] {
+            std::fs::write(d.join(f), "x").unwrap();
+        }
+        assert_eq!(stale_frames(&d, 2, false), ["cost_0000.png", "frame_0002.png"]);
+        assert_eq!(stale_frames(&d, 3, true), Vec::<String>::new());
+        let _ = std::fs::remove_dir_all(&d);
+    }
     use super::*;
     use crate::deform::{Sequence, SequenceOptions};
 

@@ -177,7 +177,7 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
     if let Some(p) = &a.diff {
         super::render::check_out_path(p)?;
         if p.extension().map(|e| e.to_ascii_lowercase()) != Some("png".into()) {
-            return Err(Error::Usage(format!("{}: the --diff map is written as .png", p.display())));
+            return Err(Error::Usage(format!("{}: the --diff map is a PNG; name it NAME.png", p.display())));
         }
         io::check_distinct(&[&a.a, p])?;
         io::check_distinct(&[&a.b, p])?;
@@ -207,8 +207,11 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
     let ssim = metrics::ssim(&ia, &ib, w, h);
     let (flip_values, flip_map) = metrics::flip_map(&ia, &ib, w, h)?;
     let flip = metrics::mean_finite(&flip_values);
+    // Removed again if the report cannot be printed (`> /dev/full`): a failed run leaves
+    // no outputs.
+    let mut outs = io::Outputs::default();
     if let Some(p) = &a.diff {
-        io::write_rgb8_png(p, &flip_map)?;
+        outs.wrote(p, io::write_rgb8_png(p, &flip_map))?;
     }
     let per_region: Vec<RegionFigures> =
         regions.iter().map(|r| region_figures(r, &flip_values, flip * flip_values.len() as f64, &ia, &ib, w)).collect();
@@ -280,8 +283,9 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
         }
     }
     crate::error::print_stdout(&text)?;
+    outs.keep();
     for f in &failed {
-        eprintln!("lodtrace: compare: FAIL: {f}");
+        crate::status!("lodtrace: compare: FAIL: {f}");
     }
     Ok(if failed.is_empty() { 0 } else { 1 })
 }

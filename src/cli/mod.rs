@@ -181,7 +181,7 @@ pub fn parse_vec3(s: &str) -> Result<glam::Vec3, String> {
 pub const AOVS: &[&str] = &["depth", "normal", "color", "disparity-r", "disparity-t", "lod-r", "lod-t", "cost"];
 
 fn parse_aov(s: &str) -> Result<(String, PathBuf), String> {
-    let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}': expected depth=FILE.exr, normal=FILE.exr or color=FILE.exr"))?;
+    let (k, v) = s.split_once('=').ok_or_else(|| format!("'{s}': expected KIND=FILE, KIND one of {}", AOVS.join(", ")))?;
     if !AOVS.contains(&k) {
         return Err(format!("unknown AOV '{k}' ({})", AOVS.join(", ")));
     }
@@ -212,7 +212,7 @@ pub fn run(cli: Cli) -> i32 {
             // An error caused by an interrupt's clean-up (its folder removed under a writer)
             // is not reported: the signal thread reports the interrupt and ends the process.
             crate::film::io::halt_if_interrupted();
-            eprintln!("lodtrace: error: {e}");
+            crate::status!("lodtrace: error: {e}");
             2
         }
     }

@@ -25,6 +25,16 @@ pub fn apply_camera(scene: &mut Scene, c: &CameraArgs) -> Result<()> {
 }
 
 /// Fails early (before any work) when an output's folder does not exist.
+/// A JSON output (`--stats`, `--json`) named like an image is a slip of the keyboard
+/// (`--stats s.png` beside `--out s.exr`): refused.
+pub fn check_json_path(p: &Path, option: &str) -> Result<()> {
+    const IMAGES: [&str; 5] = ["png", "exr", "jpg", "jpeg", "ppm"];
+    if p.extension().is_some_and(|e| IMAGES.iter().any(|x| e.eq_ignore_ascii_case(x))) {
+        return Err(Error::Usage(format!("{}: {option} writes JSON; name it .json", p.display())));
+    }
+    check_out_path(p)
+}
+
 pub fn check_out_path(p: &Path) -> Result<()> {
     let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     if !dir.is_dir() {
@@ -95,6 +105,14 @@ pub fn check_method_options(a: &RenderArgs) -> Result<()> {
     if m != Lod {
         wrong.extend(a.lod.changed().into_iter().map(|o| (o, "--method lod")));
     }
+    // The cone tracers trace one deterministic cone per pixel (the octree's surface samples
+    // take a fixed seed, part of the cache key): no packets, no random numbers while tracing.
+    if cone && a.packet != 8 {
+        wrong.push(("--packet", "the ray tracers (whitted, distributed, lod)"));
+    }
+    if (cone || m == Surfel) && a.seed != 0 {
+        wrong.push(("--seed", "the ray tracers' sampling (the cone and surfel tracers are deterministic)"));
+    }
     // The cone tracers trace their own octree, surfel its sphere tree: only the default
     // (which they do not use) passes unremarked.
     if matches!(m, Multires | Cone | Surfel) && a.accel.is_some() {
@@ -150,7 +168,12 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     }
     check_out_path(&out)?;
     io::check_beauty_ext(&out)?;
-    for (k, p) in &a.aov {
+    for (i, (k, p)) in a.aov.iter().enumerate() {
+        // The cost AOV comes as a heat map (.png) and as counts (.exr): one of each.
+        let ext_of = |p: &Path| p.extension().map(|e| e.to_ascii_lowercase());
+        if a.aov[..i].iter().any(|(o, q)| o == k && ext_of(q) == ext_of(p)) {
+            return Err(Error::Usage(format!("--aov {k} given twice")));
+        }
         check_out_path(p)?;
         let ext = p.extension().map(|e| e.to_ascii_lowercase());
         if k == "cost" {
@@ -176,7 +199,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         }
     }
     if let Some(p) = &a.stats {
-        check_out_path(p)?;
+        check_json_path(p, "--stats")?;
     }
     let mut paths: Vec<&Path> = vec![&out];
     paths.extend(a.aov.iter().map(|(_, p)| p.as_path()));
@@ -195,6 +218,15 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         if a.out.is_some() || !a.aov.is_empty() || a.stats.is_some() {
             return Err(Error::Usage("--debug-pixel writes no image, AOV or stats".into()));
         }
+        if a.spp != 1 {
+            return Err(Error::Usage("the cone tracers shoot one cone per pixel: use --spp 1".into()));
+        }
+        // One cone, traced on this thread, to the end: these would be ignored.
+        let d = crate::multires::MultiresArgs::default();
+        let ignored = [(a.multires.time_budget != d.time_budget, "--time-budget"), (a.threads != 0, "--threads")];
+        if let Some((_, o)) = ignored.iter().find(|(set, _)| *set) {
+            return Err(Error::Usage(format!("{o}: --debug-pixel traces one cone alone, to the end")));
+        }
     }
     if a.method == crate::cli::Method::Lod && a.accel == Some(crate::baseline::accel::AccelKind::Octree) {
         // Before loading, so that the error is the only line (no mesh warnings first).
@@ -210,7 +242,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     }
     scene.shadows = !a.no_shadows;
     if let Some(px) = a.debug_pixel {
-        print!("{}", run::explain_cone(&scene, a.method, &opts, &a.multires, px)?);
+        crate::error::print_stdout(&run::explain_cone(&scene, a.method, &opts, &a.multires, px)?)?;
         return Ok(());
     }
     let r = run::run(&scene, a.method, a.accel.unwrap_or(crate::baseline::accel::AccelKind::Embree), &opts, &a.multires, &a.lod)?;
@@ -246,9 +278,9 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     }
     outs.keep();
     if !r.finished {
-        eprintln!("lodtrace: warning: the time budget ran out; the image is incomplete");
+        crate::status!("lodtrace: warning: the time budget ran out; the image is incomplete");
     }
-    eprintln!(
+    crate::status!(
         "{}: {} {} {}x{} spp {}: build {:.3} s, render {:.3} s, {:.2} Mrays/s -> {}",
         scene.name,
         stats.method,
@@ -284,7 +316,7 @@ fn render_surfel(a: &RenderArgs, out: &Path) -> Result<()> {
     };
     let st = super::animate::animate(&args)?;
     io::write_beauty(out, &st.last_frame)?;
-    eprintln!(
+    crate::status!(
         "{}: surfel {}x{}: {} surfels, build {:.3} s, render {:.3} s -> {}",
         st.scene,
         st.width,

@@ -139,6 +139,15 @@ pub fn read_ply<R: std::io::BufRead>(r: &mut R, path: &Path) -> Result<SurfelMod
     if s.len() < 4 {
         return Err(DeformError::TooSmall(format!("{}: {} points (need at least 4)", path.display(), s.len())));
     }
+    if !has_r {
+        // The placeholder becomes the model's size, which passes `validate`'s checks of radii
+        // against the model (neither wider than it nor a millionth of it) at any scale.
+        let (lo, hi) = s.positions().iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+        let diag = (hi - lo).length();
+        if diag.is_finite() && diag > 0.0 {
+            s.r.iter_mut().for_each(|r| *r = diag);
+        }
+    }
     // Validate positions and normals (and duplicates) before using them for radii.
     s.validate()?;
     if !has_r {

@@ -266,7 +266,15 @@ fn mesh_object(mesh: &Mesh, opts: &SequenceOptions, height: f32, base: Vec3) -> 
             }
         }
     };
-    surfel_object(&mesh.name, s, opts, height, base)
+    // Samples of one mesh coincide only when f32 cannot tell them apart: parts tiny against
+    // the whole (two unit tetrahedra 1e6 apart). The file holds no duplicate to point at.
+    surfel_object(&mesh.name, s, opts, height, base).map_err(|e| match e {
+        DeformError::DuplicatePoint { .. } => DeformError::TooSmall(format!(
+            "{}: parts of the mesh are tiny against the whole (surfels sampled from them fall on one f32 position once the model is scaled to the sequence's size)",
+            mesh.name
+        )),
+        e => e,
+    })
 }
 
 /// A surfel set (sampled from a mesh or read from a point file) scaled to `height`, standing

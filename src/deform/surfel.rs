@@ -124,6 +124,18 @@ impl SurfelSoa {
                 });
             }
         }
+        // Every radius a millionth of the model or less: even 10^8 surfels spread over it
+        // would leave gaps 100 times their size, and no ray hits (a unit mix-up, as above).
+        if let Some((i, &r)) = self.r.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)) {
+            if diag > 0.0 && r < 1e-6 * diag {
+                return Err(DeformError::BadSurfel {
+                    index: i,
+                    msg: format!(
+                        "the largest radius, {r:e}, is below a millionth of the model ({diag:e} across): the surfels would not cover the surface; radii are in the positions' units"
+                    ),
+                });
+            }
+        }
         Ok(())
     }
 

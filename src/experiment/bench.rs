@@ -71,7 +71,7 @@ pub struct BenchArgs {
     pub threads: usize,
     /// Repeat each render this many times and keep the fastest (rendering only; for deforming
     /// sequences the repeats go round the methods, so a slow phase of the machine hits all alike).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub repeat: u32,
     /// Equal-time comparison: render this stochastic spec (e.g. `distributed:embree`) at
     /// 1, 2, 4, … samples per pixel until it is both slower and better than every other
@@ -172,8 +172,15 @@ impl MethodSpec {
                     v.parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0).ok_or_else(|| bad(format!("bad value '{v}' for {k}")))
                 };
                 // Counts are whole numbers: `k=2.5` is an error, not k = 2.
-                let int =
-                    |v: &str| v.parse::<u32>().map_err(|_| bad(format!("bad value '{v}' for {k}: a whole number in 0..={}", u32::MAX)));
+                let int = |v: &str| {
+                    v.parse::<u32>().map_err(|_| {
+                        bad(if v.parse::<u128>().is_ok() {
+                            format!("{k}={v} is too large")
+                        } else {
+                            format!("bad value '{v}' for {k}: a whole number (0, 1, 2, ...)")
+                        })
+                    })
+                };
                 // Switches are 0 or 1: `spread=2` is a typo, not "on".
                 let on = |v: &str| match v {
                     "0" => Ok(false),
@@ -350,7 +357,12 @@ impl MethodSpec {
 
     /// A file-name-safe form of the spec.
     pub fn slug(&self) -> String {
-        self.text.chars().map(|c| if c.is_ascii_alphanumeric() { c } else { '_' }).collect()
+        Self::slug_of(&self.text)
+    }
+
+    /// [`MethodSpec::slug`] of a spec's text.
+    pub fn slug_of(text: &str) -> String {
+        text.chars().map(|c| if c.is_ascii_alphanumeric() { c } else { '_' }).collect()
     }
 }
 
@@ -358,6 +370,16 @@ pub fn parse_list(s: &str) -> Result<Vec<MethodSpec>> {
     let v: Vec<MethodSpec> = s.split(',').filter(|p| !p.trim().is_empty()).map(MethodSpec::parse).collect::<Result<_>>()?;
     if v.is_empty() {
         return Err(Error::Usage("--methods is empty".into()));
+    }
+    // Images and table rows are named after the spec.
+    for (i, m) in v.iter().enumerate() {
+        if let Some(o) = v[..i].iter().find(|o| o.slug() == m.slug()) {
+            return Err(Error::Usage(if o.text == m.text {
+                format!("--methods: '{}' given twice", m.text)
+            } else {
+                format!("--methods: '{}' and '{}' would write the same image files ({})", o.text, m.text, m.slug())
+            }));
+        }
     }
     Ok(v)
 }
@@ -701,6 +723,12 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
         r.seed = REFERENCE_SEED;
     }
     let sweeps: Vec<MethodSpec> = a.sweep.iter().map(|s| MethodSpec::parse(s)).collect::<Result<_>>()?;
+    if specs.iter().any(|s| s.method == Method::Surfel) && (!a.regions.is_empty() || !sweeps.is_empty()) {
+        // Before "needs --reference", which they would refuse as well.
+        return Err(Error::Usage(
+            "surfel specs bench deforming sequences: there is no reference image to split by --region or to --sweep against".into(),
+        ));
+    }
     let regions = parse_regions(&a.regions, a.width, a.height)?;
     if !regions.is_empty() && reference.is_none() {
         return Err(Error::Usage("--region splits the error against the reference: it needs --reference".into()));
@@ -721,15 +749,32 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
         if sw.text.split(':').any(|p| p.starts_with("spp=")) {
             return Err(Error::Usage(format!("--sweep '{}': the sweep sets spp itself; leave it out", sw.text)));
         }
-        if !(1..=crate::baseline::render::MAX_SPP).contains(&a.sweep_max_spp) {
-            return Err(Error::Usage(format!(
-                "--sweep-max-spp {} out of range (1..={})",
-                a.sweep_max_spp,
-                crate::baseline::render::MAX_SPP
-            )));
+        // A method that is one of the sweep's points would write the same image.
+        let mut spp = 1u32;
+        while spp <= a.sweep_max_spp {
+            let point = format!("{}:spp={spp}", sw.text);
+            if let Some(m) = specs.iter().find(|m| m.slug() == MethodSpec::slug_of(&point)) {
+                return Err(Error::Usage(format!(
+                    "--methods '{}' is a point of --sweep '{}' (its spp={spp} render): leave one of them out",
+                    m.text, sw.text
+                )));
+            }
+            spp = spp.saturating_mul(2);
+            if spp == u32::MAX {
+                break;
+            }
         }
     }
+    if !(1..=crate::baseline::render::MAX_SPP).contains(&a.sweep_max_spp) {
+        return Err(Error::Usage(format!("--sweep-max-spp {} out of range (1..={})", a.sweep_max_spp, crate::baseline::render::MAX_SPP)));
+    }
+    if sweeps.is_empty() && a.sweep_max_spp != 256 {
+        return Err(Error::Usage("--sweep-max-spp bounds a --sweep; there is none".into()));
+    }
     let surfel = specs.iter().filter(|s| s.method == Method::Surfel).count();
+    if a.sizes.is_some() && (a.width, a.height) != (640, 480) {
+        return Err(Error::Usage("--sizes gives the image sizes; --width and --height would be ignored".into()));
+    }
     if a.sizes.is_some() && surfel == 0 {
         return Err(Error::Usage("--sizes is for deforming sequences (surfel specs); use --width and --height".into()));
     }
@@ -763,7 +808,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                 (out, _) => out.clone(),
             };
             if a.sizes.is_some() && !a.quiet {
-                eprintln!("bench: {w}x{h}");
+                crate::status!("bench: {w}x{h}");
             }
             deform.extend(super::deform_bench::run(&a.scenes, &specs, w, h, a.threads, a.repeat, dir.as_deref(), a.quiet)?);
         }
@@ -788,7 +833,16 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
     }
     // Validate everything before the first (possibly long) render.
     for s in specs.iter().chain(reference.iter()).chain(sweeps.iter()) {
-        s.opts(a.width, a.height, a.threads, true).validate()?;
+        // The spec named, its key by the option it sets (`c` is `--oversampling`).
+        let named = |e: Error| match e {
+            Error::Usage(m) => Error::Usage(format!("method spec '{}': {m}", s.text)),
+            e => e,
+        };
+        s.opts(a.width, a.height, a.threads, true).validate().map_err(named)?;
+        if matches!(s.method, Method::Multires | Method::Cone) {
+            let (_, tp) = s.multires.params(s.method == Method::Multires).map_err(named)?;
+            tp.validate().map_err(named)?;
+        }
     }
     let scenes: Vec<Scene> = a.scenes.iter().map(|s| crate::scene::load::load_scene(s)).collect::<Result<_>>()?;
     for (i, s) in scenes.iter().enumerate() {
@@ -1007,7 +1061,7 @@ fn finish_row(
         None => None,
     };
     if !quiet {
-        eprintln!("  {} {}: render {:.3} s", scene.name, spec.text, stats.render_seconds);
+        crate::status!("  {} {}: render {:.3} s", scene.name, spec.text, stats.render_seconds);
     }
     Ok(BenchRow {
         scene: scene.name.clone(),
@@ -1432,7 +1486,8 @@ mod tests {
         let e = |s: &str| parse_list(s).unwrap_err().to_string();
         assert!(e("multires:spread=2").contains("0 or 1"), "{}", e("multires:spread=2"));
         assert!(e("whitted:embree:foo").contains("a second accelerator"), "{}", e("whitted:embree:foo"));
-        assert!(e("whitted:spp=99999999999").contains("0..="), "{}", e("whitted:spp=99999999999"));
+        assert!(e("whitted:spp=99999999999").contains("too large"), "{}", e("whitted:spp=99999999999"));
+        assert!(e("whitted:spp=-1").contains("a whole number"), "{}", e("whitted:spp=-1"));
         assert!(e("distributed:fps=0").contains("fps=0 out of range"), "{}", e("distributed:fps=0"));
         assert!(e("whitted:packet=4").contains("packet=4"), "{}", e("whitted:packet=4"));
     }

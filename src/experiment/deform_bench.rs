@@ -227,7 +227,7 @@ pub fn run(
                 image,
             };
             if !quiet {
-                eprintln!("  {} {}: {:.1} ms/frame", row.scene, row.spec, row.ms_per_frame);
+                crate::status!("  {} {}: {:.1} ms/frame", row.scene, row.spec, row.ms_per_frame);
             }
             seq_rows.push(row);
         }
@@ -479,7 +479,7 @@ pub fn validate(spec: &MethodSpec) -> Result<()> {
         return bad("ordered is a key of the sphere tree's traversal; update=refit (an obvhs BVH2) would ignore it".into());
     }
     if s.frames == Some(0) || s.frames.is_some_and(|f| f > 100_000) {
-        return bad("frames out of range".into());
+        return bad(format!("frames={} out of range (1..=100000)", s.frames.unwrap_or(0)));
     }
     Ok(())
 }

@@ -10,11 +10,14 @@ use std::path::{Path, PathBuf};
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct DemoArgs {
+    /// Folder for the images, tables, plots and `index.html` (created; the demo's own files
+    /// in it are replaced).
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
     /// Smaller images, fewer reference samples and frames: about 1 minute on 2 cores instead of about 4.5 (AMD EPYC; 1–4 and 11–13 minutes on a slower machine).
     #[arg(long)]
     pub quick: bool,
+    /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
 }
@@ -108,11 +111,11 @@ fn run_in(a: &DemoArgs) -> Result<()> {
     let mut skipped = Vec::new();
     for job in jobs(a.quick) {
         if let Err(e) = crate::scene::builtin::get(job.scene) {
-            eprintln!("demo: skipping '{}' ({e})", job.scene);
+            crate::status!("demo: skipping '{}' ({e})", job.scene);
             skipped.push(format!("{} ({e})", job.scene));
             continue;
         }
-        eprintln!(
+        crate::status!(
             "demo: {} at {}x{}: {} (reference {})",
             job.scene,
             job.width,
@@ -155,7 +158,7 @@ fn run_in(a: &DemoArgs) -> Result<()> {
     html = html.replace("</body></html>", &format!("{deform}</body></html>"));
     let p = a.out.join("index.html");
     crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, html).map_err(|e| Error::io(&p, e)))?;
-    eprintln!("demo: open {}", p.display());
+    crate::status!("demo: open {}", p.display());
     Ok(())
 }
 
@@ -173,7 +176,7 @@ fn deform_section(a: &DemoArgs, skipped: &mut Vec<String>) -> Result<(String, Ve
             .map(|m| super::bench::MethodSpec::parse(&format!("surfel:update={m}:frames={frames}:detail={detail}")))
             .collect::<Result<_>>()?;
     let dir = a.out.join("deform");
-    std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+    crate::film::io::create_out_dir(&dir)?;
     let mut rows = Vec::new();
     for seq in crate::deform::Sequence::BUILTIN {
         match super::deform_bench::run(&[seq.to_string()], &specs, w, h, a.threads, 1, Some(&dir), false) {
@@ -181,7 +184,7 @@ fn deform_section(a: &DemoArgs, skipped: &mut Vec<String>) -> Result<(String, Ve
             // A sequence whose mesh is missing is skipped; any other failure (a write, a
             // plot) is the demo's.
             Err(e) if is_missing_asset(&e) => {
-                eprintln!("demo: skipping {seq} ({e}: run tools/setup)");
+                crate::status!("demo: skipping {seq} ({e}: run tools/setup)");
                 skipped.push(format!("{seq} ({e})"));
             }
             Err(e) => return Err(e),
@@ -278,7 +281,7 @@ fn size_section(a: &DemoArgs, dir: &Path, detail: f32) -> Result<String> {
         .map(|m| super::bench::MethodSpec::parse(&format!("surfel:update={m}:frames=16:detail={detail}")))
         .collect::<Result<_>>()?;
     let sdir = dir.join("sizes");
-    std::fs::create_dir_all(&sdir).map_err(|e| Error::io(&sdir, e))?;
+    crate::film::io::create_out_dir(&sdir)?;
     let mut rows = Vec::new();
     for seq in crate::deform::Sequence::BUILTIN {
         for &(w, h) in sizes {

@@ -30,12 +30,26 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Res
         Err(e) => return Err(Error::io(dir, e)),
     }
     let name = path.file_name().ok_or_else(|| Error::Usage(format!("{}: not a file name", path.display())))?;
+    if crate::error::is_input(path) {
+        return Err(Error::Usage(format!("{}: this run read it as an input; an output may not replace it", path.display())));
+    }
     let ext = path.extension().map(|e| e.to_string_lossy().to_string()).unwrap_or_default();
     let tmp: PathBuf = dir.join(format!(".{}.{}.tmp.{}", name.to_string_lossy(), std::process::id(), ext));
     if let Ok(mut t) = TEMPS.lock() {
         t.push(std::path::absolute(&tmp).unwrap_or_else(|_| tmp.clone()));
     }
     let r = write(&tmp);
+    // Inside a [`discard_dir_on_error`] scope, a file this write replaces is kept aside (a
+    // hard link) until the scope ends: a failed re-run into an earlier run's folder puts
+    // the earlier files back instead of leaving that run's report without its images.
+    let backup = if r.is_ok() && scope_open() && std::fs::symlink_metadata(path).is_ok_and(|m| m.is_file()) {
+        let b = dir.join(format!(".{}.{}.old.{}", name.to_string_lossy(), std::process::id(), ext));
+        // Already there: this run wrote `path` before and `b` keeps the file from before
+        // the run (undone latest first, the later write is simply removed).
+        std::fs::hard_link(path, &b).ok().map(|_| b)
+    } else {
+        None
+    };
     let r = match r {
         Err(e) => {
             let _ = std::fs::remove_file(&tmp);
@@ -58,9 +72,33 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Res
             t.swap_remove(i);
         }
     }
+    if r.is_err() {
+        if let Some(b) = &backup {
+            let _ = std::fs::remove_file(b);
+        }
+    }
     r?;
-    record_written(path);
+    record_written(path, backup);
     Ok(())
+}
+
+/// Whether a [`discard_dir_on_error`] scope is running.
+fn scope_open() -> bool {
+    WRITTEN.lock().is_ok_and(|w| w.0 > 0)
+}
+
+/// Undoes one write of a failed scope: removes the file, or puts back the file it replaced,
+/// or removes the folder it created.
+fn undo_write(path: &Path, backup: &Option<PathBuf>) -> bool {
+    match backup {
+        Some(b) if b.as_os_str() == MADE_DIR => {
+            // Counted as no output (its files were counted).
+            let _ = std::fs::remove_dir_all(path);
+            false
+        }
+        Some(b) => std::fs::rename(b, path).is_ok(),
+        None => std::fs::remove_file(path).is_ok(),
+    }
 }
 
 /// After SIGINT or SIGTERM a writer waits here for the signal thread to end the process
@@ -97,8 +135,9 @@ pub fn remove_outputs_of_interrupted_run() -> usize {
     let written = WRITTEN.lock().map(|w| w.1.clone()).unwrap_or_default();
     for (abs, fresh, start) in scopes {
         if let Some(a) = &abs {
-            for p in written.iter().skip(start).filter(|p| p.starts_with(a)) {
-                removed += std::fs::remove_file(p).is_ok() as usize;
+            // Latest first: a file written twice gets back what was there before the run.
+            for (p, b) in written.iter().skip(start).rev().filter(|(p, _)| p.starts_with(a)) {
+                removed += undo_write(p, b) as usize;
             }
         }
         if let Some(d) = fresh {
@@ -111,13 +150,18 @@ pub fn remove_outputs_of_interrupted_run() -> usize {
 /// Files written by [`write_atomic`] while a [`discard_dir_on_error`] scope runs (absolute
 /// paths), and the number of scopes running. Scopes of different output folders may run at
 /// once (tests): each removes only files under its own folder.
-static WRITTEN: std::sync::Mutex<(usize, Vec<PathBuf>)> = std::sync::Mutex::new((0, Vec::new()));
+/// Each with the hard link that keeps the file it replaced, if any ([`write_atomic`]).
+#[allow(clippy::type_complexity)]
+static WRITTEN: std::sync::Mutex<(usize, Vec<(PathBuf, Option<PathBuf>)>)> = std::sync::Mutex::new((0, Vec::new()));
 
-fn record_written(path: &Path) {
+fn record_written(path: &Path, backup: Option<PathBuf>) {
     if let Ok(mut w) = WRITTEN.lock() {
         if w.0 > 0 {
             let p = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
-            w.1.push(p);
+            let b = backup.map(|b| std::path::absolute(&b).unwrap_or(b));
+            w.1.push((p, b));
+        } else if let Some(b) = backup {
+            let _ = std::fs::remove_file(b);
         }
     }
 }
@@ -136,9 +180,23 @@ pub fn create_out_dir(dir: &Path) -> Result<()> {
             return Err(Error::Usage(format!("{}: --out names a folder here (the files go inside it), not a .{ext} file", dir.display())));
         }
     }
+    let abs = std::path::absolute(dir).unwrap_or_else(|_| dir.to_path_buf());
+    let fresh = abs.ancestors().take_while(|a| !a.exists()).last().map(Path::to_path_buf);
     std::fs::create_dir_all(dir)
-        .map_err(|e| Error::io(dir, std::io::Error::new(e.kind(), format!("cannot create the output folder ({e})"))))
+        .map_err(|e| Error::io(dir, std::io::Error::new(e.kind(), format!("cannot create the output folder ({e})"))))?;
+    // A folder made inside a scope's existing output folder (the demo's `OUT/spheres/`) goes
+    // again with the scope's files if the run fails.
+    if let (Some(f), Ok(mut w)) = (fresh, WRITTEN.lock()) {
+        if w.0 > 0 {
+            w.1.push((f, Some(PathBuf::from(MADE_DIR))));
+        }
+    }
+    Ok(())
 }
+
+/// Marks an entry of `WRITTEN` as a folder the run created ([`create_out_dir`]): undone by
+/// removing it whole.
+const MADE_DIR: &str = "\0made-dir";
 
 /// Fails early, before any work, when a file cannot be created in `dir` (a folder that is
 /// read-only or, like `/proc`, takes no new files): creates and removes a probe file there.
@@ -153,8 +211,13 @@ pub fn check_writable_dir(dir: &Path) -> Result<()> {
     }
 }
 
-/// A path with its folder resolved, for comparing paths ([`check_distinct`]).
+/// A path with its folder resolved, for comparing paths ([`check_distinct`]); an existing
+/// file is resolved whole, so that a symbolic link and its target compare equal (`compare
+/// a.png alink.png --diff a.png`).
 fn key(p: &Path) -> std::path::PathBuf {
+    if let Ok(k) = std::fs::canonicalize(p) {
+        return k;
+    }
     let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
     match (std::fs::canonicalize(dir), p.file_name()) {
         (Ok(d), Some(f)) => d.join(f),
@@ -262,26 +325,29 @@ pub fn discard_dir_on_error<T>(dir: Option<&Path>, f: impl FnOnce() -> Result<T>
             sc.remove(i);
         }
     }
-    let mine: Vec<PathBuf> = match WRITTEN.lock() {
+    // The entries stay while an enclosing scope runs (the demo's around each bench): its
+    // failure undoes them too, so their backups are kept until the last scope ends.
+    let (mine, ended): (Vec<(PathBuf, Option<PathBuf>)>, Vec<(PathBuf, Option<PathBuf>)>) = match WRITTEN.lock() {
         Ok(mut w) => {
-            let v = if r.is_err() { start.map(|s| w.1[s.min(w.1.len())..].to_vec()).unwrap_or_default() } else { Vec::new() };
+            let v = start.map(|s| w.1[s.min(w.1.len())..].to_vec()).unwrap_or_default();
             w.0 = w.0.saturating_sub(1);
-            if w.0 == 0 {
-                w.1.clear();
-            }
-            v
+            let ended = if w.0 == 0 { std::mem::take(&mut w.1) } else { Vec::new() };
+            (v, ended)
         }
-        Err(_) => Vec::new(),
+        Err(_) => (Vec::new(), Vec::new()),
     };
     if r.is_err() {
-        if let Some(a) = &abs {
-            for p in mine.iter().filter(|p| p.starts_with(a)) {
-                let _ = std::fs::remove_file(p);
-            }
+        // Latest first: a file written twice gets back what was there before the run.
+        for (p, b) in mine.iter().rev().filter(|(p, _)| abs.as_ref().is_some_and(|a| p.starts_with(a))) {
+            undo_write(p, b);
         }
         if let Some(d) = fresh {
             let _ = std::fs::remove_dir_all(d);
         }
+    }
+    // Backups not put back (a file no longer there: renamed back above, or never made).
+    for b in ended.iter().filter_map(|(_, b)| b.as_ref()).filter(|b| b.as_os_str() != MADE_DIR) {
+        let _ = std::fs::remove_file(b);
     }
     r
 }
@@ -378,6 +444,10 @@ pub fn write_exr_scalar(path: &Path, w: u32, h: u32, v: &[f32]) -> Result<()> {
 
 /// Reads a PNG (sRGB-encoded, converted to linear) or an EXR (already linear) as
 /// `(width, height, linear RGB row-major)`. Alpha is dropped.
+/// Largest image [`read_image_linear`] reads: 100 Mpixels (10000x10000), about 1.2 GB as
+/// linear RGB, several of which `compare` holds at once.
+pub const MAX_READ_PIXELS: u64 = 100_000_000;
+
 pub fn read_image_linear(path: &Path) -> Result<(u32, u32, Vec<Vec3>)> {
     let bad = |e: &dyn std::fmt::Display| Error::Image(format!("{}: cannot read image: {e}", path.display()));
     crate::error::check_input_file(path)?;
@@ -389,6 +459,19 @@ pub fn read_image_linear(path: &Path) -> Result<(u32, u32, Vec<Vec3>)> {
         image::ImageFormat::Png => false,
         other => return Err(bad(&format!("{other:?} files are not supported (PNG or EXR)"))),
     };
+    // The size first: the decoder's default allocation limit (512 MiB) would refuse a
+    // 20000x20000 PNG with "Memory limit exceeded", naming neither size nor limit.
+    if let Ok((w, h)) = image::image_dimensions(path) {
+        let px = w as u64 * h as u64;
+        if px > MAX_READ_PIXELS {
+            return Err(bad(&format!("{w}x{h} is too large to read (at most {} Mpixels)", MAX_READ_PIXELS / 1_000_000)));
+        }
+    }
+    let mut reader = reader;
+    let mut limits = image::Limits::default();
+    // Room for the largest image accepted above as 32-bit float RGBA.
+    limits.max_alloc = Some(MAX_READ_PIXELS * 16 + (64 << 20));
+    reader.limits(limits);
     // A malformed file must give an error, not a panic: decoders are guarded as well.
     let decoded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| reader.decode()))
         .map_err(|_| bad(&"decoder failed on malformed data"))?
@@ -416,4 +499,51 @@ pub fn read_image_linear(path: &Path) -> Result<(u32, u32, Vec<Vec3>)> {
         })
         .collect();
     Ok((w, h, px))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn text(p: &Path, s: &str) -> Result<()> {
+        write_atomic(p, |tmp| std::fs::write(tmp, s).map_err(|e| Error::io(tmp, e)))
+    }
+
+    fn listing(d: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(d).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into()).collect();
+        v.sort();
+        v
+    }
+
+    /// A failed run into an earlier run's folder puts back the files it replaced (written
+    /// twice included) and removes its new ones; a run that succeeds leaves no backups.
+    #[test]
+    fn a_failed_rerun_restores_the_earlier_files() {
+        let d = std::env::temp_dir().join(format!("lodtrace-io-restore-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        let (a, b) = (d.join("a.txt"), d.join("b.txt"));
+        text(&a, "first run").unwrap();
+        let r: Result<()> = discard_dir_on_error(Some(&d), || {
+            text(&a, "second run")?;
+            text(&a, "second run, again")?;
+            text(&b, "new")?;
+            // A folder made inside the existing one (the demo's per-scene folders), and a
+            // nested scope that succeeds: the outer failure undoes it all.
+            create_out_dir(&d.join("sub/deeper"))?;
+            discard_dir_on_error(Some(&d.join("sub")), || text(&d.join("sub/c.txt"), "inner"))?;
+            Err(Error::Usage("failed".into()))
+        });
+        assert!(r.is_err());
+        assert_eq!(std::fs::read_to_string(&a).unwrap(), "first run");
+        assert_eq!(listing(&d), ["a.txt"]);
+        discard_dir_on_error(Some(&d), || {
+            text(&a, "third run")?;
+            text(&b, "new")
+        })
+        .unwrap();
+        assert_eq!(std::fs::read_to_string(&a).unwrap(), "third run");
+        assert_eq!(listing(&d), ["a.txt", "b.txt"]);
+        let _ = std::fs::remove_dir_all(&d);
+    }
 }

@@ -722,7 +722,8 @@ pub fn effects() -> Scene {
 /// Where the real meshes live: `$LODTRACE_ASSETS`, else `./assets` when it exists, else the
 /// crate's own `assets/` folder (where `tools/setup` puts them).
 pub fn assets_dir() -> PathBuf {
-    if let Some(d) = std::env::var_os("LODTRACE_ASSETS") {
+    // Empty counts as unset (as `LODTRACE_CACHE`).
+    if let Some(d) = std::env::var_os("LODTRACE_ASSETS").filter(|d| !d.is_empty()) {
         return PathBuf::from(d);
     }
     let local = Path::new("assets");

@@ -123,7 +123,60 @@ pub fn load_off(path: &Path, mat: u32) -> Result<Mesh> {
             mesh.push_tri(idx[0], idx[k], idx[k + 1], mat);
         }
     }
+    // More than the header declares: a wrong count, most likely (faces lost without a word).
+    if let Some((line, _)) = lines.next() {
+        crate::error::warn(format!(
+            "{}: line {line}: data after the {nf} faces the header declares is ignored (is the face count right?)",
+            path.display()
+        ));
+    }
     finish_mesh(path, mesh)
+}
+
+/// An OBJ stream without its `l` (polyline) and `p` (point) elements, each replaced by an
+/// empty line (line numbers stay): tobj 4 parses `l a b c` as the face `f a b c`.
+struct SurfaceLines<R> {
+    inner: R,
+    line: Vec<u8>,
+    at: usize,
+    dropped: usize,
+}
+
+impl<R: std::io::BufRead> std::io::Read for SurfaceLines<R> {
+    fn read(&mut self, out: &mut [u8]) -> std::io::Result<usize> {
+        use std::io::BufRead;
+        let n = {
+            let b = self.fill_buf()?;
+            let n = b.len().min(out.len());
+            out[..n].copy_from_slice(&b[..n]);
+            n
+        };
+        self.consume(n);
+        Ok(n)
+    }
+}
+
+impl<R: std::io::BufRead> std::io::BufRead for SurfaceLines<R> {
+    fn fill_buf(&mut self) -> std::io::Result<&[u8]> {
+        if self.at >= self.line.len() {
+            self.line.clear();
+            self.at = 0;
+            if self.inner.read_until(b'\n', &mut self.line)? > 0 {
+                let first = self.line.iter().position(|c| !c.is_ascii_whitespace());
+                let kw = first.map(|i| &self.line[i..]).unwrap_or(&[]);
+                let is = |k: u8| kw.first() == Some(&k) && kw.get(1).is_some_and(|c| c.is_ascii_whitespace());
+                if is(b'l') || is(b'p') {
+                    self.dropped += 1;
+                    self.line.clear();
+                    self.line.push(b'\n');
+                }
+            }
+        }
+        Ok(&self.line[self.at..])
+    }
+    fn consume(&mut self, n: usize) {
+        self.at = (self.at + n).min(self.line.len());
+    }
 }
 
 /// After tobj refused an OBJ file (its errors carry no position): the first line whose
@@ -238,7 +291,9 @@ pub fn load_obj_with_materials(path: &Path, base: u32) -> Result<(Mesh, Vec<Mate
 /// triangle materials are `mat` + the MTL material index (or `mat` when there is no MTL).
 pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
     crate::error::check_input_file(path)?;
-    let opts = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
+    // Lines (`l`) and points (`p`) are no surface: tobj reads `l` like `f` (a polyline of 3
+    // or more vertices became a filled polygon), so [`SurfaceLines`] drops them first.
+    let opts = tobj::LoadOptions { triangulate: true, single_index: true, ignore_lines: true, ignore_points: true, ..Default::default() };
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     // tobj's own `load_obj` opens an `mtllib` path as given: `/dev/zero` filled the memory and
@@ -252,10 +307,19 @@ pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
         let text = std::fs::read(&full).map_err(|_| tobj::LoadError::ReadError)?;
         tobj::load_mtl_buf(&mut std::io::Cursor::new(mtl_colours_complete(&text)?))
     };
-    let (models, mtls) = tobj::load_obj_buf(&mut std::io::BufReader::new(file), &opts, load_mtl).map_err(|e| match obj_bad_line(path) {
+    let mut reader = SurfaceLines { inner: std::io::BufReader::new(file), line: Vec::new(), at: 0, dropped: 0 };
+    let (models, mtls) = tobj::load_obj_buf(&mut reader, &opts, load_mtl).map_err(|e| match obj_bad_line(path) {
         Some(line) => Error::parse(path, format!("line {line}: {e}")),
         None => Error::parse(path, e.to_string()),
     })?;
+    if reader.dropped > 0 {
+        crate::error::warn(format!(
+            "{}: skipped {} line or point element{} (`l`, `p`: no surface to trace)",
+            path.display(),
+            reader.dropped,
+            if reader.dropped == 1 { "" } else { "s" }
+        ));
+    }
     let mtls = mtls.unwrap_or_else(|e| {
         // The geometry is still usable: grey diffuse, as for a file without materials.
         crate::error::warn(format!("{}: materials not loaded ({e}); using the default material", path.display()));

@@ -256,7 +256,7 @@ impl Scene {
 
     fn collect(&self, g: u32, xf: Affine3A, mat: Option<u32>, depth: u32, out: &mut Vec<LeafInstance>, budget: &mut u64) -> Result<()> {
         if depth > 64 {
-            return Err(Error::Scene("instance hierarchy deeper than 64 (a cycle?)".into()));
+            return Err(Error::Scene("instance hierarchy nests deeper than 64 levels".into()));
         }
         let group = self.groups.get(g as usize).ok_or_else(|| Error::Scene(format!("group {g} does not exist")))?;
         for inst in &group.children {
@@ -392,7 +392,8 @@ impl Scene {
                 return Err(Error::Scene(format!("{what} {c} is not finite or beyond {MAX_INTENSITY:e}")));
             }
         }
-        for (i, l) in self.lights.iter().enumerate() {
+        // Counted from 1, as the TOML scene's `[[lights]]` entries are named.
+        for (i, l) in (1..).zip(self.lights.iter()) {
             if !l.center().is_finite() || !l.intensity().is_finite() {
                 return Err(Error::Scene(format!("light {i} has non-finite values")));
             }

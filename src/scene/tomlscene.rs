@@ -559,7 +559,10 @@ impl Builder<'_> {
             Some(RotateDef::AxisAngle(a)) => {
                 let axis = self.vec3(a.axis, &format!("{whose}: rotate axis"))?;
                 let angle = self.finite(a.angle, &format!("{whose}: rotate angle"))?;
-                let n = axis.normalize_or_zero();
+                // Scaled to its largest component first: [1e30, 1e30, 1e30] is a fine axis
+                // whose length overflows f32.
+                let big = axis.abs().max_element();
+                let n = if big > 0.0 { (axis / big).normalize_or_zero() } else { Vec3::ZERO };
                 if n == Vec3::ZERO {
                     return Err(self.err(format!("{whose}: rotate axis must not be zero")));
                 }
@@ -588,6 +591,11 @@ impl Builder<'_> {
                 }
                 _ => {}
             }
+            // Deeper than the hierarchy may nest (`Scene::collect`): an empty "cycle" says so,
+            // before a chain of 100,000 groups overflows this recursion's stack.
+            if stack.len() > 64 {
+                return Some(Vec::new());
+            }
             state[g as usize] = 1;
             stack.push(g);
             for inst in &s.groups[g as usize].children {
@@ -604,6 +612,9 @@ impl Builder<'_> {
         for &g in groups {
             let mut stack = Vec::new();
             if let Some(cyc) = visit(s, g, &mut state, &mut stack) {
+                if cyc.is_empty() {
+                    return Err(self.err("groups nest deeper than 64 levels".to_string()));
+                }
                 let names: Vec<&str> = cyc.iter().map(|&i| s.groups[i as usize].name.as_str()).collect();
                 return Err(self.err(format!("groups refer to each other in a cycle: {}", names.join(" -> "))));
             }
