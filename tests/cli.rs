@@ -1818,12 +1818,16 @@ fn stop_58_inputs_survive_and_odd_geometry_is_refused() {
         ply += &format!("{x} {y} {z} {x} {y} {z} 1e-30\n");
     }
     std::fs::write(p("tiny.ply"), ply).unwrap();
+    std::fs::write(p("latin1.obj"), b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n# caf\xe9\n").unwrap();
+    std::fs::write(p("mac.off"), "OFF\r3 1 0\r0 0 0\r1 0 0\r0 1 0\r3 0 1 2\r").unwrap();
     for (args, says) in [
         (vec!["animate", &p("link.off") as &str, "--frames", "1", "--out", &p("o")], "read it as an input"),
         (vec!["render", &p("tri.obj"), "--out", &p("tri.png"), "--stats", &p("mats.json")], "read it as an input"),
         (vec!["render", &p("chain.toml"), "--out", &p("chain.png")], "deeper than 64"),
         (vec!["render", &p("outline.obj"), "--out", &p("outline.png")], "no faces"),
         (vec!["animate", &p("tiny.ply"), "--frames", "1"], "millionth"),
+        (vec!["render", &p("latin1.obj"), "--out", &p("l.png")], "line 5: not text"),
+        (vec!["render", &p("mac.off"), "--out", &p("m.png")], "CR only"),
         (vec!["render", "bend", "--method", "surfel", "--seed", "3", "--out", &p("s.png")], "--seed"),
     ] {
         let (code, _, err) = lodtrace(&[&args[..], &small[..]].concat());

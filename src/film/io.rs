@@ -415,9 +415,12 @@ fn write_rgb32f_exr(path: &Path, w: u32, h: u32, px: impl Iterator<Item = [f32; 
     let img = image::Rgb32FImage::from_raw(w, h, data)
         .ok_or_else(|| Error::Image(format!("{}: film buffer does not match {w}x{h}", path.display())))?;
     write_atomic(path, |tmp| {
-        image::DynamicImage::ImageRgb32F(img)
-            .save_with_format(tmp, image::ImageFormat::OpenExr)
-            .map_err(|e| Error::Image(format!("{}: {e}", path.display())))
+        image::DynamicImage::ImageRgb32F(img).save_with_format(tmp, image::ImageFormat::OpenExr).map_err(|e| {
+            // The EXR encoder reports its write errors as "Format error decoding OpenExr: ...".
+            let e = e.to_string();
+            let why = e.strip_prefix("Format error decoding OpenExr: ").unwrap_or(&e);
+            Error::Image(format!("{}: cannot write the EXR file: {why}", path.display()))
+        })
     })
 }
 

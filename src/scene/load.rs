@@ -50,7 +50,17 @@ pub fn load_mesh(path: &Path, mat: u32) -> Result<Mesh> {
 
 fn read_to_string(path: &Path) -> Result<String> {
     crate::error::check_input_file(path)?;
-    std::fs::read_to_string(path).map_err(|e| Error::io(path, e))
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let text = String::from_utf8(bytes).map_err(|e| {
+        let b = e.as_bytes();
+        let line = 1 + b[..e.utf8_error().valid_up_to()].iter().filter(|&&c| c == b'\n').count();
+        Error::parse(path, format!("line {line}: not text (a byte that is not UTF-8)"))
+    })?;
+    // Classic Mac line ends: the whole file would read as one line ("truncated: 0 of N").
+    if text.contains('\r') && !text.contains('\n') {
+        return Err(Error::parse(path, "lines end in CR only (classic Mac); convert them to LF or CR LF"));
+    }
+    Ok(text)
 }
 
 /// Object File Format: a header `OFF` (or with the prefixes `C`, `N`, `ST`, `4`: colours,
@@ -183,7 +193,12 @@ impl<R: std::io::BufRead> std::io::BufRead for SurfaceLines<R> {
 /// numbers do not parse — a `v`/`vn`/`vt` line with fewer than 3/3/1 numbers or a bad one, or
 /// an `f`/`l`/`p` line with an index that is not a non-zero whole number.
 fn obj_bad_line(path: &Path) -> Option<usize> {
-    let text = std::fs::read_to_string(path).ok()?;
+    let bytes = std::fs::read(path).ok()?;
+    let text = match std::str::from_utf8(&bytes) {
+        Ok(t) => t,
+        // tobj's "read error": the first byte that is not UTF-8.
+        Err(e) => return Some(1 + bytes[..e.valid_up_to()].iter().filter(|&&c| c == b'\n').count()),
+    };
     for (i, l) in text.lines().enumerate() {
         let mut t = l.split('#').next().unwrap_or("").split_whitespace();
         let ok = match t.next() {
@@ -309,6 +324,10 @@ pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
     };
     let mut reader = SurfaceLines { inner: std::io::BufReader::new(file), line: Vec::new(), at: 0, dropped: 0 };
     let (models, mtls) = tobj::load_obj_buf(&mut reader, &opts, load_mtl).map_err(|e| match obj_bad_line(path) {
+        // tobj's "read error" on a regular file: a line that is not UTF-8.
+        Some(line) if matches!(e, tobj::LoadError::ReadError) => {
+            Error::parse(path, format!("line {line}: not text (a byte that is not UTF-8)"))
+        }
         Some(line) => Error::parse(path, format!("line {line}: {e}")),
         None => Error::parse(path, e.to_string()),
     })?;
