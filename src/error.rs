@@ -93,8 +93,8 @@ pub fn is_input(path: &std::path::Path) -> bool {
 }
 
 /// An input must be a regular file (symbolic links followed): a FIFO would block the read
-/// forever and `/dev/zero` would fill the memory before any parser could object.
-/// Every input is noted ([`is_input`]): no output of the run may replace it.
+/// forever and `/dev/zero` would fill the memory before any parser could object. Every
+/// input is noted ([`is_input`]): no output of the run may replace it.
 pub fn check_input_file(path: &std::path::Path) -> Result<()> {
     let m = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
     if m.is_file() {

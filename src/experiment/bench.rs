@@ -733,6 +733,9 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
     if !regions.is_empty() && reference.is_none() {
         return Err(Error::Usage("--region splits the error against the reference: it needs --reference".into()));
     }
+    if !(1..=crate::baseline::render::MAX_SPP).contains(&a.sweep_max_spp) {
+        return Err(Error::Usage(format!("--sweep-max-spp {} out of range (1..={})", a.sweep_max_spp, crate::baseline::render::MAX_SPP)));
+    }
     for (i, sw) in sweeps.iter().enumerate() {
         if sweeps[..i].iter().any(|o| o.text == sw.text) {
             return Err(Error::Usage(format!("--sweep '{}' given twice", sw.text)));
@@ -759,14 +762,8 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                     m.text, sw.text
                 )));
             }
-            spp = spp.saturating_mul(2);
-            if spp == u32::MAX {
-                break;
-            }
+            spp *= 2; // at most 2 × MAX_SPP, checked above
         }
-    }
-    if !(1..=crate::baseline::render::MAX_SPP).contains(&a.sweep_max_spp) {
-        return Err(Error::Usage(format!("--sweep-max-spp {} out of range (1..={})", a.sweep_max_spp, crate::baseline::render::MAX_SPP)));
     }
     if sweeps.is_empty() && a.sweep_max_spp != 256 {
         return Err(Error::Usage("--sweep-max-spp bounds a --sweep; there is none".into()));

@@ -445,12 +445,12 @@ pub fn write_exr_scalar(path: &Path, w: u32, h: u32, v: &[f32]) -> Result<()> {
     write_rgb32f_exr(path, w, h, v.iter().map(|&x| [x, x, x]))
 }
 
-/// Reads a PNG (sRGB-encoded, converted to linear) or an EXR (already linear) as
-/// `(width, height, linear RGB row-major)`. Alpha is dropped.
 /// Largest image [`read_image_linear`] reads: 100 Mpixels (10000x10000), about 1.2 GB as
 /// linear RGB, several of which `compare` holds at once.
 pub const MAX_READ_PIXELS: u64 = 100_000_000;
 
+/// Reads a PNG (sRGB-encoded, converted to linear) or an EXR (already linear) as
+/// `(width, height, linear RGB row-major)`. Alpha is dropped.
 pub fn read_image_linear(path: &Path) -> Result<(u32, u32, Vec<Vec3>)> {
     let bad = |e: &dyn std::fmt::Display| Error::Image(format!("{}: cannot read image: {e}", path.display()));
     crate::error::check_input_file(path)?;
