@@ -330,14 +330,8 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
         // After the folder exists: `--stats` may go inside it.
         if let Some(p) = &a.stats {
             super::render::check_json_path(p, "--stats")?;
+            // It cannot be one of the frames (`frame_NNNN.png`): `check_json_path` refuses .png.
             io::check_outputs_apart_from_scene(&a.scene, &[p])?;
-            // Nor may it be one of the frames (`frame_NNNN.png` in `--out`).
-            if let (Some(d), Some(name)) = (&a.out, p.file_name().and_then(|f| f.to_str())) {
-                let digits = name.strip_prefix("frame_").and_then(|r| r.strip_suffix(".png"));
-                if digits.is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit())) {
-                    io::check_distinct(&[&d.join(name), p])?;
-                }
-            }
         }
         pool.install(|| animate_in_pool(a, mode, threads))
     })

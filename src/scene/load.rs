@@ -52,8 +52,7 @@ fn read_to_string(path: &Path) -> Result<String> {
     crate::error::check_input_file(path)?;
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let text = String::from_utf8(bytes).map_err(|e| {
-        let b = e.as_bytes();
-        let line = 1 + b[..e.utf8_error().valid_up_to()].iter().filter(|&&c| c == b'\n').count();
+        let line = line_of(e.as_bytes(), e.utf8_error().valid_up_to());
         Error::parse(path, format!("line {line}: not text (a byte that is not UTF-8)"))
     })?;
     // Classic Mac line ends: the whole file would read as one line ("truncated: 0 of N").
@@ -61,6 +60,11 @@ fn read_to_string(path: &Path) -> Result<String> {
         return Err(Error::parse(path, "lines end in CR only (classic Mac); convert them to LF or CR LF"));
     }
     Ok(text)
+}
+
+/// The line (from 1) that holds byte `at` of `bytes`.
+fn line_of(bytes: &[u8], at: usize) -> usize {
+    1 + bytes[..at].iter().filter(|&&c| c == b'\n').count()
 }
 
 /// Object File Format: a header `OFF` (or with the prefixes `C`, `N`, `ST`, `4`: colours,
@@ -197,7 +201,7 @@ fn obj_bad_line(path: &Path) -> Option<usize> {
     let text = match std::str::from_utf8(&bytes) {
         Ok(t) => t,
         // tobj's "read error": the first byte that is not UTF-8.
-        Err(e) => return Some(1 + bytes[..e.valid_up_to()].iter().filter(|&&c| c == b'\n').count()),
+        Err(e) => return Some(line_of(&bytes, e.valid_up_to())),
     };
     for (i, l) in text.lines().enumerate() {
         let mut t = l.split('#').next().unwrap_or("").split_whitespace();

@@ -175,6 +175,9 @@ pub const MAX_INSTANCE_VISITS: u64 = 1 << 22;
 /// `cabinet` did not finish in a minute, at 16 it takes 0.03 s.
 pub const MAX_DEPTH: u32 = 16;
 
+/// Deepest nesting of instance groups (a deeper chain is refused, not recursed into).
+pub const MAX_NESTING: u32 = 64;
+
 /// Largest coordinate a scene or camera may have. Embree rejects rays whose origin lies
 /// beyond ±1.8e18 (an assertion that aborts the process), and at such magnitudes f32 has
 /// no precision left for hit offsets anyway.
@@ -255,8 +258,8 @@ impl Scene {
     }
 
     fn collect(&self, g: u32, xf: Affine3A, mat: Option<u32>, depth: u32, out: &mut Vec<LeafInstance>, budget: &mut u64) -> Result<()> {
-        if depth > 64 {
-            return Err(Error::Scene("instance hierarchy nests deeper than 64 levels".into()));
+        if depth > MAX_NESTING {
+            return Err(Error::Scene(format!("instance hierarchy nests deeper than {MAX_NESTING} levels").into()));
         }
         let group = self.groups.get(g as usize).ok_or_else(|| Error::Scene(format!("group {g} does not exist")))?;
         for inst in &group.children {

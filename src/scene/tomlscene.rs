@@ -593,7 +593,7 @@ impl Builder<'_> {
             }
             // Deeper than the hierarchy may nest (`Scene::collect`): an empty "cycle" says so,
             // before a chain of 100,000 groups overflows this recursion's stack.
-            if stack.len() > 64 {
+            if stack.len() > super::MAX_NESTING as usize {
                 return Some(Vec::new());
             }
             state[g as usize] = 1;
@@ -613,7 +613,7 @@ impl Builder<'_> {
             let mut stack = Vec::new();
             if let Some(cyc) = visit(s, g, &mut state, &mut stack) {
                 if cyc.is_empty() {
-                    return Err(self.err("groups nest deeper than 64 levels".to_string()));
+                    return Err(self.err(format!("groups nest deeper than {} levels", super::MAX_NESTING)));
                 }
                 let names: Vec<&str> = cyc.iter().map(|&i| s.groups[i as usize].name.as_str()).collect();
                 return Err(self.err(format!("groups refer to each other in a cycle: {}", names.join(" -> "))));
