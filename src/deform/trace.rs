@@ -923,6 +923,20 @@ impl DeformTracer {
         self.update_sphere(ii, n)
     }
 
+    /// Node n's sphere if it is current in this frame (always in the naive tree), else None
+    /// (nothing is updated): [`current`](Self::current) and [`sphere`](Self::sphere) in one
+    /// stamp check.
+    #[inline(always)]
+    fn current_sphere(&self, ii: &Instance, n: usize) -> Option<(Vec3, f32)> {
+        if let Some(t) = &ii.naive {
+            return Some((t.center(n), t.r[n]));
+        }
+        if let Some(s) = leaf_surfel(ii, n) {
+            return (ii.surf.slot[s].stamp.load(Acquire) == self.frame).then(|| load_surfel_ball(&ii.surf, s));
+        }
+        (ii.nodes.slot[n].stamp.load(Acquire) == self.frame).then(|| ii.nodes.load(n))
+    }
+
     /// The first computation of inner node n's sphere in this frame (out of line: the common path
     /// of [`Self::sphere`] is a stamp check and a load, and inlining this body's large stack
     /// frame into every caller costs more than the call).
@@ -1848,8 +1862,10 @@ impl DeformTracer {
                 let (l, r) = (n + 1, topo.right[n] as usize);
                 // Levels past 126 share the counters' last level anyway (`LEVELS`).
                 let lv = lv.min(UNTESTED - 2);
-                if self.current(ii, l) && self.current(ii, r) {
-                    let ((cl, rl), (cr, rr)) = (self.sphere(ii, l), self.sphere(ii, r));
+                // Each child's sphere if it is current (one stamp check and load each).
+                let sl = self.current_sphere(ii, l);
+                let sr = if sl.is_some() || self.params.shadow_updated_first { self.current_sphere(ii, r) } else { None };
+                if let (Some((cl, rl)), Some((cr, rr))) = (sl, sr) {
                     let cnt = 2 * m.count_ones() as u64;
                     dc.sphere_tests += cnt;
                     dc.tests_at(lv + 1, cnt);
@@ -1861,7 +1877,8 @@ impl DeformTracer {
                     if ml != 0 {
                         stack.push((l as u32, lv + 1, ml));
                     }
-                } else if self.left_first(ii, l, r) {
+                } else if !self.params.shadow_updated_first || sl.is_some() || sr.is_none() {
+                    // §4.4: the current child first (`left_first`).
                     stack.push((r as u32, (lv + 1) | UNTESTED, m));
                     stack.push((l as u32, (lv + 1) | UNTESTED, m));
                 } else {
