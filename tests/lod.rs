@@ -248,7 +248,7 @@ fn bench_full_lod_figure_covers_the_pixels_at_the_full_detail_model() {
         threads: 2,
         repeat: 1,
         sweep: vec![],
-        sweep_max_spp: 256,
+        sweep_max_spp: None,
         regions: vec![],
         sizes: None,
         quiet: true,

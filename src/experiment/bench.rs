@@ -83,9 +83,9 @@ pub struct BenchArgs {
     /// code basis (§6) in one run.
     #[arg(long)]
     pub sweep: Vec<String>,
-    /// Largest spp of the sweep.
-    #[arg(long, default_value_t = 256)]
-    pub sweep_max_spp: u32,
+    /// Largest spp of the sweep (default 256).
+    #[arg(long)]
+    pub sweep_max_spp: Option<u32>,
     /// Split each row's error by image region, `NAME=X0,Y0,X1,Y1` (pixels, half-open, rows
     /// from the top), repeatable, as `lodtrace compare --region`: mean FLIP, share of the
     /// image's FLIP error, RMSE, luminance bias and smooth share per region. Needs
@@ -716,7 +716,22 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
     crate::film::io::discard_dir_on_error(a.out.as_deref(), || bench_in(a))
 }
 
-fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
+/// A bench run's parsed and checked arguments ([`plan`]).
+pub(crate) struct Plan {
+    specs: Vec<MethodSpec>,
+    reference: Option<MethodSpec>,
+    sweeps: Vec<MethodSpec>,
+    regions: Vec<Region>,
+    /// Largest spp of the sweeps.
+    sweep_max_spp: u32,
+    /// Deforming sequences (surfel specs): the image sizes to run; then `scenes` is empty.
+    surfel_sizes: Option<Vec<(u32, u32)>>,
+    scenes: Vec<Scene>,
+}
+
+/// Checks every argument of a bench run and loads its scenes, before anything is rendered or
+/// written (the demo's test checks its own runs' arguments with it).
+pub(crate) fn plan(a: &BenchArgs) -> Result<Plan> {
     let specs = parse_list(&a.methods)?;
     let mut reference = a.reference.as_deref().map(MethodSpec::parse).transpose()?;
     if let Some(r) = &mut reference {
@@ -733,8 +748,9 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
     if !regions.is_empty() && reference.is_none() {
         return Err(Error::Usage("--region splits the error against the reference: it needs --reference".into()));
     }
-    if !(1..=crate::baseline::render::MAX_SPP).contains(&a.sweep_max_spp) {
-        return Err(Error::Usage(format!("--sweep-max-spp {} out of range (1..={})", a.sweep_max_spp, crate::baseline::render::MAX_SPP)));
+    let sweep_max_spp = a.sweep_max_spp.unwrap_or(256);
+    if !(1..=crate::baseline::render::MAX_SPP).contains(&sweep_max_spp) {
+        return Err(Error::Usage(format!("--sweep-max-spp {sweep_max_spp} out of range (1..={})", crate::baseline::render::MAX_SPP)));
     }
     for (i, sw) in sweeps.iter().enumerate() {
         if sweeps[..i].iter().any(|o| o.text == sw.text) {
@@ -754,7 +770,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
         }
         // A method that is one of the sweep's points would write the same image.
         let mut spp = 1u32;
-        while spp <= a.sweep_max_spp {
+        while spp <= sweep_max_spp {
             let point = format!("{}:spp={spp}", sw.text);
             if let Some(m) = specs.iter().find(|m| m.slug() == MethodSpec::slug_of(&point)) {
                 return Err(Error::Usage(format!(
@@ -765,7 +781,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             spp *= 2; // at most 2 × MAX_SPP, checked above
         }
     }
-    if sweeps.is_empty() && a.sweep_max_spp != 256 {
+    if sweeps.is_empty() && a.sweep_max_spp.is_some() {
         return Err(Error::Usage("--sweep-max-spp bounds a --sweep; there is none".into()));
     }
     let surfel = specs.iter().filter(|s| s.method == Method::Surfel).count();
@@ -790,6 +806,36 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                 vec![(a.width, a.height)]
             }
         };
+        return Ok(Plan { specs, reference, sweeps, regions, sweep_max_spp, surfel_sizes: Some(sizes), scenes: Vec::new() });
+    }
+    // Validate everything before the first (possibly long) render.
+    for s in specs.iter().chain(reference.iter()).chain(sweeps.iter()) {
+        // The spec named, its key by the option it sets (`c` is `--oversampling`).
+        let named = |e: Error| match e {
+            Error::Usage(m) => Error::Usage(format!("method spec '{}': {m}", s.text)),
+            e => e,
+        };
+        s.opts(a.width, a.height, a.threads, true).validate().map_err(named)?;
+        if matches!(s.method, Method::Multires | Method::Cone) {
+            let (_, tp) = s.multires.params(s.method == Method::Multires).map_err(named)?;
+            tp.validate().map_err(named)?;
+        }
+    }
+    let scenes: Vec<Scene> = a.scenes.iter().map(|s| crate::scene::load::load_scene(s)).collect::<Result<_>>()?;
+    for (i, s) in scenes.iter().enumerate() {
+        if let Some(t) = scenes[..i].iter().position(|t| t.name == s.name) {
+            return Err(Error::Usage(format!(
+                "scenes '{}' and '{}' are both named '{}': their outputs would overwrite each other",
+                a.scenes[t], a.scenes[i], s.name
+            )));
+        }
+    }
+    Ok(Plan { specs, reference, sweeps, regions, sweep_max_spp, surfel_sizes: None, scenes })
+}
+
+fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
+    let Plan { specs, reference, sweeps, regions, sweep_max_spp, surfel_sizes, scenes } = plan(a)?;
+    if let Some(sizes) = surfel_sizes {
         if let Some(out) = &a.out {
             crate::film::io::create_out_dir(out)?;
             crate::film::io::check_writable_dir(out)?;
@@ -827,28 +873,6 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             }
         }
         return Ok(report);
-    }
-    // Validate everything before the first (possibly long) render.
-    for s in specs.iter().chain(reference.iter()).chain(sweeps.iter()) {
-        // The spec named, its key by the option it sets (`c` is `--oversampling`).
-        let named = |e: Error| match e {
-            Error::Usage(m) => Error::Usage(format!("method spec '{}': {m}", s.text)),
-            e => e,
-        };
-        s.opts(a.width, a.height, a.threads, true).validate().map_err(named)?;
-        if matches!(s.method, Method::Multires | Method::Cone) {
-            let (_, tp) = s.multires.params(s.method == Method::Multires).map_err(named)?;
-            tp.validate().map_err(named)?;
-        }
-    }
-    let scenes: Vec<Scene> = a.scenes.iter().map(|s| crate::scene::load::load_scene(s)).collect::<Result<_>>()?;
-    for (i, s) in scenes.iter().enumerate() {
-        if let Some(t) = scenes[..i].iter().position(|t| t.name == s.name) {
-            return Err(Error::Usage(format!(
-                "scenes '{}' and '{}' are both named '{}': their outputs would overwrite each other",
-                a.scenes[t], a.scenes[i], s.name
-            )));
-        }
     }
     if let Some(out) = &a.out {
         crate::film::io::create_out_dir(out)?;
@@ -978,7 +1002,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                     c.push((t, n, g.figures.flip_mean));
                 }
                 rows.push(row);
-                if (t >= t_slowest && f <= f_best) || spp.saturating_mul(2) > a.sweep_max_spp {
+                if (t >= t_slowest && f <= f_best) || spp.saturating_mul(2) > sweep_max_spp {
                     break;
                 }
                 spp *= 2;
