@@ -1426,11 +1426,26 @@ impl DeformTracer {
     /// (instance, node) that the traversal from the root must then leave out.
     /// Every pass of a ray searches it again (`first`: the ray's first pass, which counts the
     /// lookup and the hit).
+    #[inline(always)]
     fn search_cached(&self, sl: u32, ray: &Ray, best: &mut Best, first: bool, dc: &mut DeformCounters, ctr: &mut Counters) -> (u32, u32) {
-        let v = self.cache[sl as usize].load(Relaxed);
-        if v == NO_CACHE {
-            return (u32::MAX, u32::MAX);
+        // Most slots are empty (their ray hit nothing last frame): checked inline, the search
+        // out of line.
+        match self.cache[sl as usize].load(Relaxed) {
+            NO_CACHE => (u32::MAX, u32::MAX),
+            v => self.search_cached_node(v, ray, best, first, dc, ctr),
         }
+    }
+
+    #[inline(never)]
+    fn search_cached_node(
+        &self,
+        v: u64,
+        ray: &Ray,
+        best: &mut Best,
+        first: bool,
+        dc: &mut DeformCounters,
+        ctr: &mut Counters,
+    ) -> (u32, u32) {
         let (k, n) = ((v >> 32) as usize, (v & 0xffff_ffff) as usize);
         if k >= self.inst.len() || n >= self.inst[k].obj.tree.len() {
             return (u32::MAX, u32::MAX);
@@ -1465,7 +1480,12 @@ impl DeformTracer {
             }
             None => NO_CACHE,
         };
-        self.cache[sl as usize].store(v, Relaxed);
+        // Most slots keep their value (no hit, frame after frame): a write only on a change
+        // keeps those lines clean.
+        let c = &self.cache[sl as usize];
+        if c.load(Relaxed) != v {
+            c.store(v, Relaxed);
+        }
     }
 
     /// Root spheres of all instances, 8 per f32x8 step: (entry, instance) of those hit,
