@@ -1436,6 +1436,7 @@ impl DeformTracer {
         }
     }
 
+    /// [`search_cached`](Self::search_cached) for a slot holding `v` (instance << 32 | node).
     #[inline(never)]
     fn search_cached_node(
         &self,

@@ -166,9 +166,6 @@ fn run_in(a: &DemoArgs) -> Result<()> {
     Ok(())
 }
 
-/// Adams et al.: every built-in sequence in the four update modes (same recorded motion;
-/// [`super::deform_bench`]), the per-frame time curves (the paper's Fig. 5), radius ratios
-/// (Fig. 3), test counts with and without the per-ray cache.
 /// Image size, frames and detail of the demo's deforming sequences.
 fn deform_setting(quick: bool) -> (u32, u32, u32, f32) {
     if quick {
@@ -190,6 +187,9 @@ fn deform_specs(quick: bool) -> Result<Vec<super::bench::MethodSpec>> {
         .collect()
 }
 
+/// Adams et al.: every built-in sequence in the four update modes (same recorded motion;
+/// [`super::deform_bench`]), the per-frame time curves (the paper's Fig. 5), radius ratios
+/// (Fig. 3), test counts with and without the per-ray cache.
 fn deform_section(a: &DemoArgs, skipped: &mut Vec<String>) -> Result<(String, Vec<super::deform_bench::DeformRow>)> {
     let (w, h, frames, detail) = deform_setting(a.quick);
     let specs = deform_specs(a.quick)?;
