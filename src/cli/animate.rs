@@ -273,8 +273,8 @@ fn stale_frames(dir: &std::path::Path, frames: usize, cost: bool) -> Vec<String>
     v
 }
 
-/// Runs the animation; writes frames and stats as asked; returns the statistics.
-pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
+/// Checks the options of an `animate` run before anything is read or written; its update mode.
+pub(crate) fn check(a: &AnimateArgs) -> Result<UpdateMode> {
     let mode = parse_mode(&a.update)?;
     if a.frames == Some(0) {
         return Err(Error::Usage("--frames 0: nothing to render".into()));
@@ -319,6 +319,12 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
             return Err(Error::Usage(format!("--stats {} names the --out folder; give it a file name (inside it is fine)", p.display())));
         }
     }
+    Ok(mode)
+}
+
+/// Runs the animation; writes frames and stats as asked; returns the statistics.
+pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
+    let mode = check(a)?;
     let pool = crate::core::thread_pool(a.threads)?;
     let threads = pool.current_num_threads();
     // A failed run removes the output folder again if it created it.
@@ -742,6 +748,36 @@ fn shade_x8(tr: &DeformTracer, rays: &[Ray], slots: &[Option<u32>], sc: &ShadeCt
 
 #[cfg(test)]
 mod tests {
+    /// Every `lodtrace animate` command in the README passes animate's option checks (as
+    /// `bench::tests::the_readmes_bench_commands_pass_the_checks` does for bench).
+    #[test]
+    fn the_readmes_animate_commands_pass_the_checks() {
+        #[derive(clap::Parser)]
+        struct Cmd {
+            #[command(flatten)]
+            a: AnimateArgs,
+        }
+        use clap::Parser;
+        let readme =
+            std::fs::read_to_string(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap().replace("\\\n", "");
+        let mut checked = 0;
+        for line in readme.lines() {
+            let Some(cmd) = line.trim().strip_prefix("lodtrace animate ") else {
+                continue;
+            };
+            let words = cmd.split('#').next().unwrap().split_whitespace();
+            match Cmd::try_parse_from(std::iter::once("animate").chain(words)) {
+                Ok(c) => {
+                    if let Err(e) = check(&c.a) {
+                        panic!("README: lodtrace animate {cmd}\n{e}");
+                    }
+                }
+                Err(e) => panic!("README: lodtrace animate {cmd}\n{e}"),
+            }
+            checked += 1;
+        }
+        assert!(checked >= 4, "only {checked} animate commands found in the README");
+    }
 
     /// The earlier run's frames beyond this run's, and its cost maps when this run made
     /// none, are named; this run's own files and other files are not.
