@@ -5,7 +5,7 @@ use crate::error::{Error, Result};
 use crate::experiment::run;
 use crate::film::io;
 use crate::scene::Scene;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Applies `--eye/--look/--up/--fovy`; a bare mesh keeps its automatic framing otherwise.
 pub fn apply_camera(scene: &mut Scene, c: &CameraArgs) -> Result<()> {
@@ -158,7 +158,8 @@ pub fn check_method_options(a: &RenderArgs) -> Result<()> {
     }
 }
 
-pub fn run(a: &RenderArgs) -> Result<()> {
+/// Checks the options of a `render` run before the scene is loaded; the beauty image's path.
+pub(crate) fn check(a: &RenderArgs) -> Result<PathBuf> {
     let opts = opts_from(a);
     opts.validate()?;
     check_method_options(a)?;
@@ -209,7 +210,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         if a.no_shadows {
             return Err(Error::Usage("--no-shadows is not available for --method surfel".into()));
         }
-        return render_surfel(a, &out);
+        return Ok(out);
     }
     if a.debug_pixel.is_some() {
         if !matches!(a.method, crate::cli::Method::Multires | crate::cli::Method::Cone) {
@@ -232,6 +233,15 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         // Before loading, so that the error is the only line (no mesh warnings first).
         return Err(Error::Usage("--method lod runs on --accel bvh or embree; the octree serves whitted and distributed".into()));
     }
+    Ok(out)
+}
+
+pub fn run(a: &RenderArgs) -> Result<()> {
+    let out = check(a)?;
+    if a.method == crate::cli::Method::Surfel {
+        return render_surfel(a, &out);
+    }
+    let opts = opts_from(a);
     let mut scene = crate::scene::load::load_scene(&a.scene)?;
     apply_camera(&mut scene, &a.camera)?;
     if let Some(d) = a.max_depth {
@@ -327,4 +337,43 @@ fn render_surfel(a: &RenderArgs, out: &Path) -> Result<()> {
         out.display()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    /// Every `lodtrace render` command in the README passes render's option checks (as
+    /// `bench::tests::the_readmes_bench_commands_pass_the_checks` does for bench); commands
+    /// naming a mesh that `tools/setup` has not fetched are skipped.
+    #[test]
+    fn the_readmes_render_commands_pass_the_checks() {
+        #[derive(clap::Parser)]
+        struct Cmd {
+            #[command(flatten)]
+            a: super::RenderArgs,
+        }
+        use clap::Parser;
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let readme = std::fs::read_to_string(root.join("README.md")).unwrap().replace("\\\n", "");
+        let mut checked = 0;
+        for line in readme.lines() {
+            let Some(cmd) = line.trim().strip_prefix("lodtrace render ") else {
+                continue;
+            };
+            let mut a = match Cmd::try_parse_from(std::iter::once("render").chain(cmd.split('#').next().unwrap().split_whitespace())) {
+                Ok(c) => c.a,
+                Err(e) => panic!("README: lodtrace render {cmd}\n{e}"),
+            };
+            if a.scene.contains('/') {
+                if !root.join(&a.scene).exists() {
+                    continue;
+                }
+                a.scene = root.join(&a.scene).to_string_lossy().into_owned();
+            }
+            if let Err(e) = super::check(&a) {
+                panic!("README: lodtrace render {cmd}\n{e}");
+            }
+            checked += 1;
+        }
+        assert!(checked >= 8, "only {checked} render commands found in the README");
+    }
 }
