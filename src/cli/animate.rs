@@ -752,27 +752,10 @@ mod tests {
     /// `bench::tests::the_readmes_bench_commands_pass_the_checks` does for bench).
     #[test]
     fn the_readmes_animate_commands_pass_the_checks() {
-        #[derive(clap::Parser)]
-        struct Cmd {
-            #[command(flatten)]
-            a: AnimateArgs,
-        }
-        use clap::Parser;
-        let readme =
-            std::fs::read_to_string(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap().replace("\\\n", "");
         let mut checked = 0;
-        for line in readme.lines() {
-            let Some(cmd) = line.trim().strip_prefix("lodtrace animate ") else {
-                continue;
-            };
-            let words = cmd.split('#').next().unwrap().split_whitespace();
-            match Cmd::try_parse_from(std::iter::once("animate").chain(words)) {
-                Ok(c) => {
-                    if let Err(e) = check(&c.a) {
-                        panic!("README: lodtrace animate {cmd}\n{e}");
-                    }
-                }
-                Err(e) => panic!("README: lodtrace animate {cmd}\n{e}"),
+        for (cmd, a) in crate::cli::readme_commands::<AnimateArgs>("animate") {
+            if let Err(e) = check(&a) {
+                panic!("README: {cmd}\n{e}");
             }
             checked += 1;
         }

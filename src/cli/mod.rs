@@ -217,3 +217,28 @@ pub fn run(cli: Cli) -> i32 {
         }
     }
 }
+
+/// Test support: every `lodtrace SUB …` line of the README (shell continuation lines joined as
+/// the shell joins them, `#` comments dropped) with its arguments parsed by clap into `A`;
+/// panics naming the line if clap refuses one. The README-command tests of bench, render and
+/// animate check these against their subcommand's option checks.
+#[cfg(test)]
+pub(crate) fn readme_commands<A: clap::Args>(sub: &str) -> Vec<(String, A)> {
+    let readme = std::fs::read_to_string(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap().replace("\\\n", "");
+    let prefix = format!("lodtrace {sub} ");
+    readme
+        .lines()
+        .filter_map(|line| line.trim().strip_prefix(prefix.as_str()))
+        .map(|cmd| {
+            let words = std::iter::once(sub).chain(cmd.split('#').next().unwrap().split_whitespace());
+            let parsed = A::augment_args(clap::Command::new("lodtrace"))
+                .try_get_matches_from(words)
+                .map_err(|e| e.to_string())
+                .and_then(|m| A::from_arg_matches(&m).map_err(|e| e.to_string()));
+            match parsed {
+                Ok(a) => (format!("lodtrace {sub} {cmd}"), a),
+                Err(e) => panic!("README: lodtrace {sub} {cmd}\n{e}"),
+            }
+        })
+        .collect()
+}

@@ -346,23 +346,9 @@ mod tests {
     /// naming a mesh that `tools/setup` has not fetched are skipped.
     #[test]
     fn the_readmes_render_commands_pass_the_checks() {
-        #[derive(clap::Parser)]
-        struct Cmd {
-            #[command(flatten)]
-            a: super::RenderArgs,
-        }
-        use clap::Parser;
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let readme = std::fs::read_to_string(root.join("README.md")).unwrap().replace("\\\n", "");
         let mut checked = 0;
-        for line in readme.lines() {
-            let Some(cmd) = line.trim().strip_prefix("lodtrace render ") else {
-                continue;
-            };
-            let mut a = match Cmd::try_parse_from(std::iter::once("render").chain(cmd.split('#').next().unwrap().split_whitespace())) {
-                Ok(c) => c.a,
-                Err(e) => panic!("README: lodtrace render {cmd}\n{e}"),
-            };
+        for (cmd, mut a) in crate::cli::readme_commands::<super::RenderArgs>("render") {
             if a.scene.contains('/') {
                 if !root.join(&a.scene).exists() {
                     continue;
@@ -370,7 +356,7 @@ mod tests {
                 a.scene = root.join(&a.scene).to_string_lossy().into_owned();
             }
             if let Err(e) = super::check(&a) {
-                panic!("README: lodtrace render {cmd}\n{e}");
+                panic!("README: {cmd}\n{e}");
             }
             checked += 1;
         }

@@ -1478,32 +1478,16 @@ mod tests {
     /// commands naming a mesh that `tools/setup` has not fetched are skipped.
     #[test]
     fn the_readmes_bench_commands_pass_the_checks() {
-        #[derive(clap::Parser)]
-        struct Cmd {
-            #[command(flatten)]
-            a: BenchArgs,
-        }
-        use clap::Parser;
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let readme = std::fs::read_to_string(root.join("README.md")).unwrap().replace("\\\n", "");
         let mut checked = 0;
-        for line in readme.lines() {
-            let Some(cmd) = line.trim().strip_prefix("lodtrace bench ") else {
-                continue;
-            };
-            let words: Vec<String> = cmd.split('#').next().unwrap().split_whitespace().map(|w| w.to_string()).collect();
-            let parsed = Cmd::try_parse_from(std::iter::once("bench".to_string()).chain(words.iter().cloned()));
-            let mut a = match parsed {
-                Ok(c) => c.a,
-                Err(e) => panic!("README: lodtrace bench {cmd}\n{e}"),
-            };
+        for (cmd, mut a) in crate::cli::readme_commands::<BenchArgs>("bench") {
             if a.scenes.iter().any(|s| s.contains('/') && !root.join(s).exists()) {
                 continue;
             }
             a.scenes =
                 a.scenes.iter().map(|s| if s.contains('/') { root.join(s).to_string_lossy().into_owned() } else { s.clone() }).collect();
             if let Err(e) = plan(&a) {
-                panic!("README: lodtrace bench {cmd}\n{e}");
+                panic!("README: {cmd}\n{e}");
             }
             checked += 1;
         }
