@@ -939,6 +939,15 @@ fn bench_sizes_sweep_deforming_sequences() {
     let (code, _, err) = lodtrace(&["bench", "spheres", "--methods", "whitted:bvh", "--sizes", "16x12"]);
     assert_eq!(code, 2, "{err}");
     one_error_line(&err);
+    // An explicit --width or --height is refused beside --sizes, the defaults' values too.
+    for wh in [["--width", "640"], ["--height", "480"], ["--width", "8"]] {
+        let mut args = vec!["bench", "bend", "--methods", "surfel:update=naive:frames=1", "--sizes", "16x12"];
+        args.extend_from_slice(&wh);
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{wh:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains("--sizes") && err.contains(wh[0]), "{wh:?}: {err}");
+    }
 }
 
 /// `render SEQ --method surfel`: the first frame of a deforming sequence, PNG and stats.
