@@ -700,9 +700,11 @@ fn animate_warm_pass_reports_each_frame() {
     assert!((total - v["render_seconds"].as_f64().unwrap()).abs() < 1e-9);
 }
 
-/// `--cache-up` and `--unordered` (the §4.2.2 ablation switches) change the work, never the
-/// frames: every frame is byte-identical to a naive rebuild's, an ancestor cache hits more
-/// often than the paper's leaf cache, and the stats record the parameters.
+/// `--cache-up`, `--cache-climb` and `--unordered` (the §4.2.2 ablation switches) change the
+/// work, never the frames: every frame is byte-identical to a naive rebuild's, an ancestor
+/// cache hits more often than the paper's leaf cache, the climb finds a hit for nearly every
+/// lookup and cuts the leaf tests below the uncached traversal's, and the stats record the
+/// parameters.
 #[test]
 fn animate_cache_ablation_keeps_the_frames() {
     let args = ["--frames", "4", "--detail", "0.05"];
@@ -715,11 +717,21 @@ fn animate_cache_ablation_keeps_the_frames() {
     let (_, dn) = run("cacheabl_naive", &["--update", "naive"]);
     let (leaf, _) = run("cacheabl_leaf", &["--update", "lazy-cache", "--unordered"]);
     let (up, du) = run("cacheabl_up", &["--update", "lazy-cache", "--unordered", "--cache-up", "8"]);
+    let (climb, dc) = run("cacheabl_climb", &["--update", "lazy-cache", "--unordered", "--cache-climb"]);
+    let (plain, _) = run("cacheabl_plain", &["--update", "lazy", "--unordered"]);
     for f in 0..4 {
         let name = format!("frame_{f:04}.png");
         assert_eq!(std::fs::read(dn.join(&name)).unwrap(), std::fs::read(du.join(&name)).unwrap(), "{name} differs");
+        assert_eq!(std::fs::read(dn.join(&name)).unwrap(), std::fs::read(dc.join(&name)).unwrap(), "{name} differs (climb)");
     }
     let sum = |v: &serde_json::Value, k: &str| v["per_frame"].as_array().unwrap().iter().map(|r| r[k].as_u64().unwrap()).sum::<u64>();
+    // Frame 0 has no cache; from frame 1 on the climb ends at a hit for nearly every lookup.
+    let (hits, lookups) = (sum(&climb, "cache_hits"), sum(&climb, "cache_lookups"));
+    assert!(lookups > 0 && hits as f64 >= 0.8 * lookups as f64, "climb: {hits} hits of {lookups} lookups");
+    let (lc, lp, ll) = (sum(&climb, "leaf_tests"), sum(&plain, "leaf_tests"), sum(&leaf, "leaf_tests"));
+    assert!((lc as f64) < 0.9 * lp as f64 && lc < ll, "leaf tests: climb {lc}, leaf cache {ll}, uncached {lp}");
+    assert_eq!(climb["trace_params"]["cache_climb"], true);
+    assert_eq!(up["trace_params"]["cache_climb"], false);
     assert!(sum(&up, "cache_lookups") > 0);
     assert!(
         sum(&up, "cache_hits") > sum(&leaf, "cache_hits"),
@@ -735,6 +747,7 @@ fn animate_cache_ablation_keeps_the_frames() {
     // it never used).
     for bad in [
         &["--update", "lazy", "--cache-up", "2"][..],
+        &["--update", "naive", "--cache-climb"][..],
         &["--cache-up", "65"][..],
         &["--update", "naive", "--exact-below", "0"][..],
         &["--update", "refit", "--exact-below", "64"][..],
@@ -893,6 +906,7 @@ fn bench_deforming_sequences() {
         "surfel:update=lazy,whitted:bvh",
         "whitted:bvh:warm=1",
         "surfel:update=lazy:cache_up=2",
+        "surfel:update=lazy:climb=1",
         "surfel:cache_up=65",
         "surfel:update=naive:exact=0",
         "surfel:update=refit:exact=10",

@@ -1033,8 +1033,8 @@ fn cache_hits_in(name: &str) {
     let mut seq = Sequence::builtin(name, &opts).unwrap();
     let rec = seq.record(10).unwrap();
     let (w, h) = (48, 36);
-    for (cache_up, ordered) in [(0, true), (3, true), (0, false)] {
-        let params = TraceParams { cache_up, ordered, ..TraceParams::default() };
+    for (cache_up, ordered, cache_climb) in [(0, true, false), (3, true, false), (0, false, false), (0, false, true), (0, true, true)] {
+        let params = TraceParams { cache_up, ordered, cache_climb, ..TraceParams::default() };
         let mut plain = DeformTracer::new(&seq.scene, UpdateMode::Lazy, params.clone()).unwrap();
         plain.begin_frame(&rec.frames[9]).unwrap();
         let mut dc0 = DeformCounters::default();
@@ -1050,7 +1050,7 @@ fn cache_hits_in(name: &str) {
             same_hits(&ref_img, &img).unwrap();
             let hits = img.iter().flatten().count() as u64;
             eprintln!(
-                "cache_up {cache_up} ordered {ordered} frame {k}: cache hits {}/{} lookups ({hits} hit pixels), sphere tests {} vs {} uncached, leaf tests {} vs {}",
+                "cache_up {cache_up} ordered {ordered} climb {cache_climb} frame {k}: cache hits {}/{} lookups ({hits} hit pixels), sphere tests {} vs {} uncached, leaf tests {} vs {}",
                 dc.cache_hits, dc.cache_lookups, dc.sphere_tests, dc0.sphere_tests, dc.leaf_tests, dc0.leaf_tests
             );
             if k == 1 {

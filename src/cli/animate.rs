@@ -80,6 +80,12 @@ pub struct AnimateArgs {
     /// larger node does not.
     #[arg(long, default_value_t = 0)]
     pub cache_up: u32,
+    /// Per-ray cache (`--update lazy-cache`): when the cached node holds no hit, climb from it
+    /// towards the root, searching each ancestor's other child, until a hit is found (not
+    /// in the paper, which then descends from the root unbounded). The smallest node that
+    /// bounds the ray, whatever the motion was; pays off with `--unordered`. Same images.
+    #[arg(long)]
+    pub cache_climb: bool,
     /// Visit a node's children left first instead of nearer first (closest-hit rays). This
     /// is the order in which the per-ray cache pays off (§4.2.2: the cached hit bounds the
     /// traversal); front to back (the default) finds that bound by itself. Same images.
@@ -303,6 +309,9 @@ pub(crate) fn check(a: &AnimateArgs) -> Result<UpdateMode> {
     if a.cache_up > 0 && mode != UpdateMode::LazyCache {
         return Err(Error::Usage(format!("--cache-up is an option of --update lazy-cache; --update {} would ignore it", mode.name())));
     }
+    if a.cache_climb && mode != UpdateMode::LazyCache {
+        return Err(Error::Usage(format!("--cache-climb is an option of --update lazy-cache; --update {} would ignore it", mode.name())));
+    }
     if a.exact_below.is_some() && matches!(mode, UpdateMode::Naive | UpdateMode::Refit) {
         return Err(Error::Usage(format!("--exact-below is an option of the lazy updates; --update {} would ignore it", mode.name())));
     }
@@ -398,6 +407,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         TraceParams {
             exact_below: a.exact_below.unwrap_or(crate::deform::trace::TraceParams::default().exact_below),
             cache_up: a.cache_up,
+            cache_climb: a.cache_climb,
             ordered: !a.unordered,
             instance_tree: !a.no_instance_tree,
             clip_early: !a.no_clip_early,

@@ -9,7 +9,13 @@
 //!   surfels (and their MLS neighbours) are deformed when a ray reaches their leaf.
 //! - `LazyCache`: `Lazy` plus the per-ray cache of §4.2.2: the leaf of the closest hit of
 //!   slot k (e.g. pixel k) in the previous frame is tested first, so its hit bounds the
-//!   traversal from the root.
+//!   traversal from the root. Two deviations as options: `cache_up` caches an ancestor of
+//!   that leaf, and `cache_climb` (not in the paper) climbs from a cached node that holds no
+//!   hit, searching each ancestor's other child, until a hit is found; the traversal from
+//!   the root then skips the climb's top node. Under this motion a surfel leaves its ray
+//!   within a frame (the paper's leaf cache hits on 0.4–4 % of lookups), and a fixed
+//!   ancestor is too small for fast parts and too large for still ones; the climb stops at
+//!   the smallest node that holds the hit, whatever the motion was.
 //!
 //! - `Auto` (not in the paper; the heuristic its §6 asks for): per frame `Naive` or `Lazy`,
 //!   whichever cost less when last tried ([`AutoPick`]; the caller reports frame times with
@@ -246,6 +252,10 @@ pub struct TraceParams {
     /// Per-ray cache (LazyCache): cache the ancestor this many levels above the leaf of the
     /// closest hit (0 = the leaf itself, the paper's choice; see module docs).
     pub cache_up: u32,
+    /// Per-ray cache (LazyCache): when the cached node yields no hit, climb from it towards
+    /// the root, searching each ancestor's other child, until one does (see
+    /// `search_cached_node`). Off: the paper's single cached node.
+    pub cache_climb: bool,
     /// Visit the nearer child first (by sphere entry). Off: always the left child first.
     pub ordered: bool,
     /// Take the smaller of the paper's Eq. 9 bound and the re-centred bound (see `tree`);
@@ -335,6 +345,7 @@ impl Default for TraceParams {
             shadow_updated_first: true,
             max_support_stretch: 3.0,
             cache_up: 0,
+            cache_climb: false,
             ordered: true,
             recentred_bound: true,
             node_rotation: true,
@@ -408,6 +419,9 @@ pub struct DeformCounters {
 
 /// Levels of [`DeformCounters::level_tests`].
 pub const LEVELS: usize = 32;
+
+/// Flag of a packet traversal's stack entry (in its level byte): the node is a leaf.
+const IS_LEAF: u8 = 0x80;
 
 impl DeformCounters {
     pub fn merge(&mut self, o: &DeformCounters) {
@@ -909,12 +923,24 @@ impl DeformTracer {
         if let Some(t) = &ii.naive {
             return (t.center(n), t.r[n]);
         }
+        self.sphere_as(ii, n, ii.obj.tree.topo.right[n] == LEAF)
+    }
+
+    /// [`sphere`](Self::sphere) of a node whose leafness the caller knows
+    /// ([`Topology::leaf_children`]): the node's slot (or its surfel's) is loaded without
+    /// waiting for the load of its `right` first, a second cache miss in a row for a far
+    /// right child.
+    #[inline(always)]
+    fn sphere_as(&self, ii: &Instance, n: usize, leaf: bool) -> (Vec3, f32) {
+        if let Some(t) = &ii.naive {
+            return (t.center(n), t.r[n]);
+        }
         // A leaf's sphere is its surfel's leaf ball, stored with the deformed surfel (§4.1.2
         // updates leaves from their surfel), not in the node's slot: the refit of a subtree
         // then publishes only its inner nodes, half of them, and a leaf whose test passes
         // finds its surfel's line, which the ellipse test reads next, already loaded.
-        if let Some(s) = leaf_surfel(ii, n) {
-            return self.surfel_ball(ii, s);
+        if leaf {
+            return self.surfel_ball(ii, ii.obj.tree.topo.surfel[n] as usize);
         }
         let st = &ii.nodes;
         if st.slot[n].stamp.load(Acquire) == self.frame {
@@ -925,13 +951,14 @@ impl DeformTracer {
 
     /// Node n's sphere if it is current in this frame (always in the naive tree), else None
     /// (nothing is updated): [`current`](Self::current) and [`sphere`](Self::sphere) in one
-    /// stamp check.
+    /// stamp check. The caller knows whether n is a leaf ([`Topology::leaf_children`]).
     #[inline(always)]
-    fn current_sphere(&self, ii: &Instance, n: usize) -> Option<(Vec3, f32)> {
+    fn current_sphere(&self, ii: &Instance, n: usize, leaf: bool) -> Option<(Vec3, f32)> {
         if let Some(t) = &ii.naive {
             return Some((t.center(n), t.r[n]));
         }
-        if let Some(s) = leaf_surfel(ii, n) {
+        if leaf {
+            let s = ii.obj.tree.topo.surfel[n] as usize;
             return (ii.surf.slot[s].stamp.load(Acquire) == self.frame).then(|| load_surfel_ball(&ii.surf, s));
         }
         (ii.nodes.slot[n].stamp.load(Acquire) == self.frame).then(|| ii.nodes.load(n))
@@ -1047,8 +1074,9 @@ impl DeformTracer {
     #[inline(always)]
     fn child_spheres(&self, ii: &Instance, n: usize) -> ((Vec3, f32), (Vec3, f32)) {
         let topo = self.topo(ii);
-        let s1 = self.sphere(ii, n + 1);
-        let s2 = self.sphere(ii, topo.right[n] as usize);
+        let (leaf1, leaf2) = topo.leaf_children(n);
+        let s1 = self.sphere_as(ii, n + 1, leaf1);
+        let s2 = self.sphere_as(ii, topo.right[n] as usize, leaf2);
         // A node inside a refitted subtree took Eq. 11 from its final children when it was
         // refitted (`refit_subtree`), so it is skipped here. Median splits halve the counts,
         // so a node of fewer than exact_below/2 surfels is inside one; a subtree's own root
@@ -1452,17 +1480,30 @@ impl DeformTracer {
             return (u32::MAX, u32::MAX);
         }
         dc.cache_lookups += first as u64;
-        let (c, r) = self.sphere(&self.inst[k], n);
-        dc.sphere_tests += 1;
-        dc.tests_at(self.inst[k].obj.tree.topo.level[n], 1);
-        ctr.inc(Counter::node_tests);
-        if let Some(te) = sphere_test_1(ray.org, ray.dir, c, r, ray.tnear, best.t) {
-            self.closest_in(k, ray, n as u32, te, best, u32::MAX, dc, ctr);
-            if first && best.found() {
-                dc.cache_hits += 1;
+        let (ii, topo) = (&self.inst[k], &self.inst[k].obj.tree.topo);
+        let search = |n: usize, best: &mut Best, dc: &mut DeformCounters, ctr: &mut Counters| {
+            let (c, r) = self.sphere(ii, n);
+            dc.sphere_tests += 1;
+            dc.tests_at(topo.level[n], 1);
+            ctr.inc(Counter::node_tests);
+            if let Some(te) = sphere_test_1(ray.org, ray.dir, c, r, ray.tnear, best.t) {
+                self.closest_in(k, ray, n as u32, te, best, u32::MAX, dc, ctr);
             }
+        };
+        search(n, best, dc, ctr);
+        // The climb: the subtree of `top` has been searched; while it held no hit, the
+        // other child of its parent is searched too, and the parent's whole subtree is then
+        // the one the root's traversal skips.
+        let mut top = n;
+        while self.params.cache_climb && !best.found() && topo.parent[top] != u32::MAX {
+            let p = topo.parent[top] as usize;
+            search(if top == p + 1 { topo.right[p] as usize } else { p + 1 }, best, dc, ctr);
+            top = p;
         }
-        (k as u32, n as u32)
+        if first && best.found() {
+            dc.cache_hits += 1;
+        }
+        (k as u32, top as u32)
     }
 
     /// Remembers the node of `hit` (`cache_up` levels above its leaf) for the slot's next frame.
@@ -1769,10 +1810,11 @@ impl DeformTracer {
         let skip8 = u32x8::from(skipn);
         let mut tb = best_t(best);
         stack.clear();
-        // (node, its level, lanes, entries): the level rides on the stack for `level_tests`
-        // rather than costing a load per node.
-        stack.push((0, 0, mask, entry));
+        // (node, its level | IS_LEAF, lanes, entries): the level rides on the stack for
+        // `level_tests` and the kind for the visit, rather than costing a load per node.
+        stack.push((0, if topo.right[0] == LEAF { IS_LEAF } else { 0 }, mask, entry));
         while let Some((n, lv, m, te)) = stack.pop() {
+            let (leaf, lv) = (lv & IS_LEAF != 0, lv & !IS_LEAF);
             let mut m = m & te.simd_le(tb).to_bitmask() as u8;
             if any_skip {
                 // The lanes whose cached node (searched already) this is, in one compare.
@@ -1782,7 +1824,7 @@ impl DeformTracer {
                 continue;
             }
             let n = n as usize;
-            if topo.right[n] == LEAF {
+            if leaf {
                 let (node, s) = (leaf_node(ii, n), topo.surfel[n] as usize);
                 let (ds, hit, t, x) = self.ellipse_x8(k, s, pk, m, tfar, dc, ctr);
                 for i in lanes(hit) {
@@ -1801,18 +1843,22 @@ impl DeformTracer {
             let (m1, e1) = pk.test(s1.0, s1.1, tb);
             let (m2, e2) = pk.test(s2.0, s2.1, tb);
             let (m1, m2) = (m1 & m, m2 & m);
+            // Levels past 126 share the counters' last level anyway (`LEVELS`).
+            let (leaf1, leaf2) = topo.leaf_children(n);
+            let lv = lv.min(IS_LEAF - 2) + 1;
+            let (lv1, lv2) = (lv | if leaf1 { IS_LEAF } else { 0 }, lv | if leaf2 { IS_LEAF } else { 0 });
             match (m1 != 0, m2 != 0) {
                 (true, true) => {
                     if !self.params.ordered || hmin(e1, m1) <= hmin(e2, m2) {
-                        stack.push((r as u32, lv + 1, m2, e2));
-                        stack.push((l as u32, lv + 1, m1, e1));
+                        stack.push((r as u32, lv2, m2, e2));
+                        stack.push((l as u32, lv1, m1, e1));
                     } else {
-                        stack.push((l as u32, lv + 1, m1, e1));
-                        stack.push((r as u32, lv + 1, m2, e2));
+                        stack.push((l as u32, lv1, m1, e1));
+                        stack.push((r as u32, lv2, m2, e2));
                     }
                 }
-                (true, false) => stack.push((l as u32, lv + 1, m1, e1)),
-                (false, true) => stack.push((r as u32, lv + 1, m2, e2)),
+                (true, false) => stack.push((l as u32, lv1, m1, e1)),
+                (false, true) => stack.push((r as u32, lv2, m2, e2)),
                 (false, false) => {}
             }
         }
@@ -1878,14 +1924,18 @@ impl DeformTracer {
             // each and two independent tests, so the two misses overlap), or one still to test
             // (the paper's shadow-ray order: the current child first, and the other updated
             // only if the ray still needs it, §4.4).
-            const UNTESTED: u8 = 0x80;
+            // The level byte also carries IS_LEAF (the node's kind, known from its parent's
+            // count: no load of the node's own `right`).
+            const UNTESTED: u8 = 0x20;
             let expand = |stack: &mut Vec<(u32, u8, u8)>, n: usize, lv: u8, m: u8, dc: &mut DeformCounters, ctr: &mut Counters| {
                 let (l, r) = (n + 1, topo.right[n] as usize);
-                // Levels past 126 share the counters' last level anyway (`LEVELS`).
+                let (leaf_l, leaf_r) = topo.leaf_children(n);
+                // Levels past 30 share the counters' last level anyway (`LEVELS`).
                 let lv = lv.min(UNTESTED - 2);
+                let (kl, kr) = (if leaf_l { IS_LEAF } else { 0 }, if leaf_r { IS_LEAF } else { 0 });
                 // Each child's sphere if it is current (one stamp check and load each).
-                let sl = self.current_sphere(ii, l);
-                let sr = if sl.is_some() || self.params.shadow_updated_first { self.current_sphere(ii, r) } else { None };
+                let sl = self.current_sphere(ii, l, leaf_l);
+                let sr = if sl.is_some() || self.params.shadow_updated_first { self.current_sphere(ii, r, leaf_r) } else { None };
                 if let (Some((cl, rl)), Some((cr, rr))) = (sl, sr) {
                     let cnt = 2 * m.count_ones() as u64;
                     dc.sphere_tests += cnt;
@@ -1893,18 +1943,18 @@ impl DeformTracer {
                     ctr.add(Counter::node_tests, cnt);
                     let (ml, mr) = (m & pk.test_any(cl, rl, tfar), m & pk.test_any(cr, rr, tfar));
                     if mr != 0 {
-                        stack.push((r as u32, lv + 1, mr));
+                        stack.push((r as u32, (lv + 1) | kr, mr));
                     }
                     if ml != 0 {
-                        stack.push((l as u32, lv + 1, ml));
+                        stack.push((l as u32, (lv + 1) | kl, ml));
                     }
                 } else if !self.params.shadow_updated_first || sl.is_some() || sr.is_none() {
                     // §4.4: the current child first (`left_first`).
-                    stack.push((r as u32, (lv + 1) | UNTESTED, m));
-                    stack.push((l as u32, (lv + 1) | UNTESTED, m));
+                    stack.push((r as u32, (lv + 1) | UNTESTED | kr, m));
+                    stack.push((l as u32, (lv + 1) | UNTESTED | kl, m));
                 } else {
-                    stack.push((l as u32, (lv + 1) | UNTESTED, m));
-                    stack.push((r as u32, (lv + 1) | UNTESTED, m));
+                    stack.push((l as u32, (lv + 1) | UNTESTED | kl, m));
+                    stack.push((r as u32, (lv + 1) | UNTESTED | kr, m));
                 }
             };
             stack.clear();
@@ -1915,9 +1965,9 @@ impl DeformTracer {
                     continue;
                 }
                 let n = n as usize;
-                let (untested, lv) = (lv & UNTESTED != 0, lv & !UNTESTED);
+                let (untested, leaf, lv) = (lv & UNTESTED != 0, lv & IS_LEAF != 0, lv & !(UNTESTED | IS_LEAF));
                 if untested {
-                    let (c, r) = self.sphere(ii, n);
+                    let (c, r) = self.sphere_as(ii, n, leaf);
                     let cnt = m.count_ones() as u64;
                     dc.sphere_tests += cnt;
                     dc.tests_at(lv, cnt);
@@ -1927,7 +1977,7 @@ impl DeformTracer {
                         continue;
                     }
                 }
-                if topo.right[n] == LEAF {
+                if leaf {
                     done |= self.leaf_x8(k, n, rays, pk, m, tfar, dc, ctr);
                     if done == valid {
                         return done;

@@ -108,6 +108,15 @@ impl Topology {
     pub fn depth(&self) -> usize {
         self.level.iter().copied().max().map(|l| l as usize + 1).unwrap_or(0)
     }
+    /// Whether inner node n's children (n + 1 and `right[n]`) are leaves, from n's own surfel
+    /// count: the median split puts ⌊c/2⌋ of n's c surfels on the left (`build`), so the left
+    /// child is a leaf iff c ≤ 3 and the right one iff c = 2. Traversals learn a child's kind
+    /// without loading the child's `right`, a cache miss before the one for its sphere.
+    #[inline(always)]
+    pub fn leaf_children(&self, n: usize) -> (bool, bool) {
+        let c = self.count[n];
+        (c <= 3, c == 2)
+    }
     #[inline(always)]
     pub fn center(&self, n: usize) -> Vec3 {
         Vec3::new(self.cx[n], self.cy[n], self.cz[n])
@@ -989,6 +998,14 @@ mod tests {
     #[test]
     fn topology_contains_and_is_preorder() {
         let mut s = Sampler::new(1, 1, 1);
+        // Small trees too: every count from 1 to 9 at the root.
+        for m in 1..10 {
+            let pts: Vec<Vec3> = (0..m).map(|_| Vec3::new(s.next(), s.next(), s.next())).collect();
+            let t = Topology::build(&pts, &vec![0.01; m]);
+            for n in (0..t.len()).filter(|&n| t.right[n] != LEAF) {
+                assert_eq!(t.leaf_children(n), (t.right[n + 1] == LEAF, t.right[t.right[n] as usize] == LEAF), "{m} surfels, node {n}");
+            }
+        }
         let pts: Vec<Vec3> = (0..3000).map(|_| Vec3::new(s.next(), s.next() * 3.0, s.next())).collect();
         let ext = vec![0.01f32; pts.len()];
         let t = Topology::build(&pts, &ext);
@@ -1000,6 +1017,8 @@ mod tests {
             }
             if t.right[n] != LEAF {
                 assert_eq!(t.count[n + 1] + t.count[t.right[n] as usize], t.count[n]);
+                // The traversals' shortcut for the children's kind.
+                assert_eq!(t.leaf_children(n), (t.right[n + 1] == LEAF, t.right[t.right[n] as usize] == LEAF), "node {n}");
             }
         }
         assert!(t.depth() <= 14);

@@ -20,7 +20,7 @@ use serde::Serialize;
 use std::path::Path;
 
 /// `surfel` spec options (keys `update=`, `frames=`, `detail=`, `shadows=`, `exact=`,
-/// `warm=`, `cache_up=`, `ordered=`, `top=`, `nearest=`; the spec's `packet=` chooses packets of 8 or single rays).
+/// `warm=`, `cache_up=`, `climb=`, `ordered=`, `top=`, `nearest=`; the spec's `packet=` chooses packets of 8 or single rays).
 #[derive(Clone, Debug, Serialize)]
 pub struct SurfelSpec {
     pub update: String,
@@ -34,6 +34,8 @@ pub struct SurfelSpec {
     pub warm: bool,
     /// `--cache-up` of `animate` (`cache_up=N`, lazy-cache only).
     pub cache_up: u32,
+    /// `climb=1`: `--cache-climb` of `animate` (lazy-cache only).
+    pub cache_climb: bool,
     /// `ordered=0`: `--unordered` of `animate`.
     pub ordered: bool,
     /// `top=0`: `--no-instance-tree` of `animate`.
@@ -52,6 +54,7 @@ impl Default for SurfelSpec {
             exact_below: None,
             warm: false,
             cache_up: 0,
+            cache_climb: false,
             ordered: true,
             top: true,
             nearest_ellipse: true,
@@ -141,6 +144,7 @@ pub fn run(
                     packet: spec.packet,
                     exact_below: s.exact_below,
                     cache_up: s.cache_up,
+                    cache_climb: s.cache_climb,
                     unordered: !s.ordered,
                     no_instance_tree: !s.top,
                     nearest: if s.nearest_ellipse { crate::cli::animate::Nearest::Ellipse } else { crate::cli::animate::Nearest::Mls },
@@ -451,6 +455,9 @@ pub fn update_label(update: &str, spec: &str) -> String {
     if let Some(n) = spec.split(':').find_map(|k| k.strip_prefix("cache_up=")) {
         l.push_str(&format!(", cache {n} up"));
     }
+    if spec.split(':').any(|k| k == "climb=1") {
+        l.push_str(", cache climbs");
+    }
     l
 }
 
@@ -470,6 +477,9 @@ pub fn validate(spec: &MethodSpec) -> Result<()> {
     }
     if s.cache_up > 0 && mode != crate::deform::UpdateMode::LazyCache {
         return bad("cache_up is a key of update=lazy-cache".into());
+    }
+    if s.cache_climb && mode != crate::deform::UpdateMode::LazyCache {
+        return bad("climb is a key of update=lazy-cache".into());
     }
     use crate::deform::UpdateMode::{Naive, Refit};
     if s.exact_below.is_some() && matches!(mode, Naive | Refit) {

@@ -176,12 +176,12 @@ fn deform_setting(quick: bool) -> (u32, u32, u32, f32) {
 }
 
 /// The update modes the demo runs on each sequence. The last two: the paper's unordered
-/// descent without and with the per-ray cache (of an ancestor 8 levels above the hit leaf;
-/// the leaf itself misses under this motion), where the cache cuts the tests as in §4.2.2
-/// (BENCHMARKS.md, "Caching (stop 34)").
+/// descent without and with the per-ray cache (climbing from the cached leaf to the smallest
+/// node that holds a hit, a deviation: the leaf itself misses under this motion), where the
+/// cache cuts the tests as in §4.2.2 (BENCHMARKS.md, "Caching (stop 34)" and "Stop 60").
 fn deform_specs(quick: bool) -> Result<Vec<super::bench::MethodSpec>> {
     let (_, _, frames, detail) = deform_setting(quick);
-    ["naive", "lazy", "lazy-cache", "refit", "lazy:ordered=0", "lazy-cache:ordered=0:cache_up=8"]
+    ["naive", "lazy", "lazy-cache", "refit", "lazy:ordered=0", "lazy-cache:ordered=0:climb=1"]
         .iter()
         .map(|m| super::bench::MethodSpec::parse(&format!("surfel:update={m}:frames={frames}:detail={detail}")))
         .collect()
@@ -214,7 +214,7 @@ fn deform_section(a: &DemoArgs, skipped: &mut Vec<String>) -> Result<(String, Ve
     // Each sequence ran on its own (so that one failing is skipped): the Fig. 3 plot of all.
     super::deform_bench::radius_plot(&dir, &rows)?;
     let mut h_out = format!(
-        "<h2>Adams et al.: deforming point-sampled surfaces</h2><p>Each sequence ({frames} frames, {w}×{h}, detail {detail}) rendered with the hierarchy rebuilt every frame (naive), updated lazily (§4.1), lazily with per-ray caching (§4.2.2), and — not in the paper — an obvhs BVH2 refitted every frame; the same recorded motion, so the images must be identical (last column). The last two rows per sequence descend the tree unordered, as the paper does, without and with the cache (of the ancestor 8 levels above each ray's hit leaf, a deviation: the leaf itself moves away within a frame): there the cache cuts the leaf tests, as in the paper; front-to-back traversal (the other rows) cuts more by itself. Per-frame time curves like the paper's Fig. 5. Same as <code>lodtrace bench SEQ --methods surfel:update=naive,surfel:update=lazy,...</code>.</p><table><tr><th>sequence</th><th>update</th><th>surfels</th><th>ms/frame</th><th>vs naive</th><th>BV tests/frame</th><th>leaf tests/frame</th><th>cache hits</th><th>MLS iterations</th><th>root radius ratio</th><th>mean radius ratio</th><th>same image</th></tr>"
+        "<h2>Adams et al.: deforming point-sampled surfaces</h2><p>Each sequence ({frames} frames, {w}×{h}, detail {detail}) rendered with the hierarchy rebuilt every frame (naive), updated lazily (§4.1), lazily with per-ray caching (§4.2.2), and — not in the paper — an obvhs BVH2 refitted every frame; the same recorded motion, so the images must be identical (last column). The last two rows per sequence descend the tree unordered, as the paper does, without and with the cache (climbing from each ray's cached leaf until a node holds a hit, a deviation: the leaf itself moves away within a frame): there the cache cuts the leaf tests, as in the paper; front-to-back traversal (the other rows) cuts more by itself. Per-frame time curves like the paper's Fig. 5. Same as <code>lodtrace bench SEQ --methods surfel:update=naive,surfel:update=lazy,...</code>.</p><table><tr><th>sequence</th><th>update</th><th>surfels</th><th>ms/frame</th><th>vs naive</th><th>BV tests/frame</th><th>leaf tests/frame</th><th>cache hits</th><th>MLS iterations</th><th>root radius ratio</th><th>mean radius ratio</th><th>same image</th></tr>"
     );
     for r in &rows {
         let f = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
@@ -508,7 +508,7 @@ fn target_rows(reports: &[&BenchReport], deform: &[super::deform_bench::DeformRo
             status: status_of(&[Some(mh <= 2.0 && rh <= 2.5)]),
         });
     }
-    let (mut m, mut v) = (Vec::new(), Vec::new());
+    let (mut m, mut cuts) = (Vec::new(), Vec::new());
     for seq in &seqs {
         let un = |cache: bool| {
             deform.iter().find(|r| r.scene == *seq && r.spec.contains("ordered=0") && r.update == if cache { "lazy-cache" } else { "lazy" })
@@ -516,15 +516,17 @@ fn target_rows(reports: &[&BenchReport], deform: &[super::deform_bench::DeformRo
         if let (Some(a), Some(b)) = (un(false), un(true)) {
             let cut = 1.0 - b.leaf_tests_per_frame / a.leaf_tests_per_frame.max(1e-12);
             m.push(format!("{seq} {:.0} %", 100.0 * cut));
-            v.push(Some(cut >= 0.20));
+            cuts.push(cut);
         }
     }
     if !m.is_empty() {
+        // The paper's 27 % is an average over its sequences, and so is this target.
+        let mean = cuts.iter().sum::<f64>() / cuts.len() as f64;
         out.push(TargetRow {
             paper: AD,
-            target: "per-ray caching cuts the ray–surfel tests by ≥ 20 % (paper 27 %; unordered descent, cache 8 levels up)".into(),
-            measured: m.join(", "),
-            status: status_of(&v),
+            target: "per-ray caching cuts the ray–surfel tests by ≥ 20 % on average over the sequences (paper 27 % on average; unordered descent, the cache climbing from the cached leaf)".into(),
+            measured: format!("mean {:.0} % ({})", 100.0 * mean, m.join(", ")),
+            status: status_of(&[Some(mean >= 0.20)]),
         });
     }
     if !deform.is_empty() {
@@ -926,7 +928,9 @@ mod tests {
             deform_row("bend", "surfel:update=naive", "naive", 100.0, 50.0, None),
             deform_row("bend", "surfel:update=lazy-cache", "lazy-cache", 40.0, 50.0, Some((1.2, 1.03))),
             deform_row("bend", "surfel:update=lazy:ordered=0", "lazy", 60.0, 100.0, Some((1.2, 1.03))),
-            deform_row("bend", "surfel:update=lazy-cache:ordered=0:cache_up=8", "lazy-cache", 60.0, 70.0, Some((1.3, 1.05))),
+            deform_row("bend", "surfel:update=lazy-cache:ordered=0:climb=1", "lazy-cache", 60.0, 70.0, Some((1.3, 1.05))),
+            deform_row("heads", "surfel:update=lazy:ordered=0", "lazy", 60.0, 100.0, Some((1.2, 1.03))),
+            deform_row("heads", "surfel:update=lazy-cache:ordered=0:climb=1", "lazy-cache", 60.0, 85.0, Some((1.2, 1.03))),
         ];
         let t = target_rows(&[&sp, &cb], &d);
         let find = |p: &str| t.iter().find(|r| r.target.starts_with(p)).unwrap_or_else(|| panic!("no '{p}' in {t:?}"));
@@ -945,7 +949,11 @@ mod tests {
         assert!(lc.measured.starts_with("bend 2.50× (192×144, 8 frames)"), "{}", lc.measured);
         assert_eq!(find("updated / tightest").measured, "mean 1.03–1.05, root 1.20–1.30");
         let cache = find("per-ray caching");
-        assert_eq!((cache.measured.as_str(), cache.status), ("bend 30 %", "met"));
+        // Judged on the mean, as the paper's 27 % (one sequence below 20 % does not fail it).
+        assert_eq!((cache.measured.as_str(), cache.status), ("mean 23 % (bend 30 %, heads 15 %)", "met"));
+        let low = [d[2].clone(), deform_row("bend", "surfel:update=lazy-cache:ordered=0:climb=1", "lazy-cache", 60.0, 85.0, None)];
+        let rows = target_rows(&[], &low);
+        assert_eq!(rows.iter().find(|r| r.target.starts_with("per-ray caching")).map(|r| r.status), Some("not met"));
         assert_eq!(find("MLS").status, "met");
         // Nothing measured, nothing claimed.
         assert!(target_rows(&[], &[]).is_empty());
@@ -999,6 +1007,10 @@ mod tests {
         assert_eq!(
             update_label("lazy-cache", "surfel:update=lazy-cache:ordered=0:cache_up=8:frames=16"),
             "lazy-cache, unordered, cache 8 up"
+        );
+        assert_eq!(
+            update_label("lazy-cache", "surfel:update=lazy-cache:ordered=0:climb=1:frames=16"),
+            "lazy-cache, unordered, cache climbs"
         );
     }
 }
