@@ -1071,10 +1071,10 @@ impl DeformTracer {
     }
 
     /// The spheres of inner node n's two children (updating them lazily), and Eq. 11 for n.
+    /// `(leaf1, leaf2)` are the children's kinds, [`Topology::leaf_children`].
     #[inline(always)]
-    fn child_spheres(&self, ii: &Instance, n: usize) -> ((Vec3, f32), (Vec3, f32)) {
+    fn child_spheres(&self, ii: &Instance, n: usize, (leaf1, leaf2): (bool, bool)) -> ((Vec3, f32), (Vec3, f32)) {
         let topo = self.topo(ii);
-        let (leaf1, leaf2) = topo.leaf_children(n);
         let s1 = self.sphere_as(ii, n + 1, leaf1);
         let s2 = self.sphere_as(ii, topo.right[n] as usize, leaf2);
         // A node inside a refitted subtree took Eq. 11 from its final children when it was
@@ -1602,7 +1602,7 @@ impl DeformTracer {
                 continue;
             }
             let (l, r) = (n + 1, topo.right[n] as usize);
-            let (s1, s2) = self.child_spheres(ii, n);
+            let (s1, s2) = self.child_spheres(ii, n, topo.leaf_children(n));
             dc.sphere_tests += 2;
             dc.tests_at(topo.level[l], 2);
             ctr.add(Counter::node_tests, 2);
@@ -1835,7 +1835,8 @@ impl DeformTracer {
                 continue;
             }
             let (l, r) = (n + 1, topo.right[n] as usize);
-            let (s1, s2) = self.child_spheres(ii, n);
+            let (leaf1, leaf2) = topo.leaf_children(n);
+            let (s1, s2) = self.child_spheres(ii, n, (leaf1, leaf2));
             let cnt = 2 * m.count_ones() as u64;
             dc.sphere_tests += cnt;
             dc.tests_at(lv + 1, cnt);
@@ -1844,7 +1845,6 @@ impl DeformTracer {
             let (m2, e2) = pk.test(s2.0, s2.1, tb);
             let (m1, m2) = (m1 & m, m2 & m);
             // Levels past 126 share the counters' last level anyway (`LEVELS`).
-            let (leaf1, leaf2) = topo.leaf_children(n);
             let lv = lv.min(IS_LEAF - 2) + 1;
             let (lv1, lv2) = (lv | if leaf1 { IS_LEAF } else { 0 }, lv | if leaf2 { IS_LEAF } else { 0 });
             match (m1 != 0, m2 != 0) {
