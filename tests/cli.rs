@@ -9,8 +9,7 @@ fn lodtrace(args: &[&str]) -> (i32, String, String) {
     (o.status.code().unwrap_or(-1), String::from_utf8_lossy(&o.stdout).into(), String::from_utf8_lossy(&o.stderr).into())
 }
 
-mod common;
-use common::Scratch;
+use crate::common::Scratch;
 
 /// A fresh, empty folder unique to this test and process, removed when the test passes.
 fn tmp(name: &str) -> Scratch {

@@ -1,6 +1,6 @@
 //! Integration tests of the Adams et al. 2005 deform tracer (`lodtrace::deform`): containment
 //! of the lazily updated spheres, agreement of the update modes, MLS known answers, clipping,
-//! simulation stability, bad input. Small sizes: `cargo test --release --test deform`.
+//! simulation stability, bad input. Small sizes: `cargo test --release --test suite deform::`.
 //!
 //! `measure` (ignored) prints per-frame figures; see its doc comment.
 
@@ -883,7 +883,7 @@ fn early_clip_keeps_every_hit() {
 
 /// Per-frame figures for one sequence (ignored by default):
 /// `DEFORM_SEQ=armadillo-ball DEFORM_DETAIL=1 DEFORM_FRAMES=30 DEFORM_W=256 DEFORM_H=192 \
-///  cargo test --release --test deform measure -- --ignored --nocapture`
+///  cargo test --release --test suite deform::measure -- --ignored --nocapture`
 /// Ablations (default 1): DEFORM_EQ11, DEFORM_RIGID, DEFORM_ORDERED, DEFORM_RECENTRED,
 /// DEFORM_NODE_ROTATION, DEFORM_RECENTRE_EQ11; DEFORM_EXACT_BELOW (default 4096);
 /// DEFORM_CACHE_UP (levels above the leaf), DEFORM_SHADOWS (one shadow ray per hit).

@@ -8,8 +8,7 @@ use std::process::Command;
 const W: u32 = 64;
 const H: u32 = 48;
 
-mod common;
-use common::Scratch;
+use crate::common::Scratch;
 
 /// A fresh, empty folder unique to this test and process, removed when the test passes.
 fn tmp(name: &str) -> Scratch {
