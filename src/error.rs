@@ -110,6 +110,57 @@ pub fn check_input_file(path: &std::path::Path) -> Result<()> {
     }
 }
 
+/// Refuses work that would need about `bytes` of memory when this process cannot have that
+/// much: the smaller of the system's available memory (`MemAvailable`) and what the address
+/// space limit (`ulimit -v`) leaves. A failed allocation aborts without an error line; this
+/// check turns the predictable ones (image sizes, decoded images) into exit 2. Where the
+/// limits cannot be read, nothing is refused.
+pub fn check_memory(bytes: u64, what: &str) -> std::result::Result<(), String> {
+    match memory_available() {
+        Some(avail) if bytes > avail => {
+            Err(format!("{what} needs about {:.1} GB of memory, {:.1} GB is available", bytes as f64 / 1e9, avail as f64 / 1e9))
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Bytes this process can still allocate, if known (Linux: `/proc`, `getrlimit`).
+fn memory_available() -> Option<u64> {
+    let kb = |text: &str, key: &str| -> Option<u64> {
+        let line = text.lines().find(|l| l.starts_with(key))?;
+        line[key.len()..].trim().trim_end_matches("kB").trim().parse::<u64>().ok().map(|k| k * 1024)
+    };
+    let sys = std::fs::read_to_string("/proc/meminfo").ok().and_then(|t| kb(&t, "MemAvailable:"));
+    #[cfg(unix)]
+    let limit = {
+        let mut rl = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
+        // SAFETY: getrlimit writes the struct it is given.
+        let ok = unsafe { libc::getrlimit(libc::RLIMIT_AS, &mut rl) } == 0;
+        if ok && rl.rlim_cur != libc::RLIM_INFINITY {
+            let used = std::fs::read_to_string("/proc/self/status").ok().and_then(|t| kb(&t, "VmSize:")).unwrap_or(0);
+            Some((rl.rlim_cur as u64).saturating_sub(used))
+        } else {
+            None
+        }
+    };
+    #[cfg(not(unix))]
+    let limit: Option<u64> = None;
+    match (sys, limit) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
+    }
+}
+
+/// `s` on one line: control characters (a newline in a file name or an option's value,
+/// echoed in the message) are written as escapes (`\n`), so an error stays one line.
+pub fn one_line(s: &str) -> std::borrow::Cow<'_, str> {
+    if s.chars().any(char::is_control) {
+        s.chars().map(|c| if c.is_control() { c.escape_default().to_string() } else { c.to_string() }).collect::<String>().into()
+    } else {
+        s.into()
+    }
+}
+
 /// `eprintln!` that cannot panic: a status or error line to standard error, dropped when
 /// that fails (`2> /dev/full`). A run's outcome is its exit code and its files; a status
 /// line that cannot be shown must not turn a finished run into a panic that leaves its

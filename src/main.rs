@@ -11,7 +11,7 @@ fn main() {
     }
     #[cfg(unix)]
     interrupts();
-    let cli = match lodtrace::cli::Cli::try_parse() {
+    let cli = match lodtrace::cli::Cli::try_parse_from(join_negative_values(std::env::args_os().collect())) {
         Ok(c) => c,
         Err(e) => match e.kind() {
             ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
@@ -43,12 +43,49 @@ fn main() {
                     .filter(|l| !l.is_empty() && !l.starts_with("tip:"))
                     .collect();
                 let msg = parts.join(" ");
-                lodtrace::status!("lodtrace: error: {}", msg.trim_start_matches("error: "));
+                lodtrace::status!("lodtrace: error: {}", lodtrace::error::one_line(msg.trim_start_matches("error: ")));
                 std::process::exit(2);
             }
         },
     };
     std::process::exit(lodtrace::cli::run(cli));
+}
+
+/// `--opt -1e-3` as `--opt=-1e-3`: clap takes a value starting with '-' for an option only
+/// when it looks like a plain number, so `-1e-3`, `-.5`, `-inf` and `-1,0,1,1` were reported
+/// as unknown arguments ('-1') instead of reaching the option's own range check. A value is
+/// joined to the long option before it when that option takes a value and every
+/// comma-separated piece of the value parses as a number.
+fn join_negative_values(args: Vec<std::ffi::OsString>) -> Vec<std::ffi::OsString> {
+    let cmd = <lodtrace::cli::Cli as clap::CommandFactory>::command();
+    let sub = args.iter().skip(1).filter_map(|a| a.to_str()).find(|a| !a.starts_with('-')).and_then(|n| cmd.find_subcommand(n));
+    let takes_value = |long: &str| {
+        let find = |c: &clap::Command| c.get_arguments().find(|a| a.get_long() == Some(long)).map(|a| a.get_action().takes_values());
+        sub.and_then(find).or_else(|| find(&cmd)).unwrap_or(false)
+    };
+    let numeric = |v: &str| v.starts_with('-') && v.split(',').all(|p| p.trim().parse::<f64>().is_ok());
+    let mut out = Vec::with_capacity(args.len());
+    let mut it = args.into_iter().peekable();
+    let mut options = true;
+    while let Some(a) = it.next() {
+        options &= a != "--";
+        let joined = match (a.to_str(), it.peek().and_then(|v| v.to_str())) {
+            (Some(o), Some(v))
+                if options && o.len() > 2 && o.starts_with("--") && !o.contains('=') && numeric(v) && takes_value(&o[2..]) =>
+            {
+                Some(format!("{o}={v}"))
+            }
+            _ => None,
+        };
+        match joined {
+            Some(j) => {
+                it.next();
+                out.push(j.into());
+            }
+            None => out.push(a),
+        }
+    }
+    out
 }
 
 /// Ctrl-C and SIGTERM end a run as a failed run ends: its outputs and the folders it created

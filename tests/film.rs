@@ -200,6 +200,14 @@ fn read_bad_files_is_err() {
     let cut = d.join("cut.png");
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
     assert!(io::read_image_linear(&cut).is_err());
+    // A CRC error in the header chunk: named plainly, without the decoder's Debug dump
+    // ("while decoding ChunkType { type: IHDR, critical: true, ... }").
+    let mut crc = bytes.clone();
+    crc[29] ^= 1; // the first byte of IHDR's CRC (after the 8-byte signature, length, type and 13 data bytes)
+    let p = d.join("crc.png");
+    std::fs::write(&p, &crc).unwrap();
+    let e = io::read_image_linear(&p).unwrap_err().to_string();
+    assert!(e.contains("crc.png") && e.contains("IHDR") && !e.contains('{'), "{e}");
 }
 
 fn lodtrace(args: &[&std::ffi::OsStr]) -> std::process::Output {

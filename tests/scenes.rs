@@ -452,7 +452,15 @@ fn bad_input_exits_2_with_one_error_line_and_no_output() {
     let bad_toml = f("bad.toml", &format!("{GOOD_MESH}[[instances]]\ntarget = \"nope\"\n"));
     let missing = d.join("missing.off").to_str().unwrap().to_string();
     let no_assets = d.join("no-assets").to_str().unwrap().to_string();
+    // A newline in a missing file's name is echoed as "\n": the error stays one line.
+    let newline = d.join("no\nsuch.off").to_str().unwrap().to_string();
     let cases: Vec<BadCase> = vec![
+        ("newline_in_the_file_name", &newline, vec![], vec![]),
+        // Negative values clap does not take for numbers reach the option's own check
+        // (they were "unexpected argument '-1' found").
+        ("negative_exponent", "plane", vec!["--method", "lod", "--lod-a", "-1e-3"], vec![]),
+        ("minus_infinity", "plane", vec!["--fovy", "-inf"], vec![]),
+        ("leading_dot", "plane", vec!["--fovy", "-.5"], vec![]),
         ("missing_file", &missing, vec![], vec![]),
         ("truncated_off", &truncated, vec![], vec![]),
         ("index_out_of_range", &out_of_range, vec![], vec![]),
@@ -482,8 +490,40 @@ fn bad_input_exits_2_with_one_error_line_and_no_output() {
         &[],
     );
     assert!(r.stderr.contains("bad.toml") && r.stderr.contains("unknown target 'nope'"), "{}", r.stderr);
+    let r = lodtrace(&["render", "plane", "--method", "lod", "--lod-a", "-1e-3", "--width", "16", "--height", "16"], &[]);
+    assert!(r.stderr.contains("--lod-a -0.001 out of range"), "{}", r.stderr);
     let _ = std::fs::remove_dir_all(&d);
     assert!(failures.is_empty(), "bad-input contract broken:\n{}", failures.join("\n"));
+}
+
+/// An image this process has not the memory for is refused before anything is allocated
+/// (exit 2, one line); a failed allocation aborted with exit 134 and a backtrace. The
+/// address-space limit (`ulimit -v`, 4 GB) is what the check reads here.
+#[test]
+fn an_image_larger_than_the_memory_is_refused() {
+    let d = scratch("memory");
+    let out = d.join("big.png");
+    let cmd = format!("ulimit -v 4000000 && exec \"$0\" render plane --width 11585 --height 11585 --quiet --out \"$1\"");
+    let o = Command::new("sh").args(["-c", &cmd, env!("CARGO_BIN_EXE_lodtrace"), out.to_str().unwrap()]).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.lines().count() == 1 && err.contains("needs about") && err.contains("GB of memory"), "{err}");
+    assert!(!out.exists());
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// A mesh file whose name holds a newline: the scene's name (summary line, table rows,
+/// bench's image names) has it replaced, so every line stays one line.
+#[test]
+fn a_newline_in_a_mesh_file_name_is_not_echoed() {
+    let d = scratch("newline-name");
+    let mesh = d.join("a\nb.off");
+    std::fs::write(&mesh, "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n").unwrap();
+    let out = d.join("x.png");
+    let r = lodtrace(&["render", mesh.to_str().unwrap(), "--width", "16", "--height", "16", "--out", out.to_str().unwrap()], &[]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(r.stderr.contains("a_b:") && !r.stderr.contains("a\nb"), "{}", r.stderr);
+    let _ = std::fs::remove_dir_all(&d);
 }
 
 #[test]

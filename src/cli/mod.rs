@@ -212,7 +212,7 @@ pub fn run(cli: Cli) -> i32 {
             // An error caused by an interrupt's clean-up (its folder removed under a writer)
             // is not reported: the signal thread reports the interrupt and ends the process.
             crate::film::io::halt_if_interrupted();
-            crate::status!("lodtrace: error: {e}");
+            crate::status!("lodtrace: error: {}", crate::error::one_line(&e.to_string()));
             2
         }
     }

@@ -31,8 +31,18 @@ fn scalar(p: &Property) -> Option<f32> {
 fn one_line(msg: &str) -> String {
     let head = msg.split("Error: Custom").next().unwrap_or(msg);
     let head = head.split("Error: ParseError").next().unwrap_or(head);
+    // A short binary body: ply-rs appends the io::Error's Debug form.
+    let (head, eof) = match head.split_once("Error: Error {") {
+        Some((h, tail)) => (h, tail.contains("UnexpectedEof")),
+        None => (head, false),
+    };
     // ply-rs spells it so.
-    head.replace("Couln't", "Could not").split_whitespace().collect::<Vec<_>>().join(" ")
+    let msg = head.replace("Couln't", "Could not").split_whitespace().collect::<Vec<_>>().join(" ");
+    if eof {
+        format!("{} (the file ends early)", msg.trim_end_matches('.'))
+    } else {
+        msg
+    }
 }
 
 /// A PLY body must hold exactly what its header declares: ply-rs reads the declared counts
@@ -159,11 +169,7 @@ pub fn read_ply<R: std::io::BufRead>(r: &mut R, path: &Path) -> Result<SurfelMod
             s.r[i] = out.last().map(|x| x.1.sqrt()).unwrap_or(1.0).max(1e-12);
         }
     }
-    let mut m = SurfelModel::single(
-        &path.file_stem().map(|x| x.to_string_lossy().to_string()).unwrap_or_else(|| "points".into()),
-        s,
-        [0.7, 0.7, 0.7],
-    );
+    let mut m = SurfelModel::single(&crate::scene::load::stem_name(path, "points"), s, [0.7, 0.7, 0.7]);
     m.validate()?;
     Ok(m)
 }
@@ -281,6 +287,24 @@ mod tests {
         assert!(read_ply(&mut with_r(30.0).as_bytes(), Path::new("t.ply")).is_ok());
         match read_ply(&mut with_r(1e20).as_bytes(), Path::new("t.ply")) {
             Err(DeformError::BadSurfel { index: 7, msg }) => assert!(msg.contains("wider than the whole model"), "{msg}"),
+            e => panic!("{:?}", e.map(|m| m.len())),
+        }
+    }
+
+    /// A binary body that ends inside a list: one plain line, not ply-rs's Debug dump of the
+    /// io::Error ("Error { kind: UnexpectedEof, ... }").
+    #[test]
+    fn a_short_binary_list_says_the_file_ends_early() {
+        let mut b = b"ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nelement face 1\nproperty list uint int vertex_indices\nend_header\n".to_vec();
+        for i in 0..4 {
+            for v in [i as f32, (i * i) as f32, 1.0, 0.0, 0.0, 1.0] {
+                b.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        b.extend_from_slice(&3u32.to_le_bytes());
+        b.extend_from_slice(&0i32.to_le_bytes());
+        match read_ply(&mut b.as_slice(), Path::new("t.ply")) {
+            Err(DeformError::Ply { msg, .. }) => assert!(msg.contains("ends early") && !msg.contains('{'), "{msg}"),
             e => panic!("{:?}", e.map(|m| m.len())),
         }
     }

@@ -139,7 +139,8 @@ impl MethodSpec {
         let bad = |m: String| Error::Usage(format!("method spec '{s}': {m}"));
         let mut parts = s.trim().split(':');
         let m = parts.next().unwrap_or("");
-        let method = Method::from_str(m, true)
+        // Case-sensitive, as `render --method`.
+        let method = Method::from_str(m, false)
             .map_err(|_| bad(format!("unknown method '{m}' (whitted, distributed, multires, cone, lod, surfel)")))?;
         let mut spec = MethodSpec {
             text: s.trim().to_string(),
@@ -369,10 +370,14 @@ impl MethodSpec {
 }
 
 pub fn parse_list(s: &str) -> Result<Vec<MethodSpec>> {
-    let v: Vec<MethodSpec> = s.split(',').filter(|p| !p.trim().is_empty()).map(MethodSpec::parse).collect::<Result<_>>()?;
-    if v.is_empty() {
+    if s.trim().is_empty() {
         return Err(Error::Usage("--methods is empty".into()));
     }
+    // An empty item (`whitted,,cone`, a trailing comma) is a typo, as in `--sizes`.
+    if s.split(',').any(|p| p.trim().is_empty()) {
+        return Err(Error::Usage(format!("--methods '{s}': an empty item (two commas, or one at either end)")));
+    }
+    let v: Vec<MethodSpec> = s.split(',').map(MethodSpec::parse).collect::<Result<_>>()?;
     // Images and table rows are named after the spec.
     for (i, m) in v.iter().enumerate() {
         if let Some(o) = v[..i].iter().find(|o| o.slug() == m.slug()) {
@@ -705,7 +710,7 @@ pub fn bench(a: &BenchArgs) -> Result<BenchReport> {
     }
     // Outputs are named after the scenes: two files with one stem (`a/x.obj b/x.off`) would
     // overwrite each other's images (stop 46's sweep).
-    let stem = |s: &str| std::path::Path::new(s).file_stem().map_or(s.to_string(), |x| x.to_string_lossy().to_string());
+    let stem = |s: &str| crate::scene::load::stem_name(std::path::Path::new(s), s);
     for (i, s) in a.scenes.iter().enumerate() {
         if let Some(t) = a.scenes[..i].iter().find(|t| stem(t) == stem(s)) {
             return Err(Error::Usage(format!(
@@ -1522,6 +1527,10 @@ mod tests {
         assert_eq!(v[2].threads, Some(1));
         assert_eq!(v[2].packet, 1);
         assert!(parse_list("nope").is_err());
+        // Empty items are typos, not skipped; names are case-sensitive, as `render --method`.
+        for bad in ["whitted,", ",whitted", "whitted,,cone", " , ", "WHITTED", "Whitted,whitted"] {
+            assert!(parse_list(bad).is_err(), "{bad}");
+        }
         assert!(parse_list("whitted:gpu").is_err());
         assert!(parse_list("whitted:spp=x").is_err());
         // Refused when the list is read, before any method runs (a helper saw three minutes of

@@ -449,10 +449,27 @@ pub fn write_exr_scalar(path: &Path, w: u32, h: u32, v: &[f32]) -> Result<()> {
 /// linear RGB, several of which `compare` holds at once.
 pub const MAX_READ_PIXELS: u64 = 100_000_000;
 
+/// A decoder's message without the Debug dump the png crate appends: "... while decoding
+/// ChunkType { type: IHDR, critical: true, ... } chunk." becomes "... in the IHDR chunk".
+fn plain_decoder_message(msg: &str) -> String {
+    match msg.split_once(" while decoding ChunkType {") {
+        Some((head, tail)) => {
+            let ty = tail.trim_start().strip_prefix("type:").and_then(|t| t.split(',').next()).map(str::trim);
+            match ty {
+                Some(t) => format!("{head} in the {t} chunk"),
+                None => head.to_string(),
+            }
+        }
+        None => msg.to_string(),
+    }
+}
+
 /// Reads a PNG (sRGB-encoded, converted to linear) or an EXR (already linear) as
 /// `(width, height, linear RGB row-major)`. Alpha is dropped.
 pub fn read_image_linear(path: &Path) -> Result<(u32, u32, Vec<Vec3>)> {
-    let bad = |e: &dyn std::fmt::Display| Error::Image(format!("{}: cannot read image: {e}", path.display()));
+    let bad = |e: &dyn std::fmt::Display| {
+        Error::Image(format!("{}: cannot read image: {}", path.display(), plain_decoder_message(&e.to_string())))
+    };
     crate::error::check_input_file(path)?;
     let reader = image::ImageReader::open(path).map_err(|e| Error::io(path, e))?;
     let reader = reader.with_guessed_format().map_err(|e| Error::io(path, e))?;
@@ -469,6 +486,9 @@ pub fn read_image_linear(path: &Path) -> Result<(u32, u32, Vec<Vec3>)> {
         if px > MAX_READ_PIXELS {
             return Err(bad(&format!("{w}x{h} is too large to read (at most {} Mpixels)", MAX_READ_PIXELS / 1_000_000)));
         }
+        // Decoded, converted and compared: about 100 bytes per pixel (`compare`, 512² against
+        // 2048², `/usr/bin/time -f %M`).
+        crate::error::check_memory(px * 100, &format!("{w}x{h}")).map_err(|m| bad(&m))?;
     }
     let mut reader = reader;
     let mut limits = image::Limits::default();

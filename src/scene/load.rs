@@ -48,6 +48,14 @@ pub fn load_mesh(path: &Path, mat: u32) -> Result<Mesh> {
     }
 }
 
+/// The name a scene, mesh or point set takes from its file: the file's stem, with control
+/// characters (a newline in the file name) replaced by `_`, since the name heads table rows
+/// and summary lines and names output files; `default` when the path has no stem.
+pub fn stem_name(path: &Path, default: &str) -> String {
+    path.file_stem()
+        .map_or_else(|| default.to_string(), |s| s.to_string_lossy().chars().map(|c| if c.is_control() { '_' } else { c }).collect())
+}
+
 fn read_to_string(path: &Path) -> Result<String> {
     crate::error::check_input_file(path)?;
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
@@ -102,7 +110,7 @@ pub fn load_off(path: &Path, mat: u32) -> Result<Mesh> {
     if nv > 100_000_000 || nf > 200_000_000 {
         return Err(Error::parse(path, "absurd vertex or face count"));
     }
-    let mut mesh = Mesh::new(path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default());
+    let mut mesh = Mesh::new(stem_name(path, ""));
     let dims = if homogeneous { 4 } else { 3 };
     for k in 0..nv {
         let (line, t) = lines.next().ok_or_else(|| Error::parse(path, format!("truncated: {k} of {nv} vertices")))?;
@@ -348,7 +356,7 @@ pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
         crate::error::warn(format!("{}: materials not loaded ({e}); using the default material", path.display()));
         Vec::new()
     });
-    let mut mesh = Mesh::new(path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_default());
+    let mut mesh = Mesh::new(stem_name(path, ""));
     let mut normals_ok = true;
     for m in &models {
         let mm = &m.mesh;
