@@ -20,6 +20,10 @@ pub struct DemoArgs {
     /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
+    /// No progress bars or progress lines on stderr (the tables on stdout, warnings such as
+    /// a skipped scene, and an error stay).
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 struct Job {
@@ -106,7 +110,7 @@ fn bench_args(a: &DemoArgs, job: &Job) -> BenchArgs {
         height: job.height,
         threads: a.threads,
         repeat: 1,
-        quiet: false,
+        quiet: a.quiet,
         sweep: job.sweep.clone(),
         // Only a job with a sweep may bound it (bench refuses `--sweep-max-spp` without one).
         sweep_max_spp: (!job.sweep.is_empty()).then_some(if a.quick { 64 } else { 128 }),
@@ -135,14 +139,16 @@ fn run_in(a: &DemoArgs) -> Result<()> {
             skipped.push(format!("{} ({e})", job.scene));
             continue;
         }
-        crate::status!(
-            "demo: {} at {}x{}: {} (reference {})",
-            job.scene,
-            job.width,
-            job.height,
-            job.methods,
-            job.reference.as_deref().unwrap_or("none")
-        );
+        if !a.quiet {
+            crate::status!(
+                "demo: {} at {}x{}: {} (reference {})",
+                job.scene,
+                job.width,
+                job.height,
+                job.methods,
+                job.reference.as_deref().unwrap_or("none")
+            );
+        }
         let report = bench::bench(&bench_args(a, &job))?;
         bench::print_table(&report)?;
         sections.push((job, report));
@@ -162,7 +168,9 @@ fn run_in(a: &DemoArgs) -> Result<()> {
     html = html.replace("</body></html>", &format!("{deform}</body></html>"));
     let p = a.out.join("index.html");
     crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, html).map_err(|e| Error::io(&p, e)))?;
-    crate::status!("demo: open {}", p.display());
+    if !a.quiet {
+        crate::status!("demo: open {}", p.display());
+    }
     Ok(())
 }
 
@@ -197,7 +205,7 @@ fn deform_section(a: &DemoArgs, skipped: &mut Vec<String>) -> Result<(String, Ve
     crate::film::io::create_out_dir(&dir)?;
     let mut rows = Vec::new();
     for seq in crate::deform::Sequence::BUILTIN {
-        match super::deform_bench::run(&[seq.to_string()], &specs, w, h, a.threads, 1, Some(&dir), false) {
+        match super::deform_bench::run(&[seq.to_string()], &specs, w, h, a.threads, 1, Some(&dir), a.quiet) {
             Ok(r) => rows.extend(r),
             // A sequence whose mesh is missing is skipped; any other failure (a write, a
             // plot) is the demo's.
@@ -822,7 +830,7 @@ mod tests {
     #[test]
     fn every_demo_job_passes_the_bench_checks() {
         for quick in [true, false] {
-            let a = DemoArgs { out: std::env::temp_dir().join("lodtrace-demo-plan"), quick, threads: 0 };
+            let a = DemoArgs { out: std::env::temp_dir().join("lodtrace-demo-plan"), quick, threads: 0, quiet: false };
             for job in jobs(quick) {
                 if crate::scene::builtin::get(job.scene).is_err() {
                     continue;
