@@ -1350,6 +1350,26 @@ fn stop_38_bad_inputs_are_one_line_exit_2() {
     let lit: Vec<[u8; 3]> = img.pixels().map(|q| q.0).filter(|q| q.iter().any(|&c| c > 100)).collect();
     let red = lit.iter().filter(|q| q[1] < 10 && q[2] < 10).count();
     assert!(red > 20 && red == lit.len(), "{red} red of {} lit pixels", lit.len());
+    // Faces with no material of the MTL (`usemtl` of a missing name) take the default grey
+    // with a warning; until stop 61 they silently took the MTL's first material (red).
+    std::fs::write(p("nomat.obj"), format!("mtllib red.mtl\nusemtl missing\n{quad}")).unwrap();
+    let (code, _, err) = lodtrace(&["render", &p("nomat.obj"), "--width", "32", "--height", "24", "--quiet", "--out", &p("g.png")]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("3 triangles name no material"), "{err}");
+    let img = image::open(p("g.png")).unwrap().to_rgb8();
+    let lit: Vec<[u8; 3]> = img.pixels().map(|q| q.0).filter(|q| q.iter().any(|&c| c > 100)).collect();
+    assert!(lit.len() > 20 && lit.iter().all(|q| q[1] > 60), "red pixels on a default-grey mesh");
+    // `Tr` (1 − d) is read and checked like `d`: 5 is an error, 0.5 loads.
+    for (tr, code_wanted) in [("Tr 5", 2), ("Tr 0.5", 0), ("Tr x", 2)] {
+        std::fs::write(p("tr.mtl"), format!("newmtl red\nKd 1 0 0\n{tr}\n")).unwrap();
+        std::fs::write(p("tr.obj"), format!("mtllib tr.mtl\nusemtl red\n{quad}")).unwrap();
+        let (code, _, err) = lodtrace(&["render", &p("tr.obj"), "--width", "16", "--height", "12", "--quiet", "--out", &p("t.png")]);
+        assert_eq!(code, code_wanted, "{tr}: {err}");
+        if code_wanted == 2 {
+            one_error_line(&err);
+            assert!(err.contains("Tr (transparency)"), "{tr}: {err}");
+        }
+    }
     // A scene file's own material on that OBJ wins over its MTL (until stop 54 the triangles
     // took the scene material's index plus their MTL index: "uses material 2, but there are
     // only 2").

@@ -40,7 +40,7 @@ pub fn load_mesh(path: &Path, mat: u32) -> Result<Mesh> {
     let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
     match ext.as_deref() {
         Some("off") => load_off(path, mat),
-        Some("obj") => load_obj(path, mat).map(|(mut m, _)| {
+        Some("obj") => load_obj(path, mat, mat).map(|(mut m, _)| {
             m.mat.iter_mut().for_each(|x| *x = mat);
             m
         }),
@@ -304,10 +304,11 @@ fn mtl_colours_complete(text: &[u8]) -> std::result::Result<Vec<u8>, tobj::LoadE
 }
 
 /// An OBJ with its MTL materials, for a scene that appends them after its first `base`
-/// materials: triangles take `base` + their MTL index; without an MTL, material 0 (the
-/// scene's default).
+/// materials: triangles take `base` + their MTL index; without an MTL, or without a material
+/// of it (faces before any `usemtl`, or after one naming a material the MTL lacks), material
+/// 0 (the scene's default).
 pub fn load_obj_with_materials(path: &Path, base: u32) -> Result<(Mesh, Vec<Material>)> {
-    let (mut mesh, mtls) = load_obj(path, base)?;
+    let (mut mesh, mtls) = load_obj(path, base, 0)?;
     if mtls.is_empty() {
         mesh.mat.iter_mut().for_each(|x| *x = 0);
     }
@@ -315,8 +316,9 @@ pub fn load_obj_with_materials(path: &Path, base: u32) -> Result<(Mesh, Vec<Mate
 }
 
 /// OBJ via tobj (triangulated, single index). Returns the mesh and the MTL materials it uses;
-/// triangle materials are `mat` + the MTL material index (or `mat` when there is no MTL).
-pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
+/// triangle materials are `mat` + the MTL material index, or `default` for a triangle with no
+/// MTL material. (Until stop 61 such a triangle took `mat` + 0, the MTL's first material.)
+pub fn load_obj(path: &Path, mat: u32, default: u32) -> Result<(Mesh, Vec<Material>)> {
     crate::error::check_input_file(path)?;
     // Lines (`l`) and points (`p`) are no surface: tobj reads `l` like `f` (a polyline of 3
     // or more vertices became a filled polygon), so [`SurfaceLines`] drops them first.
@@ -358,6 +360,7 @@ pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
     });
     let mut mesh = Mesh::new(stem_name(path, ""));
     let mut normals_ok = true;
+    let mut unmatched = 0usize;
     for m in &models {
         let mm = &m.mesh;
         if mm.positions.len() % 3 != 0 || mm.indices.len() % 3 != 0 {
@@ -378,7 +381,13 @@ pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
         } else {
             normals_ok = false;
         }
-        let tm = mat + mm.material_id.map(|i| i as u32).unwrap_or(0);
+        let tm = match mm.material_id {
+            Some(i) => mat + i as u32,
+            None => {
+                unmatched += mm.indices.len() / 3;
+                default
+            }
+        };
         for t in mm.indices.chunks_exact(3) {
             if t.iter().any(|&i| i >= nv) {
                 return Err(Error::parse(path, format!("face index out of range (vertices: {nv})")));
@@ -390,6 +399,13 @@ pub fn load_obj(path: &Path, mat: u32) -> Result<(Mesh, Vec<Material>)> {
         mesh.nx.clear();
         mesh.ny.clear();
         mesh.nz.clear();
+    }
+    if unmatched > 0 && !mtls.is_empty() {
+        crate::error::warn(format!(
+            "{}: {unmatched} triangle{} name no material of the MTL file (faces before any `usemtl`, or a `usemtl` of a name it lacks); they take the default material",
+            path.display(),
+            if unmatched == 1 { "" } else { "s" }
+        ));
     }
     let materials = mtls.iter().map(|m| material_from_mtl(path, m)).collect::<Result<Vec<_>>>()?;
     Ok((finish_mesh(path, mesh)?, materials))
@@ -412,12 +428,21 @@ fn material_from_mtl(path: &Path, m: &tobj::Material) -> Result<Material> {
     if m.dissolve.is_some_and(|v| !(0.0..=1.0).contains(&v)) {
         return bad("d (dissolve) must lie in [0, 1]");
     }
+    // `Tr` (transparency, 1 − d), which many exporters write instead of `d`; tobj keeps it
+    // as an unknown parameter. `d` wins where both are given.
+    let tr = match m.unknown_param.get("Tr") {
+        Some(t) => match t.trim().parse::<f32>() {
+            Ok(v) if (0.0..=1.0).contains(&v) => Some(v),
+            _ => return bad(&format!("Tr (transparency) must be one number in [0, 1], not '{t}'")),
+        },
+        None => None,
+    };
     if m.optical_density.is_some_and(|v| !(v.is_finite() && v > 0.0)) {
         return bad("Ni (index of refraction) must be finite and > 0");
     }
     let kd = m.diffuse.map(Vec3::from).unwrap_or(Vec3::splat(0.7));
     let ks = m.specular.map(|s| Vec3::from(s).max_element()).unwrap_or(0.0);
-    let d = m.dissolve.unwrap_or(1.0);
+    let d = m.dissolve.or(tr.map(|t| 1.0 - t)).unwrap_or(1.0);
     Ok(Material {
         name: m.name.clone(),
         color: kd,
@@ -500,7 +525,7 @@ mod tests {
         let zero = dir.join("zero.obj");
         std::fs::write(&zero, "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nvn 0 0 0\nf 1//1 2//2 3//1\n").unwrap();
         for p in [&p, &zero] {
-            let (m, _) = load_obj(p, 0).unwrap();
+            let (m, _) = load_obj(p, 0, 0).unwrap();
             for i in 0..m.vertex_count() as u32 {
                 let n = m.normal(i);
                 assert!((n.length() - 1.0).abs() < 1e-4, "{}: vertex {i}: normal {n}", p.display());
@@ -516,10 +541,10 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let p = dir.join("tiny.obj");
         std::fs::write(&p, "v 0 0 0\nv 1e-25 0 0\nv 0 1e-25 0\nf 1 2 3\n").unwrap();
-        let e = load_obj(&p, 0).unwrap_err().to_string();
+        let e = load_obj(&p, 0, 0).unwrap_err().to_string();
         assert!(e.contains("spans only 1.000e-25 units; scale it up"), "{e}");
         std::fs::write(&p, "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n").unwrap();
-        let e = load_obj(&p, 0).unwrap_err().to_string();
+        let e = load_obj(&p, 0, 0).unwrap_err().to_string();
         assert!(e.contains("every triangle is degenerate"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
