@@ -27,8 +27,9 @@ fn scalar(p: &Property) -> Option<f32> {
 }
 
 /// `ply-rs`'s multi-line parse message (line, offending text, nested `Custom { .. }`
-/// error) as one line: whitespace collapsed, the nested debug dump dropped.
-fn one_line(msg: &str) -> String {
+/// error, or a short body's io::Error) as one line: whitespace collapsed, the nested debug
+/// dumps dropped (not [`crate::error::one_line`], which only escapes control characters).
+fn plain_ply_message(msg: &str) -> String {
     let head = msg.split("Error: Custom").next().unwrap_or(msg);
     let head = head.split("Error: ParseError").next().unwrap_or(head);
     // A short binary body: ply-rs appends the io::Error's Debug form.
@@ -121,7 +122,7 @@ pub fn read_ply<R: std::io::BufRead>(r: &mut R, path: &Path) -> Result<SurfelMod
     r.read_to_end(&mut buf).map_err(|e| err(e.to_string()))?;
     body_matches_header(&buf).map_err(err)?;
     let parser = Parser::<DefaultElement>::new();
-    let ply = parser.read_ply(&mut buf.as_slice()).map_err(|e| err(format!("parse error: {}", one_line(&e.to_string()))))?;
+    let ply = parser.read_ply(&mut buf.as_slice()).map_err(|e| err(format!("parse error: {}", plain_ply_message(&e.to_string()))))?;
     let verts = ply.payload.get("vertex").ok_or_else(|| err("no 'vertex' element".into()))?;
     let get = |e: &DefaultElement, k: &str, i: usize| -> Result<Option<f32>, DeformError> {
         match e.get(k) {
