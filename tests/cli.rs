@@ -1359,6 +1359,13 @@ fn stop_38_bad_inputs_are_one_line_exit_2() {
     let img = image::open(p("g.png")).unwrap().to_rgb8();
     let lit: Vec<[u8; 3]> = img.pixels().map(|q| q.0).filter(|q| q.iter().any(|&c| c > 100)).collect();
     assert!(lit.len() > 20 && lit.iter().all(|q| q[1] > 60), "red pixels on a default-grey mesh");
+    // A value the scene check refuses names the OBJ (it said only "material 'red': ...").
+    std::fs::write(p("huge.mtl"), "newmtl red\nKd 1e30 0 0\n").unwrap();
+    std::fs::write(p("huge.obj"), format!("mtllib huge.mtl\nusemtl red\n{quad}")).unwrap();
+    let (code, _, err) = lodtrace(&["render", &p("huge.obj"), "--width", "16", "--height", "12", "--quiet", "--out", &p("h.png")]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains("huge.obj: material 'red'"), "{err}");
     // `Tr` (1 − d) is read and checked like `d`: 5 is an error, 0.5 loads.
     for (tr, code_wanted) in [("Tr 5", 2), ("Tr 0.5", 0), ("Tr x", 2)] {
         std::fs::write(p("tr.mtl"), format!("newmtl red\nKd 1 0 0\n{tr}\n")).unwrap();

@@ -26,9 +26,14 @@ pub fn load_scene(spec: &str) -> Result<Scene> {
         Some("ply") => {
             return Err(Error::parse(p, "point files (.ply) are surfel models: render them with `--method surfel` or `lodtrace animate`; the other methods take .obj, .off or .toml"))
         }
-        _ => super::builtin::get(spec)?,
+        _ => return super::builtin::get(spec).and_then(|mut s| s.validate().map(|_| s)),
     };
-    scene.validate()?;
+    // A file's scene names the file: "material 'm': ..." alone did not say which MTL or
+    // TOML it came from (stop 61's sweep).
+    scene.validate().map_err(|e| match e {
+        Error::Scene(m) => Error::Scene(format!("{}: {m}", p.display())),
+        e => e,
+    })?;
     Ok(scene)
 }
 
