@@ -41,6 +41,10 @@ pub struct SurfelObject {
     pub tree: SphereTree,
     /// Reference positions (copied out of the SoA for the hot deformation loop).
     pub pos: Vec<Vec3>,
+    /// Reference tangent axes (u, v) of each surfel ([`SurfelSoa::axes`](super::surfel::SurfelSoa::axes)),
+    /// precomputed: Eq. 1 deforms every surfel every frame, and building the frame from the
+    /// normal each time took ≈ 6 % of a whole-object refit's instructions (stop 62).
+    pub axes: Vec<(Vec3, Vec3)>,
     /// Collection of each surfel.
     pub coll: Vec<u32>,
     /// MLS neighbours: `nbr[i*nk .. i*nk + nk]` (nearest first, the surfel itself first),
@@ -73,6 +77,7 @@ impl SurfelObject {
         }
         let nodes = SimNodes::new(node_rest, node_mass, p.nodes_per_gradient)?;
         let pos = model.surfels.positions();
+        let axes = (0..pos.len()).map(|i| model.surfels.axes(i)).collect();
         let weights = NodeWeights::new(&pos, &nodes, p.nodes_per_surfel);
         let coll = model.collection_of();
         let sizes = model.collections.iter().map(|c| (c.end - c.start) as usize);
@@ -138,7 +143,7 @@ impl SurfelObject {
             clip_nb.extend(rows);
         }
         let tree = SphereTree::build(&pos, &model.surfels.r, &nodes, &weights, p.nodes_per_surfel);
-        Ok(Arc::new(SurfelObject { model, nodes, weights, tree, pos, coll, nk, nbr, h, clip_partners, clip_base, clip_nb }))
+        Ok(Arc::new(SurfelObject { model, nodes, weights, tree, pos, axes, coll, nk, nbr, h, clip_partners, clip_base, clip_nb }))
     }
 
     pub fn surfel_count(&self) -> usize {
@@ -156,7 +161,7 @@ impl SurfelObject {
 
     /// Approximate bytes of the static data.
     pub fn memory_bytes(&self) -> usize {
-        self.pos.len() * (7 * 4 + 12 + 4 + 4 + self.nk * 4 + self.weights.k * 8)
+        self.pos.len() * (7 * 4 + 12 + 24 + 4 + 4 + self.nk * 4 + self.weights.k * 8)
             + self.tree.len() * (4 * 4 + 4 * 4 + 3)
             + self.tree.list_node.len() * 16
             + self.clip_nb.len() * 8

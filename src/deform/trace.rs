@@ -125,7 +125,9 @@ use super::miniball::miniball;
 use super::mls::{clipped_by, ellipse_hit, mls_intersect_x8, MlsNbr, MlsOutcome, MlsParams, MAX_NBR};
 use super::object::{SurfelObject, NO_NBR};
 use super::top::TopTree;
-use super::tree::{child_bound, leaf_sphere, max_reach_x8, sphere_test_1, sphere_test_spheres, RayPacketX8, Topology, LEAF, RADIUS_PAD};
+use super::tree::{
+    child_bound, leaf_sphere, max_reach_x8, sphere_test_1, sphere_test_spheres, RayPacketX8, Topology, LEAF, RADIUS_PAD, REACH_PAD,
+};
 use super::DeformError;
 use crate::baseline::accel::Ray;
 use crate::core::stats::{Counter, Counters};
@@ -595,6 +597,20 @@ impl NodeState {
             std::hint::spin_loop();
         }
     }
+    /// [`store`](Self::store), or with `exclusive` (no other thread reads or writes the slot
+    /// until the caller's task has ended) plain stores outside the lock: the stamp's release
+    /// store and the join of the task publish them.
+    #[inline(always)]
+    fn publish(&self, n: usize, c: Vec3, r: f32, frame: u32, exclusive: bool) {
+        if exclusive {
+            let s = &self.slot[n];
+            s.write(c, r);
+            s.stamp.store(frame, Release);
+        } else {
+            self.store(n, c, r, frame);
+        }
+    }
+
     /// First computation of the node in `frame`: published unless another thread already
     /// did (or holds the lock; the caller uses its own values either way).
     #[inline(always)]
@@ -858,7 +874,11 @@ impl DeformTracer {
                     let r = 0.5 * (hi - lo).length();
                     (c, r * (1.0 + RADIUS_PAD) + RADIUS_PAD * c.abs().max_element())
                 }),
-                None => self.sphere(ii, 0),
+                None if ii.naive.is_some() => self.sphere(ii, 0),
+                // No ray runs yet, and each instance is one task: its refit needs no locks.
+                None if ii.obj.tree.topo.right[0] == LEAF => self.sphere(ii, 0),
+                None if ii.nodes.slot[0].stamp.load(Acquire) == self.frame => ii.nodes.load(0),
+                None => self.update_sphere_with(ii, 0, true),
             })
             .collect();
         self.top = if self.params.instance_tree { TopTree::build(&roots) } else { TopTree::flat(roots.len()) };
@@ -969,6 +989,14 @@ impl DeformTracer {
     /// frame into every caller costs more than the call).
     #[inline(never)]
     fn update_sphere(&self, ii: &Instance, n: usize) -> (Vec3, f32) {
+        self.update_sphere_with(ii, n, false)
+    }
+
+    /// [`update_sphere`](Self::update_sphere); `exclusive`: no other thread reads or writes
+    /// this instance's slots meanwhile (`begin_frame`'s roots, before any ray), so a refit
+    /// publishes its nodes with plain stores instead of each under the node's sequence lock.
+    #[inline(always)]
+    fn update_sphere_with(&self, ii: &Instance, n: usize, exclusive: bool) -> (Vec3, f32) {
         let tree = &ii.obj.tree;
         debug_assert!(tree.topo.right[n] != LEAF, "a leaf's sphere is its surfel's ball (`sphere`)");
         // Eq. 9 above the refitted subtrees, and for a subtree another thread has claimed
@@ -977,9 +1005,9 @@ impl DeformTracer {
         // A root whose two children would both be refitted subtrees is refitted with them
         // (module docs, "Subtree refit": small objects).
         let refit = cnt <= lim || (n == 0 && lim > 0 && cnt <= 2 * lim);
-        let (c, r) = (if refit { self.refit_subtree(ii, n) } else { None })
+        let (c, r) = (if refit { self.refit_subtree(ii, n, exclusive) } else { None })
             .unwrap_or_else(|| tree.update_eq9(n, &ii.field, &ii.obj.nodes.rest, self.params.recentred_bound, self.params.node_rotation));
-        ii.nodes.store(n, c, r, self.frame);
+        ii.nodes.publish(n, c, r, self.frame, exclusive);
         (c, r)
     }
 
@@ -1003,7 +1031,7 @@ impl DeformTracer {
     /// its surfel's ball, made current with the surfel). (Publishing nothing for
     /// `n` until the owner is done was tried: every packet in the meantime recomputed Eq. 9
     /// and refitted the small subtrees below again, 2× slower frames.)
-    fn refit_subtree(&self, ii: &Instance, n: usize) -> Option<(Vec3, f32)> {
+    fn refit_subtree(&self, ii: &Instance, n: usize, exclusive: bool) -> Option<(Vec3, f32)> {
         let topo = &ii.obj.tree.topo;
         let (s0, cnt) = (topo.start[n] as usize, topo.count[n] as usize);
         if cnt > REFIT_CLAIM_MIN as usize && ii.nodes.slot[n].claim.swap(self.frame, AcqRel) == self.frame {
@@ -1022,6 +1050,10 @@ impl DeformTracer {
                 }
                 let (c, rr) = self.surfel_ball(ii, s as usize);
                 (x.push(c.x), y.push(c.y), z.push(c.z), r.push(rr));
+            }
+            // `max_reach_x8` loads whole groups of eight.
+            for v in [&mut *x, &mut *y, &mut *z, &mut *r] {
+                v.extend_from_slice(&[0.0; REACH_PAD]);
             }
             let m = 2 * cnt - 1;
             lo.clear();
@@ -1052,7 +1084,7 @@ impl DeformTracer {
                         enc
                     } else {
                         let c = 0.5 * (lo[q - n] + hi[q - n]);
-                        let reach = max_reach_x8(&x[a..a + k], &y[a..a + k], &z[a..a + k], &r[a..a + k], c);
+                        let reach = max_reach_x8(x, y, z, r, a..a + k, c);
                         let exact = (c, reach * (1.0 + RADIUS_PAD) + RADIUS_PAD * c.abs().max_element());
                         if enc.1 < exact.1 {
                             enc
@@ -1063,7 +1095,7 @@ impl DeformTracer {
                 };
                 sph[q - n] = b;
                 if q != n && k > 1 && ii.nodes.slot[q].stamp.load(Relaxed) != self.frame {
-                    ii.nodes.store(q, b.0, b.1, self.frame);
+                    ii.nodes.publish(q, b.0, b.1, self.frame, exclusive);
                 }
             }
             sph[0]
@@ -2361,7 +2393,7 @@ fn prefetch<T>(x: &T) {
 #[inline]
 fn deform_surfel(obj: &SurfelObject, f: &DeformField, s: usize) -> DeformedSurfel {
     let k = obj.weights.k;
-    deform_point(f, obj.pos[s], obj.model.surfels.axes(s), &obj.weights.idx[s * k..s * k + k], &obj.weights.w[s * k..s * k + k])
+    deform_point(f, obj.pos[s], obj.axes[s], &obj.weights.idx[s * k..s * k + k], &obj.weights.w[s * k..s * k + k])
 }
 
 #[inline]

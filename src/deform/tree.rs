@@ -698,11 +698,21 @@ pub fn max_reach_1(x: &[f32], y: &[f32], z: &[f32], r: &[f32], c: Vec3) -> f32 {
     m
 }
 
-/// [`max_reach_1`] eight balls per step; bit-identical to it (same operations per element,
-/// no fused multiply-add, and a maximum does not depend on the order).
-pub fn max_reach_x8(x: &[f32], y: &[f32], z: &[f32], r: &[f32], c: Vec3) -> f32 {
-    let n = x.len();
-    let (x, y, z, r) = (&x[..n], &y[..n], &z[..n], &r[..n]);
+/// Entries past a range that [`max_reach_x8`] may load: its last step reads whole groups of
+/// eight.
+pub const REACH_PAD: usize = 7;
+
+/// [`max_reach_1`] of the balls `range` of the arrays, eight per step; bit-identical to it
+/// (same operations per element, no fused multiply-add, and a maximum does not depend on the
+/// order). The arrays must hold at least [`REACH_PAD`] entries past `range.end` (any values:
+/// a last step of 1–7 balls loads a full group of eight and gives the lanes past the range a
+/// reach of 0, where the scalar reference starts). (Until stop 62 that step was assembled
+/// lane by lane from bounds-checked reads: with a subtree refit's many nodes of 3–15 balls
+/// it took most of the kernel's instructions.)
+pub fn max_reach_x8(x: &[f32], y: &[f32], z: &[f32], r: &[f32], range: std::ops::Range<usize>, c: Vec3) -> f32 {
+    let (a, n) = (range.start, range.len());
+    let end = a + n.next_multiple_of(8);
+    let (x, y, z, r) = (&x[a..end], &y[a..end], &z[a..end], &r[a..end]);
     let (cx, cy, cz) = (f32x8::splat(c.x), f32x8::splat(c.y), f32x8::splat(c.z));
     let mut m8 = f32x8::ZERO;
     let body = n / 8 * 8;
@@ -712,11 +722,11 @@ pub fn max_reach_x8(x: &[f32], y: &[f32], z: &[f32], r: &[f32], c: Vec3) -> f32 
         m8 = m8.max((dx * dx + dy * dy + dz * dz).sqrt() + ld(r, i));
     }
     if body < n {
-        // The last 1–7 balls as one more step, padded with zero-reach balls at c (the scalar
-        // reference starts from 0, so the maximum is unchanged).
-        let pad = |a: &[f32], v: f32| f32x8::from(std::array::from_fn::<f32, 8, _>(|i| a.get(body + i).copied().unwrap_or(v)));
-        let (dx, dy, dz) = (pad(x, c.x) - cx, pad(y, c.y) - cy, pad(z, c.z) - cz);
-        m8 = m8.max((dx * dx + dy * dy + dz * dz).sqrt() + pad(r, 0.0));
+        const LANE: [f32; 8] = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0];
+        let inside = f32x8::from(LANE).simd_lt(f32x8::splat((n - body) as f32));
+        let (dx, dy, dz) = (ld(x, body) - cx, ld(y, body) - cy, ld(z, body) - cz);
+        let reach = (dx * dx + dy * dy + dz * dz).sqrt() + ld(r, body);
+        m8 = m8.max(inside.bitselect(reach, f32x8::ZERO));
     }
     m8.to_array().into_iter().fold(0.0, f32::max)
 }
@@ -851,7 +861,17 @@ mod tests {
                     x[n - 1] = 1e4;
                 }
                 let a = max_reach_1(&x, &y, &z, &r, c);
-                let b = max_reach_x8(&x, &y, &z, &r, c);
+                // The range inside longer arrays, whose other entries (in front and in the
+                // padding) are far balls and NaN: none may count.
+                let pre = case % 3;
+                let pad = |v: &[f32], junk: f32| -> Vec<f32> {
+                    let mut o = vec![junk; pre];
+                    o.extend_from_slice(v);
+                    o.extend(std::iter::repeat_n(if case % 2 == 0 { f32::NAN } else { junk }, REACH_PAD));
+                    o
+                };
+                let (px, py, pz, pr) = (pad(&x, 1e6), pad(&y, -1e6), pad(&z, 1e6), pad(&r, 1e6));
+                let b = max_reach_x8(&px, &py, &pz, &pr, pre..pre + n, c);
                 assert_eq!(a.to_bits(), b.to_bits(), "n={n} case={case}");
                 let exact = (0..n).map(|i| (Vec3::new(x[i], y[i], z[i]) - c).length() + r[i]).fold(0.0f32, f32::max);
                 assert!((a - exact).abs() <= 1e-5 * exact.max(1.0), "n={n}: {a} vs {exact}");
