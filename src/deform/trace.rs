@@ -119,6 +119,14 @@
 //! nodes (each under the node's sequence lock). The refit also prefetches the surfel and node
 //! slots it is about to write. Whole-object refit (`elastic-balls`, one thread) −7 %, lazy
 //! frames 0–9 % faster (BENCHMARKS.md, "Stop 48").
+//!
+//! *Cheaper refits* (stop 62): the whole-object refits that `begin_frame` starts (one task
+//! per instance, before any ray) publish their nodes without the sequence lock, and so do
+//! the refits during the rays for nodes that every writer writes with the same values
+//! (`NodeState::publish`); `max_reach_x8` ends on a masked step instead of a lane-by-lane
+//! one; the rest axes are precomputed; Eq. 1's sum is fused where the build has FMA. A
+//! whole-object refit (`elastic-balls`) takes 17 % fewer instructions, and its update
+//! 24 → 19 ms per frame (BENCHMARKS.md, "Stop 62").
 
 use super::displace::{deform_point, DeformField, DeformedSurfel};
 use super::miniball::miniball;
@@ -553,7 +561,8 @@ impl NodeSlot {
         let v = self.seq.load(Relaxed);
         self.seq.store(v.wrapping_add(1), Release);
     }
-    /// Only between [`Self::try_lock`] and [`Self::unlock`], which publish it.
+    /// Between [`Self::try_lock`] and [`Self::unlock`], which publish it, or as
+    /// [`NodeState::publish`] allows without them.
     #[inline(always)]
     fn write(&self, c: Vec3, r: f32) {
         self.c[0].store(c.x.to_bits(), Relaxed);
@@ -597,12 +606,13 @@ impl NodeState {
             std::hint::spin_loop();
         }
     }
-    /// [`store`](Self::store), or with `exclusive` (no other thread reads or writes the slot
-    /// until the caller's task has ended) plain stores outside the lock: the stamp's release
-    /// store and the join of the task publish them.
+    /// [`store`](Self::store), or with `plain` stores outside the lock: for a slot that no
+    /// other thread reads or writes until the caller's task has ended (the stamp's release
+    /// store and the join of the task publish them), or one that every writer writes with the
+    /// same values (`DeformTracer::refit_subtree`).
     #[inline(always)]
-    fn publish(&self, n: usize, c: Vec3, r: f32, frame: u32, exclusive: bool) {
-        if exclusive {
+    fn publish(&self, n: usize, c: Vec3, r: f32, frame: u32, plain: bool) {
+        if plain {
             let s = &self.slot[n];
             s.write(c, r);
             s.stamp.store(frame, Release);
@@ -1095,7 +1105,14 @@ impl DeformTracer {
                 };
                 sph[q - n] = b;
                 if q != n && k > 1 && ii.nodes.slot[q].stamp.load(Relaxed) != self.frame {
-                    ii.nodes.publish(q, b.0, b.1, self.frame, exclusive);
+                    // Without the lock where every writer writes these same values: a node
+                    // of at most REFIT_CLAIM_MIN surfels is never claimed, so never bounded
+                    // by Eq. 9 (any thread that reaches it first refits it, from the same
+                    // leaf balls, to the same bits), and one of fewer than exact_below / 2
+                    // is never tightened (`child_spheres`). A reader that meets two such
+                    // writers mid-write still assembles those values.
+                    let plain = exclusive || (k <= REFIT_CLAIM_MIN as usize && 2 * k < self.params.exact_below as usize);
+                    ii.nodes.publish(q, b.0, b.1, self.frame, plain);
                 }
             }
             sph[0]
