@@ -884,16 +884,21 @@ impl DeformTracer {
                     let r = 0.5 * (hi - lo).length();
                     (c, r * (1.0 + RADIUS_PAD) + RADIUS_PAD * c.abs().max_element())
                 }),
-                None if ii.naive.is_some() => self.sphere(ii, 0),
-                // No ray runs yet, and each instance is one task: its refit needs no locks.
-                None if ii.obj.tree.topo.right[0] == LEAF => self.sphere(ii, 0),
-                None if ii.nodes.slot[0].stamp.load(Acquire) == self.frame => ii.nodes.load(0),
-                None => self.update_sphere_with(ii, 0, true),
+                None => self.root_before_rays(ii),
             })
             .collect();
         self.top = if self.params.instance_tree { TopTree::build(&roots) } else { TopTree::flat(roots.len()) };
         self.update_seconds = t0.elapsed().as_secs_f64();
         Ok(())
+    }
+
+    /// [`sphere`](Self::sphere) of instance `ii`'s root in `begin_frame`: no ray runs yet and
+    /// each instance is one task, so a refit of the root publishes without locks.
+    fn root_before_rays(&self, ii: &Instance) -> (Vec3, f32) {
+        if ii.naive.is_some() || ii.obj.tree.topo.right[0] == LEAF || self.current(ii, 0) {
+            return self.sphere(ii, 0);
+        }
+        self.update_sphere_with(ii, 0, true)
     }
 
     // -- lazy state ------------------------------------------------------------------------
