@@ -228,8 +228,12 @@ pub fn run(a: &AnimateArgs) -> Result<()> {
             1e3 * (stats.render_seconds - warm) / n
         );
     }
+    // The share of a frame spent before its rays (`begin_frame`: naive's rebuild, the lazy
+    // modes' deformation fields and instance roots); a lazy mode's node updates during the
+    // rays are in the rest.
+    let before_rays: f64 = stats.per_frame.iter().map(|r| r.update_seconds).sum();
     crate::status!(
-        "{}: {} frames {}x{} --update {}: {:.3} s in all, {:.1} ms/frame ({} surfels)",
+        "{}: {} frames {}x{} --update {}: {:.3} s in all, {:.1} ms/frame ({:.1} of them before the rays), {} surfels",
         stats.scene,
         stats.frames,
         stats.width,
@@ -237,6 +241,7 @@ pub fn run(a: &AnimateArgs) -> Result<()> {
         stats.update,
         stats.render_seconds,
         1e3 * stats.render_seconds / stats.frames.max(1) as f64,
+        1e3 * before_rays / stats.frames.max(1) as f64,
         stats.surfels
     );
     if let Some(d) = &a.out {
