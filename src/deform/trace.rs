@@ -1130,7 +1130,7 @@ impl DeformTracer {
     fn child_spheres(&self, ii: &Instance, n: usize, (leaf1, leaf2): (bool, bool)) -> ((Vec3, f32), (Vec3, f32)) {
         let topo = self.topo(ii);
         let s1 = self.sphere_as(ii, n + 1, leaf1);
-        let s2 = self.sphere_as(ii, topo.right[n] as usize, leaf2);
+        let s2 = self.sphere_as(ii, topo.right_child(n), leaf2);
         // A node inside a refitted subtree took Eq. 11 from its final children when it was
         // refitted (`refit_subtree`), so it is skipped here. Median splits halve the counts,
         // so a node of fewer than exact_below/2 surfels is inside one; a subtree's own root
@@ -1651,11 +1651,11 @@ impl DeformTracer {
                 continue;
             }
             let n = n as usize;
-            if topo.right[n] == LEAF {
+            if topo.count[n] == 1 {
                 self.visit(k, topo.surfel[n] as usize, leaf_node(ii, n), ray, best, dc, ctr);
                 continue;
             }
-            let (l, r) = (n + 1, topo.right[n] as usize);
+            let (l, r) = (n + 1, topo.right_child(n));
             let (s1, s2) = self.child_spheres(ii, n, topo.leaf_children(n));
             dc.sphere_tests += 2;
             dc.tests_at(topo.level[l], 2);
@@ -1708,7 +1708,7 @@ impl DeformTracer {
                 continue;
             }
             let push_children = |stack: &mut Vec<u32>, n: usize| {
-                let (l, r) = (n + 1, topo.right[n] as usize);
+                let (l, r) = (n + 1, topo.right_child(n));
                 if self.left_first(ii, l, r) {
                     stack.push(r as u32);
                     stack.push(l as u32);
@@ -1727,7 +1727,7 @@ impl DeformTracer {
                 if sphere_test_1(ray.org, ray.dir, c, r, ray.tnear, ray.tfar).is_none() {
                     continue;
                 }
-                if topo.right[n] == LEAF {
+                if topo.count[n] == 1 {
                     if self.leaf(k, n, ray, dc, ctr).is_some() {
                         return true;
                     }
@@ -1888,7 +1888,7 @@ impl DeformTracer {
                 tb = best_t(best);
                 continue;
             }
-            let (l, r) = (n + 1, topo.right[n] as usize);
+            let (l, r) = (n + 1, topo.right_child(n));
             let (leaf1, leaf2) = topo.leaf_children(n);
             let (s1, s2) = self.child_spheres(ii, n, (leaf1, leaf2));
             let cnt = 2 * m.count_ones() as u64;
@@ -1982,7 +1982,7 @@ impl DeformTracer {
             // count: no load of the node's own `right`).
             const UNTESTED: u8 = 0x20;
             let expand = |stack: &mut Vec<(u32, u8, u8)>, n: usize, lv: u8, m: u8, dc: &mut DeformCounters, ctr: &mut Counters| {
-                let (l, r) = (n + 1, topo.right[n] as usize);
+                let (l, r) = (n + 1, topo.right_child(n));
                 let (leaf_l, leaf_r) = topo.leaf_children(n);
                 // Levels past 30 share the counters' last level anyway (`LEVELS`).
                 let lv = lv.min(UNTESTED - 2);
