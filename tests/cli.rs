@@ -99,6 +99,23 @@ fn bench_writes_table_json_images_and_plots() {
     image::open(d.join("bench-time.png")).unwrap();
 }
 
+/// `--repeat 2`: the renders go round the methods, and each row gets its speed-up over the
+/// first method within each round (the first method's 1 in both), in bench.json and as a
+/// table column.
+#[test]
+fn bench_repeats_go_round_the_methods() {
+    let (code, out, err, _d, json) = small_bench("bench-rounds", &["spheres", "--methods", "whitted:bvh,whitted:octree", "--repeat", "2"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("per-round speed-up") && out.contains("| 1.00x | 1.00x [1.00–1.00] |"), "{out}");
+    let v = json.unwrap();
+    assert_eq!(v["repeat"].as_u64(), Some(2));
+    for (i, r) in v["rows"].as_array().unwrap().iter().enumerate() {
+        let p: Vec<f64> = r["per_round_speedups"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+        assert_eq!(p.len(), 2, "{r}");
+        assert!(p.iter().all(|x| if i == 0 { *x == 1.0 } else { x.is_finite() && *x > 0.0 }), "{r}");
+    }
+}
+
 /// `--region`: each row's error split by pixel rectangle. Two halves tiling the image: their
 /// FLIP shares add up to 1, their mean FLIPs average to the whole image's, their mean squared
 /// errors to the whole image's; the split is in the table and bench.json, and with `--sweep`

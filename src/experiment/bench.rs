@@ -399,6 +399,11 @@ pub struct BenchRow {
     pub stats: run::Stats,
     /// render_seconds of the first method ÷ this method's (so > 1 is faster).
     pub speedup_vs_first: f64,
+    /// The same ratio within each round of `--repeat` (the renders go round the methods):
+    /// on a machine whose speed drifts, its spread says how far the best-of ratio can be
+    /// trusted. Empty for one round and for the sweeps' rows.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub per_round_speedups: Vec<f64>,
     pub rmse: Option<f64>,
     pub psnr: Option<f64>,
     pub flip: Option<f64>,
@@ -904,8 +909,25 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
         let mut full: Vec<(MethodSpec, Film, run::Stats)> = Vec::new();
         // Floor differences already rendered: (full-detail spec, (other back-end, difference)).
         let mut floors: Vec<(String, Option<(String, Vec<f32>)>)> = Vec::new();
-        for spec in &specs {
-            let (film, stats, maps, pixel_tests) = run_spec(scene, spec, a.width, a.height, a.threads, a.repeat, a.quiet)?;
+        // Best of `--repeat` renders per method, the repeats taken round the methods (1, 2,
+        // …, 1, 2, …) as for the deforming sequences: a slow phase of the machine then hits
+        // every method of the comparison alike, and each round gives a ratio of its own.
+        let mut bests: Vec<Option<SpecRun>> = specs.iter().map(|_| None).collect();
+        let mut rounds: Vec<Vec<f64>> = Vec::new();
+        for _ in 0..a.repeat.max(1) {
+            let mut round = Vec::with_capacity(specs.len());
+            for (spec, best) in specs.iter().zip(bests.iter_mut()) {
+                let r = run_spec(scene, spec, a.width, a.height, a.threads, 1, a.quiet)?;
+                round.push(r.1.render_seconds);
+                if best.as_ref().is_none_or(|b| r.1.render_seconds < b.1.render_seconds) {
+                    *best = Some(r);
+                }
+            }
+            rounds.push(round);
+        }
+        let paired = super::deform_bench::per_round_speedups(&rounds);
+        for ((spec, best), per_round) in specs.iter().zip(bests).zip(paired) {
+            let (film, stats, maps, pixel_tests) = best.expect("at least one render");
             if let (Some(out), Some(v)) = (&a.out, &pixel_tests) {
                 // Where the cone tracer's work went: tests per pixel, log-scale heat map.
                 crate::film::io::write_rgb8_png(
@@ -974,6 +996,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             let t0 = *first_time.get_or_insert(stats.render_seconds);
             let mut row = finish_row(scene, spec, &film, stats, ref_film.as_ref().map(|f| (f, &regions[..])), a.out.as_deref(), a.quiet)?;
             row.speedup_vs_first = t0 / row.stats.render_seconds.max(1e-12);
+            row.per_round_speedups = per_round;
             row.lod_vs_full = lod_vs_full;
             rows.push(row);
             if spec.method == Method::Whitted {
@@ -1097,6 +1120,7 @@ fn finish_row(
         scene: scene.name.clone(),
         spec: spec.text.clone(),
         speedup_vs_first: 1.0,
+        per_round_speedups: Vec::new(),
         stats,
         rmse,
         psnr,
@@ -1233,12 +1257,12 @@ pub fn table_string(report: &BenchReport) -> String {
         }
         return s;
     }
-    s.push_str("| scene | method | thr | build s | render s | Mrays/s | speed-up vs first | RMSE | PSNR dB | FLIP | triangle tests | node tests |\n");
-    s.push_str("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    s.push_str("| scene | method | thr | build s | render s | Mrays/s | speed-up vs first | per-round speed-up: median [range] | RMSE | PSNR dB | FLIP | triangle tests | node tests |\n");
+    s.push_str("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for r in &report.rows {
         let f = |x: Option<f64>, p: usize| x.map(|v| format!("{v:.p$}")).unwrap_or_else(|| "-".into());
         s.push_str(&format!(
-            "| {} | {}{} | {} | {:.3} | {:.3} | {:.2} | {:.2}x | {} | {} | {} | {} | {} |\n",
+            "| {} | {}{} | {} | {:.3} | {:.3} | {:.2} | {:.2}x | {} | {} | {} | {} | {} | {} |\n",
             r.scene,
             r.spec,
             if r.stats.finished { "" } else { " (stopped at its time budget: incomplete image)" },
@@ -1247,6 +1271,7 @@ pub fn table_string(report: &BenchReport) -> String {
             r.stats.render_seconds,
             r.stats.mrays_per_second,
             r.speedup_vs_first,
+            super::deform_bench::median_range(&r.per_round_speedups),
             f(r.rmse, 4),
             f(r.psnr, 2),
             f(r.flip, 4),
@@ -1461,6 +1486,7 @@ pub(crate) mod fixtures {
             spec: spec.into(),
             stats,
             speedup_vs_first: 1.0,
+            per_round_speedups: Vec::new(),
             rmse: None,
             psnr: None,
             flip: None,

@@ -307,7 +307,7 @@ pub fn per_round_speedups(rounds: &[Vec<f64>]) -> Vec<Vec<f64>> {
 }
 
 /// "median [min–max]" of per-round speed-ups, or "-" for none.
-fn median_range(v: &[f64]) -> String {
+pub fn median_range(v: &[f64]) -> String {
     if v.is_empty() {
         return "-".into();
     }
