@@ -665,6 +665,34 @@ pub struct BenchReport {
 /// per pixel (the cone tracers).
 pub type SpecRun = (Film, run::Stats, Option<crate::lod::trace::LodMaps>, Option<Vec<u32>>);
 
+/// Runs `count` methods `repeat` times each, the repeats taken round the methods (1, 2, …,
+/// 1, 2, …): a slow phase of the machine (this VM's speed drifts by ±10–20 % over tens of
+/// seconds) then hits every method of a comparison alike instead of all the runs of one.
+/// `run(i)` runs method i once; `time` is the figure of a run (smaller is better). Returns
+/// each method's best run and the times of every run, rounds × methods
+/// ([`super::deform_bench::per_round_speedups`]).
+pub fn best_of_rounds<T>(
+    count: usize,
+    repeat: u32,
+    mut run: impl FnMut(usize) -> Result<T>,
+    time: impl Fn(&T) -> f64,
+) -> Result<(Vec<T>, Vec<Vec<f64>>)> {
+    let mut bests: Vec<Option<T>> = (0..count).map(|_| None).collect();
+    let mut rounds = Vec::new();
+    for _ in 0..repeat.max(1) {
+        let mut round = Vec::with_capacity(count);
+        for (i, best) in bests.iter_mut().enumerate() {
+            let r = run(i)?;
+            round.push(time(&r));
+            if best.as_ref().is_none_or(|b| time(&r) < time(b)) {
+                *best = Some(r);
+            }
+        }
+        rounds.push(round);
+    }
+    Ok((bests.into_iter().map(|b| b.expect("at least one run")).collect(), rounds))
+}
+
 /// Renders `spec` on `scene` (best of `repeat` renders).
 pub fn run_spec(scene: &Scene, spec: &MethodSpec, width: u32, height: u32, threads: usize, repeat: u32, quiet: bool) -> Result<SpecRun> {
     let mut sc;
@@ -909,25 +937,16 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
         let mut full: Vec<(MethodSpec, Film, run::Stats)> = Vec::new();
         // Floor differences already rendered: (full-detail spec, (other back-end, difference)).
         let mut floors: Vec<(String, Option<(String, Vec<f32>)>)> = Vec::new();
-        // Best of `--repeat` renders per method, the repeats taken round the methods (1, 2,
-        // …, 1, 2, …) as for the deforming sequences: a slow phase of the machine then hits
-        // every method of the comparison alike, and each round gives a ratio of its own.
-        let mut bests: Vec<Option<SpecRun>> = specs.iter().map(|_| None).collect();
-        let mut rounds: Vec<Vec<f64>> = Vec::new();
-        for _ in 0..a.repeat.max(1) {
-            let mut round = Vec::with_capacity(specs.len());
-            for (spec, best) in specs.iter().zip(bests.iter_mut()) {
-                let r = run_spec(scene, spec, a.width, a.height, a.threads, 1, a.quiet)?;
-                round.push(r.1.render_seconds);
-                if best.as_ref().is_none_or(|b| r.1.render_seconds < b.1.render_seconds) {
-                    *best = Some(r);
-                }
-            }
-            rounds.push(round);
-        }
+        // Best of `--repeat` renders per method, taken round the methods as for the deforming
+        // sequences; each round gives a ratio of its own.
+        let (bests, rounds) = best_of_rounds(
+            specs.len(),
+            a.repeat,
+            |i| run_spec(scene, &specs[i], a.width, a.height, a.threads, 1, a.quiet),
+            |r| r.1.render_seconds,
+        )?;
         let paired = super::deform_bench::per_round_speedups(&rounds);
-        for ((spec, best), per_round) in specs.iter().zip(bests).zip(paired) {
-            let (film, stats, maps, pixel_tests) = best.expect("at least one render");
+        for ((spec, (film, stats, maps, pixel_tests)), per_round) in specs.iter().zip(bests).zip(paired) {
             if let (Some(out), Some(v)) = (&a.out, &pixel_tests) {
                 // Where the cone tracer's work went: tests per pixel, log-scale heat map.
                 crate::film::io::write_rgb8_png(
@@ -1506,6 +1525,29 @@ pub(crate) mod fixtures {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The repeats go round the methods (0, 1, 2, 0, 1, 2), each method keeps its fastest
+    /// run, every time is kept per round, and an error ends the rounds.
+    #[test]
+    fn best_of_rounds_goes_round_the_methods() {
+        let times = [[3.0, 5.0, 2.0], [1.0, 6.0, 4.0]];
+        let mut order = Vec::new();
+        let (bests, rounds) = best_of_rounds(
+            3,
+            2,
+            |i| {
+                order.push(i);
+                Ok((order.len() - 1, times[(order.len() - 1) / 3][i]))
+            },
+            |r| r.1,
+        )
+        .unwrap();
+        assert_eq!(order, [0, 1, 2, 0, 1, 2]);
+        assert_eq!(bests, [(3, 1.0), (1, 5.0), (2, 2.0)]);
+        assert_eq!(rounds, times.map(|r| r.to_vec()).to_vec());
+        let failed = best_of_rounds(2, 3, |i| if i == 1 { Err(Error::Usage("no".into())) } else { Ok(1.0) }, |t| *t);
+        assert!(failed.is_err());
+    }
 
     /// Every `lodtrace bench` command in the README passes bench's checks ([`plan`]): a
     /// command a user copies must not be refused (stop 58's new refusals broke the demo's own

@@ -154,27 +154,16 @@ pub fn run(
                 }
             })
             .collect();
-        // Best of `repeat` by total time, the repeats taken round the specs (1, 2, …, 1, 2, …):
-        // this VM's speed drifts by ±10–20 % over tens of seconds, and a slow phase should hit
-        // every method of the comparison alike, not all the runs of one.
-        let mut bests: Vec<Option<crate::cli::animate::AnimateStats>> = specs.iter().map(|_| None).collect();
-        // ms/frame of every run: rounds × specs.
-        let mut rounds: Vec<Vec<f64>> = Vec::new();
-        for _ in 0..repeat.max(1) {
-            let mut round = Vec::with_capacity(specs.len());
-            for (args, best) in argv.iter().zip(bests.iter_mut()) {
-                let st = animate(args)?;
-                round.push(1e3 * st.render_seconds / st.frames.max(1) as f64);
-                if best.as_ref().is_none_or(|b| st.render_seconds < b.render_seconds) {
-                    *best = Some(st);
-                }
-            }
-            rounds.push(round);
-        }
+        // Best of `repeat` by ms/frame, the repeats taken round the specs.
+        let (bests, rounds) = super::bench::best_of_rounds(
+            specs.len(),
+            repeat,
+            |i| animate(&argv[i]),
+            |st| 1e3 * st.render_seconds / st.frames.max(1) as f64,
+        )?;
         let paired = per_round_speedups(&rounds);
-        for ((spec, best), per_round_speedups) in specs.iter().zip(bests).zip(paired) {
+        for ((spec, st), per_round_speedups) in specs.iter().zip(bests).zip(paired) {
             let s = &spec.surfel;
-            let st = best.expect("at least one run");
             let n = st.frames.max(1) as f64;
             let ms = 1e3 * st.render_seconds / n;
             let pixels: Vec<[f32; 3]> = st.last_frame.color.iter().map(|c| [c.x, c.y, c.z]).collect();
