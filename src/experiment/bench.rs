@@ -69,8 +69,9 @@ pub struct BenchArgs {
     /// Default thread count for methods that don't set `threads=` (0 = all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
-    /// Repeat each render this many times and keep the fastest (rendering only; for deforming
-    /// sequences the repeats go round the methods, so a slow phase of the machine hits all alike).
+    /// Repeat each render this many times and keep the fastest (rendering only). The repeats go
+    /// round the methods, so a slow phase of the machine hits all alike, and each row also
+    /// gets its speed-up within every round ("per-round speed-up").
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub repeat: u32,
     /// Equal-time comparison: render this stochastic spec (e.g. `distributed:embree`) at
@@ -649,8 +650,8 @@ pub struct BenchReport {
     pub height: u32,
     /// SIMD level of the binary ([`crate::core::SIMD_LEVEL`]).
     pub simd: &'static str,
-    /// `--repeat`: every time is the best of this many renders (of this many rounds for the
-    /// deforming sequences).
+    /// `--repeat`: every time is the best of this many rounds of renders (each round renders
+    /// every method once).
     pub repeat: u32,
     /// `--threads` (0 = all cores); each row's `stats.threads` is the count it ran with.
     pub threads: usize,
