@@ -497,7 +497,20 @@ fn target_rows(reports: &[&BenchReport], deform: &[super::deform_bench::DeformRo
         out.push(TargetRow {
             paper: AD,
             target: "lazy-cache ≥ 2× faster per frame than the rebuild (naive); the paper measured 512×384".into(),
-            measured: format!("{} ({}×{}, {} frames)", m.join(", "), r.width, r.height, r.frames),
+            measured: format!(
+                "{} ({}×{}, {} frames{})",
+                m.join(", "),
+                r.width,
+                r.height,
+                r.frames,
+                // The demo's short run: fewer surfels and frames make the rebuild cheaper against
+                // the rays than in the paper's setting, which the README's bench command runs.
+                if (r.width, r.height, r.frames) == (512, 384, 90) {
+                    ""
+                } else {
+                    "; a short run: the target is judged at 512×384 over 90 frames, the README's `lodtrace bench` command"
+                }
+            ),
             status: status_of(&v),
         });
     }
@@ -954,7 +967,12 @@ mod tests {
         assert_eq!(find("chessboard: largest").status, "partly");
         let lc = find("lazy-cache ≥ 2×");
         assert_eq!(lc.status, "met");
-        assert!(lc.measured.starts_with("bend 2.50× (192×144, 8 frames)"), "{}", lc.measured);
+        assert!(lc.measured.starts_with("bend 2.50× (192×144, 8 frames; a short run"), "{}", lc.measured);
+        // In the paper's setting (the README's bench) the figure stands alone.
+        let paper: Vec<_> =
+            d.iter().cloned().map(|r| super::super::deform_bench::DeformRow { width: 512, height: 384, frames: 90, ..r }).collect();
+        let lc = target_rows(&[], &paper).into_iter().find(|r| r.target.starts_with("lazy-cache ≥ 2×")).unwrap();
+        assert_eq!(lc.measured, "bend 2.50× (512×384, 90 frames)");
         assert_eq!(find("updated / tightest").measured, "mean 1.03–1.05, root 1.20–1.30");
         let cache = find("per-ray caching");
         // Judged on the mean, as the paper's 27 % (one sequence below 20 % does not fail it).
