@@ -998,6 +998,34 @@ pub fn tri_bound_x8(
 /// slack of 1e-4 against the two evaluations' different rounding (tested: conservative).
 #[allow(clippy::too_many_arguments)]
 pub fn tri_footprint_x8(lc: &Cone, tris: &TriSoa, k: usize, boxe: &Eigen2, clamp: f32, lf: f32, cut: f32) -> u8 {
+    tri_footprint_x8_lanes(lc, tris, k, boxe, clamp, lf, cut).0
+}
+
+/// Eight triangles in per-box footprint coordinates, lane by lane: what
+/// [`triangle_per_box_2d`] gives for one, as [`tri_footprint_x8_lanes`] computed it.
+pub struct TriLanes {
+    pub qx: [[f32; 8]; 3],
+    pub qy: [[f32; 8]; 3],
+    pub tv: [[f32; 8]; 3],
+    pub size: [f32; 8],
+}
+
+impl TriLanes {
+    /// Lane `l`: the 2-D triangle, its vertices' depths along the axis and the footprint's
+    /// size at the triangle ([`triangle_per_box_2d`]'s three results).
+    #[inline]
+    pub fn get(&self, l: usize) -> ([glam::Vec2; 3], [f32; 3], f32) {
+        let q = [0, 1, 2].map(|v| glam::Vec2::new(self.qx[v][l], self.qy[v][l]));
+        (q, [self.tv[0][l], self.tv[1][l], self.tv[2][l]], self.size[l])
+    }
+}
+
+/// [`tri_footprint_x8`]'s mask and the projection it made ([`TriLanes`]), which the full
+/// test of a surviving lane takes as it is (stop 64: the scalar [`triangle_per_box_2d`]
+/// repeated the same projection from the triangle's vertex record, a cache miss, for
+/// every survivor). The lanes agree with [`triangle_per_box_2d`] to rounding (tested).
+#[allow(clippy::too_many_arguments)]
+pub fn tri_footprint_x8_lanes(lc: &Cone, tris: &TriSoa, k: usize, boxe: &Eigen2, clamp: f32, lf: f32, cut: f32) -> (u8, TriLanes) {
     let sp = f32x8::splat;
     let ld = |a: &Vec<f32>| f32x8::from(<[f32; 8]>::try_from(&a[k..k + 8]).expect("padded to 8"));
     let o = lc.org;
@@ -1040,7 +1068,13 @@ pub fn tri_footprint_x8(lc: &Cone, tris: &TriSoa, k: usize, boxe: &Eigen2, clamp
     };
     let out_edge = (outside(q0, q1) | outside(q1, q2) | outside(q2, q0)) & area.abs().simd_gt(sp(1e-12));
     let finite = (q0.0 + q0.1 + q1.0 + q1.1 + q2.0 + q2.1).is_finite();
-    !((out_box | out_edge) & finite).to_bitmask() as u8
+    let lanes = TriLanes {
+        qx: [q0.0.to_array(), q1.0.to_array(), q2.0.to_array()],
+        qy: [q0.1.to_array(), q1.1.to_array(), q2.1.to_array()],
+        tv: tv.map(|v| v.to_array()),
+        size: e1.max(e2).to_array(),
+    };
+    (!((out_box | out_edge) & finite).to_bitmask() as u8, lanes)
 }
 
 /// Per-point quantities of a node's point block in ray coordinates, with the attributes the
@@ -1801,8 +1835,11 @@ impl<'s, 'a> Tracer<'s, 'a> {
                         as u32
                         & ((1u32 << rem) - 1);
                     c.add(Counter::triangle_bound_tests, rem as u64);
+                    let mut lanes = None;
                     if m != 0 {
-                        m &= tri_footprint_x8(&lc, tris, k, &boxe, clamp, lf, cut) as u32;
+                        let (fm, tl) = tri_footprint_x8_lanes(&lc, tris, k, &boxe, clamp, lf, cut);
+                        m &= fm as u32;
+                        lanes = Some(tl);
                     }
                     if self.tri == TriWeight::Mass {
                         // The exact mass of the block's survivors in one eight-lane call,
@@ -1812,10 +1849,11 @@ impl<'s, 'a> Tracer<'s, 'a> {
                         let mut hits = [(0usize, 0.0f32, 0.0f32, 0.0f32, 0.0f32); 8];
                         let mut n = 0;
                         while m != 0 {
-                            let j = k + m.trailing_zeros() as usize;
+                            let l = m.trailing_zeros() as usize;
+                            let j = k + l;
                             m &= m - 1;
                             c.inc(Counter::triangle_tests);
-                            let (q, tv, size) = triangle_per_box_2d(&lc, tris.verts[j], &boxe, clamp, lf);
+                            let (q, tv, size) = lanes.as_ref().expect("m != 0").get(l);
                             if let Some((b1, b2)) = mass_candidate(q) {
                                 (qs[n], hits[n]) = (q, (j, b1, b2, tv[0] * (1.0 - b1 - b2) + tv[1] * b1 + tv[2] * b2, size));
                                 n += 1;
@@ -1833,10 +1871,15 @@ impl<'s, 'a> Tracer<'s, 'a> {
                         }
                     }
                     while m != 0 {
-                        let j = k + m.trailing_zeros() as usize;
+                        let l = m.trailing_zeros() as usize;
+                        let j = k + l;
                         m &= m - 1;
                         c.inc(Counter::triangle_tests);
-                        if let Some(hit) = self.triangle_hit(&lc, s, tris.verts[j], &boxe, c) {
+                        // The per-box test (`triangle_weight_per_box`) on the prefilter's
+                        // projection.
+                        let (q, tv, size) = lanes.as_ref().expect("m != 0").get(l);
+                        if let Some((w, b1, b2)) = weight_2d(q, self.tri) {
+                            let hit = (w, b1, b2, tv[0] * (1.0 - b1 - b2) + tv[1] * b1 + tv[2] * b2, size);
                             self.emit_triangle(&lc, s, li, tree.tri_index[j], tris.verts[j], hit, e.blend, ab, mode);
                         }
                     }
@@ -2913,6 +2956,57 @@ mod tests {
         }
         assert!(passed > 500 && culled > 5000, "too few cases exercised: {passed} passed, {culled} culled");
         assert!(culled_foot > 1000, "the footprint stage culled only {culled_foot} of the sphere bound's false positives");
+    }
+
+    /// The prefilter's projection, which the full per-box test takes for the lanes that
+    /// pass ([`tri_footprint_x8_lanes`]), is the scalar [`triangle_per_box_2d`]'s to rounding,
+    /// and so are the weights `weight_2d` finds on the two, for random cones, triangles,
+    /// box axes and clamps.
+    #[test]
+    fn triangle_lanes_match_the_scalar_projection() {
+        let mut s = Sampler::new(64, 0, 0);
+        let (mut worst_q, mut worst_w, mut weighed, mut cases) = (0.0f32, 0.0f32, 0, 0);
+        for i in 0..40000 {
+            let cone = rnd_cone(&mut s);
+            let t = s.next() * 10.0;
+            let size = 10f32.powf(s.next() * 3.0 - 2.5);
+            let c = cone.org + cone.dir * t + (cone.u * (s.next() - 0.5) + cone.v * (s.next() - 0.5)) * (s.next() * 0.6);
+            let mut rv = || Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * size;
+            let pw = [c + rv(), c + rv(), c + rv()];
+            let clamp = [1.0 / 16.0, 0.125, 0.25, 1.0][i % 4];
+            let lf = if i % 5 == 0 { 1e-3 } else { 1e-7 };
+            let boxe = eigen_1(cone.sigma((t + (s.next() - 0.5) * 2.0).max(0.0)), clamp, lf);
+            let mut m = crate::scene::Mesh::new("t");
+            for p in pw {
+                m.push_vertex(p);
+            }
+            m.push_tri(0, 1, 2, 0);
+            let soa = super::super::build::TriSoa::of(&m, &[0]);
+            let (q8, tv8, size8) = tri_footprint_x8_lanes(&cone, &soa, 0, &boxe, clamp, lf, R_CUT).1.get(0);
+            let (q1, tv1, size1) = triangle_per_box_2d(&cone, pw, &boxe, clamp, lf);
+            if !q1.iter().all(|q| q.is_finite()) {
+                continue;
+            }
+            cases += 1;
+            let rel = |a: f32, b: f32| (a - b).abs() / (1.0 + b.abs());
+            for v in 0..3 {
+                worst_q = worst_q.max(rel(q8[v].x, q1[v].x)).max(rel(q8[v].y, q1[v].y));
+                assert!(rel(tv8[v], tv1[v]) < 1e-4, "depths {tv8:?} against {tv1:?}");
+            }
+            assert!(rel(size8, size1) < 1e-3 * (1.0 + size1), "size {size8} against {size1}");
+            let mode = [TriWeight::Paper, TriWeight::Coverage, TriWeight::Mass][i % 3];
+            match (weight_2d(q8, mode), weight_2d(q1, mode)) {
+                (Some(a), Some(b)) => {
+                    weighed += 1;
+                    worst_w = worst_w.max((a.0 - b.0).abs());
+                }
+                (None, None) => {}
+                (a, b) => worst_w = worst_w.max(a.or(b).map_or(0.0, |x| x.0)),
+            }
+        }
+        assert!(cases > 39000 && weighed > 500, "{cases} cases, {weighed} weighed");
+        assert!(worst_q < 1e-4, "projections differ by up to {worst_q} (relative)");
+        assert!(worst_w < 1e-4, "weights differ by up to {worst_w}");
     }
 
     /// The cut distances of the triangle weights sit just past the 2% cut-off.
