@@ -179,13 +179,14 @@ impl Frag {
     fn absorb(&mut self, s: &Frag) {
         self.absorb_with(s, true);
     }
-    /// [`Frag::absorb`]; `one_mesh_in_place` false takes the general path for every merge
+    /// [`Frag::absorb`]; `piece_in_place` false takes the general path for every merge
     /// (the reference in the tests).
-    fn absorb_with(&mut self, s: &Frag, one_mesh_in_place: bool) {
-        // In nearly every merge neither fragment holds a second mesh. (`other` is all zeros
-        // then: it only ever takes groups of positive weight.)
-        let one_mesh = one_mesh_in_place && !(self.other.w > 0.0) && !(s.other.w > 0.0) && self.absorb_one_mesh(s);
-        if !one_mesh {
+    fn absorb_with(&mut self, s: &Frag, piece_in_place: bool) {
+        // Nearly every merge is of a single piece (`other` all zeros: it only ever takes
+        // groups of positive weight).
+        if piece_in_place && !(s.other.w > 0.0) {
+            self.absorb_piece(s);
+        } else {
             self.absorb_groups(s);
         }
         self.z0 = self.z0.min(s.z0);
@@ -200,23 +201,40 @@ impl Frag {
         self.mask |= s.mask;
     }
 
-    /// [`Frag::absorb`]'s sums where neither fragment has an `other` group, added in place:
-    /// the general path's result bit for bit (its groups are `s`'s sums less an empty
-    /// `other`, added with factor 1), without its copies of the groups (stop 64: `absorb`
-    /// was 7 % of a `complex` frame, mostly moving groups through the stack). False, with
-    /// nothing changed, when `s`'s pieces are of another mesh: the general path makes them
-    /// `other`.
+    /// [`Frag::absorb`]'s sums for a fragment `s` of one mesh (no `other` group: a single
+    /// piece, as every insertion is), added in place: the general path's result bit for bit
+    /// (its group of `s` is `s`'s sums less an empty `other`, added with factor 1), without
+    /// its copies of the groups (stop 64: `absorb` was 7 % of a `complex` frame, mostly
+    /// moving groups through the stack).
     #[inline]
-    fn absorb_one_mesh(&mut self, s: &Frag) -> bool {
+    fn absorb_piece(&mut self, s: &Frag) {
+        debug_assert!(!(s.other.w > 0.0));
         let joins = s.w > 0.0;
+        let mut to_first = false;
         if joins {
-            if !(s.key == self.key || s.key == ANY_MESH || self.key == ANY_MESH) {
-                return false;
+            // The group `s` joins, as `absorb_groups` decides it.
+            to_first = if s.key == self.key || s.key == ANY_MESH || self.key == ANY_MESH {
+                true
+            } else if self.other.w > 0.0 && s.key != self.other.key {
+                let (mw, mwt) = (self.w - self.other.w, self.wt - self.other.wt);
+                let gt = s.wt / s.w;
+                let ta = if mw > 0.0 { mwt / mw } else { gt };
+                (gt - ta).abs() <= (gt - self.other.wt / self.other.w).abs()
+            } else {
+                false
+            };
+            if to_first {
+                if self.key == ANY_MESH {
+                    self.key = s.key;
+                }
+                self.z0_key = self.z0_key.min(s.z0_key);
+            } else {
+                if !(self.other.w > 0.0) {
+                    (self.other.key, self.other.z0) = (s.key, s.z0_key);
+                }
+                self.other.add(&s.sums());
+                self.other.z0 = self.other.z0.min(s.z0_key);
             }
-            if self.key == ANY_MESH {
-                self.key = s.key;
-            }
-            self.z0_key = self.z0_key.min(s.z0_key);
         }
         self.w += s.w;
         self.wt += s.wt;
@@ -230,15 +248,13 @@ impl Frag {
         self.wn += s.wn;
         self.wtn += s.wtn;
         // The general path's best of the pieces that joined the first group.
-        let (bw, b) = if joins && s.best_w > 0.0 { (s.best_w, s.best) } else { (0.0, Elem::None) };
+        let (bw, b) = if to_first && s.best_w > 0.0 { (s.best_w, s.best) } else { (0.0, Elem::None) };
         if bw > self.best_w {
             (self.best_w, self.best) = (bw, b);
         }
-        true
     }
 
-    /// [`Frag::absorb`]'s sums and best element when either fragment holds two meshes (or
-    /// `s` another mesh than this one's).
+    /// [`Frag::absorb`]'s sums and best element, the general path: `s` may hold two meshes.
     fn absorb_groups(&mut self, s: &Frag) {
         // Split meshes: each of `s`'s groups joins the one here of its mesh; a new mesh
         // becomes `other` when that is free, else joins the group nearer in depth.
@@ -554,15 +570,16 @@ mod tests {
         assert!((ab.frags[0].w - 1.5).abs() < 1e-6);
     }
 
-    /// The in-place merge of single-mesh fragments gives the general path's fragment bit for
-    /// bit: random pieces of two meshes and of instance-tree slots (`ANY_MESH`), some of
-    /// zero weight, with and without coverage masks, absorbed in random order.
+    /// The in-place merge of a single piece gives the general path's fragment bit for bit:
+    /// random pieces of three meshes and of instance-tree slots (`ANY_MESH`), some of zero
+    /// weight, with and without coverage masks, absorbed in random order, so that pieces
+    /// join the first group, start the `other` group, join it, or go to the nearer one.
     #[test]
-    fn one_mesh_merge_in_place_equals_the_general_path() {
+    fn piece_merge_in_place_equals_the_general_path() {
         let mut r = crate::core::rng::Sampler::new(64, 0, 0);
         let mut frag = |r: &mut crate::core::rng::Sampler| {
             let (t, w) = (1.0 + 9.0 * r.next(), if r.next() < 0.1 { 0.0 } else { r.next() });
-            let key = [0, 1, ANY_MESH][(r.next() * 3.0) as usize % 3];
+            let key = [0, 1, 2, ANY_MESH][(r.next() * 4.0) as usize % 4];
             let e = Elem::Point { leaf: (r.next() * 9.0) as u32, node: 1, idx: (r.next() * 99.0) as u32 };
             Frag {
                 z0: t - r.next(),
@@ -585,21 +602,26 @@ mod tests {
                 ..Default::default()
             }
         };
-        let mut in_place_merges = 0;
+        let (mut into_one, mut into_two, mut by_depth) = (0, 0, 0);
         for _ in 0..2000 {
             let mut a = frag(&mut r);
             let mut b = a;
             for _ in 0..(r.next() * 6.0) as usize {
                 let s = frag(&mut r);
-                if !(a.other.w > 0.0) && !(s.other.w > 0.0) && s.w > 0.0 && (s.key == a.key || s.key == ANY_MESH || a.key == ANY_MESH) {
-                    in_place_merges += 1;
+                if s.w > 0.0 && !(a.other.w > 0.0) {
+                    into_one += 1;
+                } else if s.w > 0.0 {
+                    into_two += 1;
+                    if ![a.key, a.other.key, ANY_MESH].contains(&s.key) && a.key != ANY_MESH {
+                        by_depth += 1;
+                    }
                 }
                 a.absorb_with(&s, true);
                 b.absorb_with(&s, false);
                 assert_eq!(format!("{a:?}"), format!("{b:?}"));
             }
         }
-        assert!(in_place_merges > 1000, "{in_place_merges}");
+        assert!(into_one > 1000 && into_two > 1000 && by_depth > 200, "{into_one} {into_two} {by_depth}");
     }
 
     /// `TraceParams::facing`: a solid's near side (facing the origin) and far side merged
