@@ -577,7 +577,7 @@ mod tests {
     #[test]
     fn piece_merge_in_place_equals_the_general_path() {
         let mut r = crate::core::rng::Sampler::new(64, 0, 0);
-        let mut frag = |r: &mut crate::core::rng::Sampler| {
+        let frag = |r: &mut crate::core::rng::Sampler| {
             let (t, w) = (1.0 + 9.0 * r.next(), if r.next() < 0.1 { 0.0 } else { r.next() });
             let key = [0, 1, 2, ANY_MESH][(r.next() * 4.0) as usize % 4];
             let e = Elem::Point { leaf: (r.next() * 9.0) as u32, node: 1, idx: (r.next() * 99.0) as u32 };
