@@ -2909,6 +2909,38 @@ mod tests {
         assert!(reached > 500 && culled > 500, "reached {reached}, culled {culled}");
     }
 
+    /// Case `i` of the triangle kernels' random tests: a cone, a triangle near and across its
+    /// footprint (sizes over three decades), one of four clamps, two floors, the box's
+    /// decomposition from some other depth (the node centre's), and the triangle as a
+    /// one-triangle [`TriSoa`].
+    struct TriCase {
+        cone: Cone,
+        pw: [Vec3; 3],
+        clamp: f32,
+        lf: f32,
+        boxe: Eigen2,
+        soa: TriSoa,
+    }
+
+    fn rnd_tri_case(s: &mut Sampler, i: usize) -> TriCase {
+        let cone = rnd_cone(s);
+        let t = s.next() * 10.0;
+        let size = 10f32.powf(s.next() * 3.0 - 2.5);
+        let c = cone.org + cone.dir * t + (cone.u * (s.next() - 0.5) + cone.v * (s.next() - 0.5)) * (s.next() * 0.6);
+        let mut rv = || Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * size;
+        let pw = [c + rv(), c + rv(), c + rv()];
+        let clamp = [1.0 / 16.0, 0.125, 0.25, 1.0][i % 4];
+        let lf = if i % 5 == 0 { 1e-3 } else { 1e-7 };
+        let boxe = eigen_1(cone.sigma((t + (s.next() - 0.5) * 2.0).max(0.0)), clamp, lf);
+        let mut m = crate::scene::Mesh::new("t");
+        for p in pw {
+            m.push_vertex(p);
+        }
+        m.push_tri(0, 1, 2, 0);
+        let soa = TriSoa::of(&m, &[0]);
+        TriCase { cone, pw, clamp, lf, boxe, soa }
+    }
+
     /// The triangle prefilter culls exactly: every triangle that the full per-box test gives
     /// a weight (inside the cone's depth range) passes its bounding-sphere test, for random
     /// cones, triangles near and across the footprint, all three weight modes (`mass` with
@@ -2919,29 +2951,9 @@ mod tests {
         let mut s = Sampler::new(21, 0, 0);
         let (mut passed, mut culled, mut culled_foot) = (0, 0, 0);
         for i in 0..40000 {
-            let cone = rnd_cone(&mut s);
-            let t = s.next() * 10.0;
-            let size = 10f32.powf(s.next() * 3.0 - 2.5);
-            let c = cone.org + cone.dir * t + (cone.u * (s.next() - 0.5) + cone.v * (s.next() - 0.5)) * (s.next() * 0.6);
-            let mut rv = || Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * size;
-            let pw = [c + rv(), c + rv(), c + rv()];
-            let clamp = [1.0 / 16.0, 0.125, 0.25, 1.0][i % 4];
-            let lf = if i % 5 == 0 { 1e-3 } else { 1e-7 };
-            // The box's axes come from some other depth (the node centre's).
-            let boxe = eigen_1(cone.sigma((t + (s.next() - 0.5) * 2.0).max(0.0)), clamp, lf);
+            let TriCase { cone, pw, clamp, lf, boxe, soa } = rnd_tri_case(&mut s, i);
             let mode = [TriWeight::Paper, TriWeight::Coverage, TriWeight::Mass][i % 3];
             let full = triangle_weight_per_box(&cone, pw, &boxe, clamp, lf, mode).filter(|x| x.3 >= cone.tmin && x.3 <= cone.tmax);
-            let soa = super::super::build::TriSoa::of(
-                &{
-                    let mut m = crate::scene::Mesh::new("t");
-                    for p in pw {
-                        m.push_vertex(p);
-                    }
-                    m.push_tri(0, 1, 2, 0);
-                    m
-                },
-                &[0],
-            );
             let bound = tri_bound_1(&cone, soa.cx[0], soa.cy[0], soa.cz[0], soa.r[0], &boxe, clamp, lf, mode.cut());
             let foot = tri_footprint_x8(&cone, &soa, 0, &boxe, clamp, lf, mode.cut()) & 1 == 1;
             if full.is_some() {
@@ -2967,21 +2979,7 @@ mod tests {
         let mut s = Sampler::new(64, 0, 0);
         let (mut worst_q, mut worst_w, mut weighed, mut cases) = (0.0f32, 0.0f32, 0, 0);
         for i in 0..40000 {
-            let cone = rnd_cone(&mut s);
-            let t = s.next() * 10.0;
-            let size = 10f32.powf(s.next() * 3.0 - 2.5);
-            let c = cone.org + cone.dir * t + (cone.u * (s.next() - 0.5) + cone.v * (s.next() - 0.5)) * (s.next() * 0.6);
-            let mut rv = || Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * size;
-            let pw = [c + rv(), c + rv(), c + rv()];
-            let clamp = [1.0 / 16.0, 0.125, 0.25, 1.0][i % 4];
-            let lf = if i % 5 == 0 { 1e-3 } else { 1e-7 };
-            let boxe = eigen_1(cone.sigma((t + (s.next() - 0.5) * 2.0).max(0.0)), clamp, lf);
-            let mut m = crate::scene::Mesh::new("t");
-            for p in pw {
-                m.push_vertex(p);
-            }
-            m.push_tri(0, 1, 2, 0);
-            let soa = super::super::build::TriSoa::of(&m, &[0]);
+            let TriCase { cone, pw, clamp, lf, boxe, soa } = rnd_tri_case(&mut s, i);
             let (q8, tv8, size8) = tri_footprint_x8_lanes(&cone, &soa, 0, &boxe, clamp, lf, R_CUT).1.get(0);
             let (q1, tv1, size1) = triangle_per_box_2d(&cone, pw, &boxe, clamp, lf);
             if !q1.iter().all(|q| q.is_finite()) {
