@@ -671,7 +671,7 @@ pub type SpecRun = (Film, run::Stats, Option<crate::lod::trace::LodMaps>, Option
 /// seconds) then hits every method of a comparison alike instead of all the runs of one.
 /// `run(i)` runs method i once; `time` is the figure of a run (smaller is better). Returns
 /// each method's best run and the times of every run, rounds × methods
-/// ([`super::deform_bench::per_round_speedups`]).
+/// ([`per_round_speedups`]).
 pub fn best_of_rounds<T>(
     count: usize,
     repeat: u32,
@@ -694,6 +694,26 @@ pub fn best_of_rounds<T>(
     Ok((bests.into_iter().map(|b| b.expect("at least one run")).collect(), rounds))
 }
 
+/// Per method, the first method's time ÷ its own in each round of `rounds` (rounds × methods,
+/// from [`best_of_rounds`]);
+/// empty lists with fewer than two rounds, where the best-of speed-up says the same.
+pub fn per_round_speedups(rounds: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let specs = rounds.first().map_or(0, Vec::len);
+    (0..specs).map(|j| if rounds.len() < 2 { Vec::new() } else { rounds.iter().map(|r| r[0] / r[j].max(1e-12)).collect() }).collect()
+}
+
+/// "median [min–max]" of per-round speed-ups, or "-" for none.
+pub fn median_range(v: &[f64]) -> String {
+    if v.is_empty() {
+        return "-".into();
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let n = s.len();
+    let med = if n % 2 == 1 { s[n / 2] } else { 0.5 * (s[n / 2 - 1] + s[n / 2]) };
+    format!("{med:.2}x [{:.2}–{:.2}]", s[0], s[n - 1])
+}
+
 /// Renders `spec` on `scene` (best of `repeat` renders).
 pub fn run_spec(scene: &Scene, spec: &MethodSpec, width: u32, height: u32, threads: usize, repeat: u32, quiet: bool) -> Result<SpecRun> {
     let mut sc;
@@ -706,14 +726,9 @@ pub fn run_spec(scene: &Scene, spec: &MethodSpec, width: u32, height: u32, threa
     };
     let mut opts = spec.opts(width, height, threads, quiet);
     opts.seed = spec.seed;
-    let mut best: Option<run::RunResult> = None;
-    for _ in 0..repeat.max(1) {
-        let r = run::run(scene, spec.method, spec.accel, &opts, &spec.multires, &spec.lod)?;
-        if best.as_ref().is_none_or(|b| r.out.seconds < b.out.seconds) {
-            best = Some(r);
-        }
-    }
-    let r = best.expect("at least one run");
+    let (mut best, _) =
+        best_of_rounds(1, repeat, |_| run::run(scene, spec.method, spec.accel, &opts, &spec.multires, &spec.lod), |r| r.out.seconds)?;
+    let r = best.pop().expect("one method");
     let stats = r.stats(scene, spec.method, spec.accel, &opts);
     Ok((r.out.film, stats, r.lod.map(|l| l.maps), r.cones.map(|c| c.pixel_tests)))
 }
@@ -946,7 +961,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             |i| run_spec(scene, &specs[i], a.width, a.height, a.threads, 1, a.quiet),
             |r| r.1.render_seconds,
         )?;
-        let paired = super::deform_bench::per_round_speedups(&rounds);
+        let paired = per_round_speedups(&rounds);
         for ((spec, (film, stats, maps, pixel_tests)), per_round) in specs.iter().zip(bests).zip(paired) {
             if let (Some(out), Some(v)) = (&a.out, &pixel_tests) {
                 // Where the cone tracer's work went: tests per pixel, log-scale heat map.
@@ -1291,7 +1306,7 @@ pub fn table_string(report: &BenchReport) -> String {
             r.stats.render_seconds,
             r.stats.mrays_per_second,
             r.speedup_vs_first,
-            super::deform_bench::median_range(&r.per_round_speedups),
+            median_range(&r.per_round_speedups),
             f(r.rmse, 4),
             f(r.psnr, 2),
             f(r.flip, 4),
@@ -1526,6 +1541,23 @@ pub(crate) mod fixtures {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each round pairs the methods' runs: a round in a slow phase (all three 2× slower) gives
+    /// the same ratios as a fast one, while the per-spec bests may come from different phases.
+    #[test]
+    fn per_round_speedups_pair_runs_of_one_round() {
+        let rounds = vec![vec![200.0, 100.0, 80.0], vec![400.0, 200.0, 160.0], vec![210.0, 140.0, 70.0]];
+        let p = per_round_speedups(&rounds);
+        assert_eq!(p[0], [1.0, 1.0, 1.0]);
+        assert_eq!(p[1], [2.0, 2.0, 1.5]);
+        assert_eq!(p[2], [2.5, 2.5, 3.0]);
+        assert_eq!(median_range(&p[1]), "2.00x [1.50–2.00]");
+        assert_eq!(median_range(&[3.0, 1.0]), "2.00x [1.00–3.00]");
+        assert_eq!(median_range(&[]), "-");
+        // One round: nothing to pair beyond the best-of speed-up.
+        assert!(per_round_speedups(&[vec![1.0, 2.0]]).iter().all(Vec::is_empty));
+        assert!(per_round_speedups(&[]).is_empty());
+    }
 
     /// The repeats go round the methods (0, 1, 2, 0, 1, 2), each method keeps its fastest
     /// run, every time is kept per round, and an error ends the rounds.

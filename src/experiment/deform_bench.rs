@@ -161,7 +161,7 @@ pub fn run(
             |i| animate(&argv[i]),
             |st| 1e3 * st.render_seconds / st.frames.max(1) as f64,
         )?;
-        let paired = per_round_speedups(&rounds);
+        let paired = super::bench::per_round_speedups(&rounds);
         for ((spec, st), per_round_speedups) in specs.iter().zip(bests).zip(paired) {
             let s = &spec.surfel;
             let n = st.frames.max(1) as f64;
@@ -288,25 +288,6 @@ fn plots(out: &Path, rows: &[DeformRow]) -> Result<()> {
     Ok(())
 }
 
-/// Per spec, the first spec's ms/frame ÷ its own in each round of `rounds` (rounds × specs);
-/// empty lists with fewer than two rounds, where the best-of speed-up says the same.
-pub fn per_round_speedups(rounds: &[Vec<f64>]) -> Vec<Vec<f64>> {
-    let specs = rounds.first().map_or(0, Vec::len);
-    (0..specs).map(|j| if rounds.len() < 2 { Vec::new() } else { rounds.iter().map(|r| r[0] / r[j].max(1e-12)).collect() }).collect()
-}
-
-/// "median [min–max]" of per-round speed-ups, or "-" for none.
-pub fn median_range(v: &[f64]) -> String {
-    if v.is_empty() {
-        return "-".into();
-    }
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    let n = s.len();
-    let med = if n % 2 == 1 { s[n / 2] } else { 0.5 * (s[n / 2 - 1] + s[n / 2]) };
-    format!("{med:.2}x [{:.2}–{:.2}]", s[0], s[n - 1])
-}
-
 /// The rows as a Markdown table.
 pub fn table(rows: &[DeformRow]) -> String {
     let mut s = String::from("\nDeforming sequences (Adams et al.):\n\n");
@@ -325,7 +306,7 @@ pub fn table(rows: &[DeformRow]) -> String {
             r.threads,
             r.ms_per_frame,
             r.speedup_vs_first,
-            median_range(&r.per_round_speedups),
+            super::bench::median_range(&r.per_round_speedups),
             r.update_ms_per_frame,
             r.rays_ms_per_frame.map(|v| format!("{v:.1}")).unwrap_or_else(|| "-".into()),
             r.sphere_tests_per_frame,
@@ -524,22 +505,5 @@ mod tests {
         assert_eq!(short_labels(&a), ["naive", "lazy-cache, unordered, cache 8 up"]);
         let b = [row("surfel:update=lazy:detail=0.2", "lazy"), row("surfel:update=lazy:detail=0.4", "lazy")];
         assert_eq!(short_labels(&b), ["surfel:update=lazy:detail=0.2", "surfel:update=lazy:detail=0.4"]);
-    }
-
-    /// Each round pairs the specs' runs: a round in a slow phase (all three 2× slower) gives
-    /// the same ratios as a fast one, while the per-spec bests may come from different phases.
-    #[test]
-    fn per_round_speedups_pair_runs_of_one_round() {
-        let rounds = vec![vec![200.0, 100.0, 80.0], vec![400.0, 200.0, 160.0], vec![210.0, 140.0, 70.0]];
-        let p = per_round_speedups(&rounds);
-        assert_eq!(p[0], [1.0, 1.0, 1.0]);
-        assert_eq!(p[1], [2.0, 2.0, 1.5]);
-        assert_eq!(p[2], [2.5, 2.5, 3.0]);
-        assert_eq!(median_range(&p[1]), "2.00x [1.50–2.00]");
-        assert_eq!(median_range(&[3.0, 1.0]), "2.00x [1.00–3.00]");
-        assert_eq!(median_range(&[]), "-");
-        // One round: nothing to pair beyond the best-of speed-up.
-        assert!(per_round_speedups(&[vec![1.0, 2.0]]).iter().all(Vec::is_empty));
-        assert!(per_round_speedups(&[]).is_empty());
     }
 }
