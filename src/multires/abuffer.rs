@@ -121,6 +121,35 @@ pub struct Group {
     pub wtn: f32,
 }
 
+/// What [`ABuffer::insert`] takes: one point's or triangle's contribution, its sums as a
+/// [`Group`] (`g.z0` where it begins, `g.best_w` its own weight), its depth interval's end
+/// and its coverage. About half a [`Frag`], which also carries a second mesh's group: the
+/// callers build and pass one per weighted element (stop 65: building and copying whole
+/// fragments was 3 % of a `complex` frame).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Piece {
+    pub g: Group,
+    pub z1: f32,
+    /// [`Frag::mask`], [`Frag::hidden`].
+    pub mask: u64,
+    pub hidden: f32,
+}
+
+impl Piece {
+    /// A piece over [z0, z1] of weight `w` at mean depth `t` (Σ w·t = w·t), of mesh `key`;
+    /// the caller adds its shading sums.
+    #[inline]
+    pub fn new(z0: f32, z1: f32, w: f32, t: f32, key: u32) -> Piece {
+        Piece { g: Group { key, z0, w, wt: w * t, best_w: w, ..Default::default() }, z1, ..Default::default() }
+    }
+    /// The fragment of this piece alone.
+    pub fn frag(&self) -> Frag {
+        let mut f = Frag { z0: self.g.z0, z0_key: self.g.z0, z1: self.z1, mask: self.mask, hidden: self.hidden, ..Default::default() };
+        f.set_sums(&self.g);
+        f
+    }
+}
+
 impl Group {
     /// Adds `k` times `g`'s sums; for k > 0 `g`'s best element may take over.
     fn add_scaled(&mut self, g: &Group, k: f32) {
@@ -182,33 +211,43 @@ impl Frag {
     /// [`Frag::absorb`]; `piece_in_place` false takes the general path for every merge
     /// (the reference in the tests).
     fn absorb_with(&mut self, s: &Frag, piece_in_place: bool) {
-        // Nearly every merge is of a single piece (`other` all zeros: it only ever takes
-        // groups of positive weight).
+        // Nearly every merge of two fragments is of a single group (`other` all zeros: it
+        // only ever takes groups of positive weight).
         if piece_in_place && !(s.other.w > 0.0) {
-            self.absorb_piece(s);
+            self.absorb_group(&s.sums());
         } else {
             self.absorb_groups(s);
         }
-        self.z0 = self.z0.min(s.z0);
-        self.z1 = self.z1.max(s.z1);
+        self.absorb_extent(s.z0, s.z1, s.w, s.mask, s.hidden);
+    }
+    /// Merges one piece: [`Frag::absorb`] of `p.frag()`, bit for bit, without building it.
+    #[inline]
+    fn absorb_piece(&mut self, p: &Piece) {
+        self.absorb_group(&p.g);
+        self.absorb_extent(p.g.z0, p.z1, p.g.w, p.mask, p.hidden);
+    }
+    /// The depth interval and coverage of a merge of pieces [z0, z1] of weight `w`.
+    #[inline]
+    fn absorb_extent(&mut self, z0: f32, z1: f32, w: f32, mask: u64, hidden: f32) {
+        self.z0 = self.z0.min(z0);
+        self.z1 = self.z1.max(z1);
         // Overlap within the fragment (`--coverage-masks`): the share of the new piece's
         // coverage that falls on sub-rays already covered here is not coverage.
-        self.hidden += s.hidden;
-        if s.mask & self.mask != 0 {
-            let over = (s.mask & self.mask).count_ones() as f32 / s.mask.count_ones() as f32;
-            self.hidden += (s.w - s.hidden).max(0.0) * over;
+        self.hidden += hidden;
+        if mask & self.mask != 0 {
+            let over = (mask & self.mask).count_ones() as f32 / mask.count_ones() as f32;
+            self.hidden += (w - hidden).max(0.0) * over;
         }
-        self.mask |= s.mask;
+        self.mask |= mask;
     }
 
-    /// [`Frag::absorb`]'s sums for a fragment `s` of one mesh (no `other` group: a single
-    /// piece, as every insertion is), added in place: the general path's result bit for bit
+    /// [`Frag::absorb`]'s sums for one group `s` (a piece, or a fragment of one mesh;
+    /// `s.z0` where its pieces begin), added in place: the general path's result bit for bit
     /// (its group of `s` is `s`'s sums less an empty `other`, added with factor 1), without
     /// its copies of the groups (stop 64: `absorb` was 7 % of a `complex` frame, mostly
     /// moving groups through the stack).
     #[inline]
-    fn absorb_piece(&mut self, s: &Frag) {
-        debug_assert!(!(s.other.w > 0.0));
+    fn absorb_group(&mut self, s: &Group) {
         let joins = s.w > 0.0;
         let mut to_first = false;
         if joins {
@@ -227,13 +266,13 @@ impl Frag {
                 if self.key == ANY_MESH {
                     self.key = s.key;
                 }
-                self.z0_key = self.z0_key.min(s.z0_key);
+                self.z0_key = self.z0_key.min(s.z0);
             } else {
                 if !(self.other.w > 0.0) {
-                    (self.other.key, self.other.z0) = (s.key, s.z0_key);
+                    (self.other.key, self.other.z0) = (s.key, s.z0);
                 }
-                self.other.add(&s.sums());
-                self.other.z0 = self.other.z0.min(s.z0_key);
+                self.other.add(s);
+                self.other.z0 = self.other.z0.min(s.z0);
             }
         }
         self.w += s.w;
@@ -400,19 +439,19 @@ impl ABuffer {
         self.merges = 0;
     }
 
-    /// Inserts one sample (a fragment of a single point or triangle).
-    pub fn insert(&mut self, mut s: Frag) {
-        s.z0_key = s.z0;
+    /// Inserts one sample (a single point or triangle).
+    pub fn insert(&mut self, s: &Piece) {
+        let (z0, z1) = (s.g.z0, s.z1);
         self.dirty = true;
         // First fragment that does not end before the sample starts.
-        let i = self.frags.partition_point(|f| f.z1 < s.z0);
+        let i = self.frags.partition_point(|f| f.z1 < z0);
         // The fragments from the first one changed here on are no longer known to be final
         // (`opaque_before` checks them again): a merge can grow a final fragment past the
         // front. (Until stop 49 only the prefix's length was capped; review finding, test
         // `a_final_fragment_grown_past_the_front_is_not_final`.)
         let mut touched = i;
-        if i < self.frags.len() && self.frags[i].z0 <= s.z1 {
-            self.frags[i].absorb(&s);
+        if i < self.frags.len() && self.frags[i].z0 <= z1 {
+            self.frags[i].absorb_piece(s);
             self.merges += 1;
             // The grown interval may now reach the following fragments.
             while i + 1 < self.frags.len() && self.frags[i + 1].z0 <= self.frags[i].z1 {
@@ -428,7 +467,7 @@ impl ABuffer {
                 touched = i - 1;
             }
         } else {
-            self.frags.insert(i, s);
+            self.frags.insert(i, s.frag());
             if self.frags.len() > self.cap {
                 touched = touched.min(self.merge_closest());
             }
@@ -549,6 +588,12 @@ impl Over {
 mod tests {
     use super::*;
 
+    /// The piece of a fragment built as one (no second mesh, `z0_key` unset).
+    fn pc(f: Frag) -> Piece {
+        assert!(f.z0_key == 0.0 && f.other.w == 0.0);
+        Piece { g: Group { z0: f.z0, ..f.sums() }, z1: f.z1, mask: f.mask, hidden: f.hidden }
+    }
+
     fn smp(t: f32, d: f32, w: f32, c: Vec3) -> Frag {
         Frag { z0: t - d, z1: t + d, w, wt: w * t, col: c * w, best_w: w, ..Default::default() }
     }
@@ -556,21 +601,22 @@ mod tests {
     #[test]
     fn overlapping_samples_merge_and_others_sort() {
         let mut ab = ABuffer::new(16);
-        ab.insert(smp(5.0, 0.1, 0.5, Vec3::X));
-        ab.insert(smp(2.0, 0.1, 0.3, Vec3::Y));
-        ab.insert(smp(5.15, 0.1, 0.6, Vec3::X));
+        ab.insert(&pc(smp(5.0, 0.1, 0.5, Vec3::X)));
+        ab.insert(&pc(smp(2.0, 0.1, 0.3, Vec3::Y)));
+        ab.insert(&pc(smp(5.15, 0.1, 0.6, Vec3::X)));
         assert_eq!(ab.frags.len(), 2);
         assert!(ab.frags[0].z1 < ab.frags[1].z0);
         assert!((ab.frags[1].w - 1.1).abs() < 1e-6);
         assert!((ab.frags[1].z0 - 4.9).abs() < 1e-6 && (ab.frags[1].z1 - 5.25).abs() < 1e-6);
         // A sample bridging the two merges all three.
-        ab.insert(smp(3.5, 1.45, 0.1, Vec3::Z));
+        ab.insert(&pc(smp(3.5, 1.45, 0.1, Vec3::Z)));
         assert_eq!(ab.frags.len(), 1);
         assert_eq!(ab.merges, 3);
         assert!((ab.frags[0].w - 1.5).abs() < 1e-6);
     }
 
-    /// The in-place merge of a single piece gives the general path's fragment bit for bit:
+    /// The in-place merges of a single-group fragment and of a [`Piece`] give the general
+    /// path's fragment bit for bit:
     /// random pieces of three meshes and of instance-tree slots (`ANY_MESH`), some of zero
     /// weight, with and without coverage masks, absorbed in random order, so that pieces
     /// join the first group, start the `other` group, join it, or go to the nearer one.
@@ -606,6 +652,7 @@ mod tests {
         for _ in 0..2000 {
             let mut a = frag(&mut r);
             let mut b = a;
+            let mut pa = a;
             for _ in 0..(r.next() * 6.0) as usize {
                 let s = frag(&mut r);
                 if s.w > 0.0 && !(a.other.w > 0.0) {
@@ -619,6 +666,12 @@ mod tests {
                 a.absorb_with(&s, true);
                 b.absorb_with(&s, false);
                 assert_eq!(format!("{a:?}"), format!("{b:?}"));
+                // The same as a piece (which begins where its interval does).
+                let p = pc(Frag { z0_key: 0.0, ..s });
+                let mut c = pa;
+                pa.absorb_piece(&p);
+                c.absorb_with(&p.frag(), false);
+                assert_eq!(format!("{pa:?}"), format!("{c:?}"));
             }
         }
         assert!(into_one > 1000 && into_two > 1000 && by_depth > 200, "{into_one} {into_two} {by_depth}");
@@ -630,15 +683,15 @@ mod tests {
     fn near_and_far_sides_of_a_solid_count_once() {
         let far = |t: f32, w: f32| Frag { wb: w, ..smp(t, 0.5, w, Vec3::ONE) };
         let mut ab = ABuffer::new(16);
-        ab.insert(smp(2.0, 0.5, 0.4, Vec3::ONE));
-        ab.insert(far(2.6, 0.45));
+        ab.insert(&pc(smp(2.0, 0.5, 0.4, Vec3::ONE)));
+        ab.insert(&pc(far(2.6, 0.45)));
         assert_eq!(ab.frags.len(), 1, "merged");
         assert!((ab.alpha() - 0.45).abs() < 1e-6, "max of the sides, not their sum 0.85: {}", ab.alpha());
         // Both pieces of one sheet face the same way: summed as in the paper, from either side.
         for mk in [|t, w| smp(t, 0.5, w, Vec3::ONE), far] {
             let mut ab = ABuffer::new(16);
-            ab.insert(mk(2.0, 0.4));
-            ab.insert(mk(2.6, 0.45));
+            ab.insert(&pc(mk(2.0, 0.4)));
+            ab.insert(&pc(mk(2.6, 0.45)));
             assert!((ab.alpha() - 0.85).abs() < 1e-6, "{}", ab.alpha());
         }
         // Without facing (wb = 0 everywhere) the rule is the paper's, and masks still apply.
@@ -657,8 +710,8 @@ mod tests {
         for split in [true, false] {
             let (face, floor) = if split { (1, 0) } else { (0, 0) };
             let mut ab = ABuffer::new(16);
-            ab.insert(piece(6.6, 0.87, Vec3::X, face));
-            ab.insert(piece(6.73, 1.0, Vec3::Y, floor));
+            ab.insert(&pc(piece(6.6, 0.87, Vec3::X, face)));
+            ab.insert(&pc(piece(6.73, 1.0, Vec3::Y, floor)));
             assert_eq!(ab.frags.len(), 1, "merged by depth");
             let (parts, n) = ab.frags[0].parts();
             let mut over = Over::default();
@@ -674,9 +727,9 @@ mod tests {
         }
         // A third mesh joins the group nearer in depth; the sums stay whole.
         let mut ab = ABuffer::new(16);
-        ab.insert(piece(6.6, 0.5, Vec3::X, 1));
-        ab.insert(piece(6.9, 0.5, Vec3::Y, 2));
-        ab.insert(piece(6.85, 0.25, Vec3::Z, 3));
+        ab.insert(&pc(piece(6.6, 0.5, Vec3::X, 1)));
+        ab.insert(&pc(piece(6.9, 0.5, Vec3::Y, 2)));
+        ab.insert(&pc(piece(6.85, 0.25, Vec3::Z, 3)));
         let f = &ab.frags[0];
         assert!((f.w - 1.25).abs() < 1e-6 && (f.other.w - 0.75).abs() < 1e-6 && f.other.key == 2, "{:?}", f.other);
     }
@@ -688,8 +741,8 @@ mod tests {
     #[test]
     fn each_mesh_of_a_fragment_counts_from_its_own_beginning() {
         let mut ab = ABuffer::new(16);
-        ab.insert(Frag { key: 1, ..smp(6.4, 1.0, 0.1, Vec3::X) });
-        ab.insert(Frag { key: 0, ..smp(6.9, 0.1, 1.0, Vec3::Y) });
+        ab.insert(&pc(Frag { key: 1, ..smp(6.4, 1.0, 0.1, Vec3::X) }));
+        ab.insert(&pc(Frag { key: 0, ..smp(6.9, 0.1, 1.0, Vec3::Y) }));
         assert_eq!(ab.frags.len(), 1, "merged by depth");
         let f = ab.frags[0];
         assert!((f.z0 - 5.4).abs() < 1e-6 && (f.z0_key - 5.4).abs() < 1e-6 && (f.other.z0 - 6.8).abs() < 1e-6, "{f:?}");
@@ -700,7 +753,7 @@ mod tests {
         assert_eq!(n, 2);
         assert!((parts[0].z0 - 5.4).abs() < 1e-6 && (parts[1].z0 - 6.8).abs() < 1e-6);
         // Merged into a third fragment's, the beginnings travel with their groups.
-        ab.insert(Frag { key: 0, ..smp(6.7, 0.1, 0.2, Vec3::Y) });
+        ab.insert(&pc(Frag { key: 0, ..smp(6.7, 0.1, 0.2, Vec3::Y) }));
         let f = ab.frags[0];
         assert!((f.other.z0 - 6.6).abs() < 1e-6 && (f.z0_key - 5.4).abs() < 1e-6, "{f:?}");
     }
@@ -708,17 +761,17 @@ mod tests {
     #[test]
     fn alpha_and_early_termination() {
         let mut ab = ABuffer::new(16);
-        ab.insert(smp(1.0, 0.1, 0.5, Vec3::ONE));
+        ab.insert(&pc(smp(1.0, 0.1, 0.5, Vec3::ONE)));
         assert!(!ab.opaque_before(2.0));
-        ab.insert(smp(3.0, 0.1, 1.7, Vec3::ONE));
+        ab.insert(&pc(smp(3.0, 0.1, 1.7, Vec3::ONE)));
         assert!(!ab.opaque_before(3.0), "not final while the front is inside it");
         assert!(ab.opaque_before(3.2));
         assert!((ab.alpha() - 1.0).abs() < 1e-6);
         let mut ab = ABuffer::new(16);
         assert!(!ab.opaque(1.0));
-        ab.insert(smp(1.0, 0.1, 0.6, Vec3::ONE));
+        ab.insert(&pc(smp(1.0, 0.1, 0.6, Vec3::ONE)));
         assert!(!ab.opaque(1.0));
-        ab.insert(smp(1.05, 0.1, 0.6, Vec3::ONE));
+        ab.insert(&pc(smp(1.05, 0.1, 0.6, Vec3::ONE)));
         assert!(ab.opaque(1.0), "merged weight 1.2: the ray is opaque even with the front inside");
     }
 
@@ -727,17 +780,17 @@ mod tests {
     #[test]
     fn fragments_behind_the_front_do_not_terminate() {
         let mut ab = ABuffer::new(16);
-        ab.insert(smp(8.0, 0.2, 1.0, Vec3::X));
+        ab.insert(&pc(smp(8.0, 0.2, 1.0, Vec3::X)));
         assert!(!ab.opaque(2.0), "the floor at 8 is behind the front at 2");
         assert!(!ab.opaque(7.7));
         assert!(ab.opaque(7.9), "the front has reached the floor");
         // The cube in front, found later, is composited first.
-        ab.insert(smp(5.0, 0.1, 1.0, Vec3::Y));
+        ab.insert(&pc(smp(5.0, 0.1, 1.0, Vec3::Y)));
         assert!(ab.opaque(5.0));
         assert_eq!(ab.frags[0].col, Vec3::Y);
         // A front that moves back (a node entered nearer) recounts.
         let mut ab = ABuffer::new(16);
-        ab.insert(smp(8.0, 0.2, 1.0, Vec3::X));
+        ab.insert(&pc(smp(8.0, 0.2, 1.0, Vec3::X)));
         assert!(ab.opaque(9.0));
         assert!(!ab.opaque(3.0));
     }
@@ -751,41 +804,41 @@ mod tests {
         let (left, right) = (0x0000_0000_ffff_ffffu64, 0xffff_ffff_0000_0000u64);
         // One fragment: two halves of one surface, then the same half twice.
         let mut ab = ABuffer::new(16);
-        ab.insert(masked(1.0, 0.5, left));
-        ab.insert(masked(1.02, 0.5, right));
+        ab.insert(&pc(masked(1.0, 0.5, left)));
+        ab.insert(&pc(masked(1.02, 0.5, right)));
         assert_eq!(ab.frags.len(), 1);
         assert!((ab.alpha() - 1.0).abs() < 1e-6);
         let mut ab = ABuffer::new(16);
-        ab.insert(masked(1.0, 0.5, left));
-        ab.insert(masked(1.02, 0.5, left));
+        ab.insert(&pc(masked(1.0, 0.5, left)));
+        ab.insert(&pc(masked(1.02, 0.5, left)));
         assert!((ab.alpha() - 0.5).abs() < 1e-6, "{}", ab.alpha());
         assert!((ab.frags[0].w - 1.0).abs() < 1e-6, "the weight sum (shading) is unchanged");
         // Half of a piece over covered sub-rays: half its weight is hidden.
-        ab.insert(masked(1.01, 0.2, 0x0000_ffff_ffff_0000));
+        ab.insert(&pc(masked(1.01, 0.2, 0x0000_ffff_ffff_0000)));
         assert!((ab.alpha() - 0.6).abs() < 1e-6, "{}", ab.alpha());
         // Unmasked pieces add as in the paper.
-        ab.insert(smp(1.01, 0.1, 0.1, Vec3::ONE));
+        ab.insert(&pc(smp(1.01, 0.1, 0.1, Vec3::ONE)));
         assert!((ab.alpha() - 0.7).abs() < 1e-6);
         // Across fragments: a leaf behind the same half of a leaf in front is hidden; one
         // behind the other half shows whole; a covering wall fills exactly what is left.
         for (back, want) in [(left, 0.5), (right, 1.0)] {
             let mut ab = ABuffer::new(16);
-            ab.insert(masked(1.0, 0.5, left));
-            ab.insert(masked(5.0, 0.5, back));
+            ab.insert(&pc(masked(1.0, 0.5, left)));
+            ab.insert(&pc(masked(5.0, 0.5, back)));
             assert_eq!(ab.frags.len(), 2);
             assert!((ab.alpha() - want).abs() < 0.01, "{} vs {want}", ab.alpha());
         }
         let mut ab = ABuffer::new(16);
-        ab.insert(masked(1.0, 0.37, left));
-        ab.insert(masked(5.0, 1.0, u64::MAX));
+        ab.insert(&pc(masked(1.0, 0.37, left)));
+        ab.insert(&pc(masked(5.0, 1.0, u64::MAX)));
         assert!((ab.alpha() - 1.0).abs() < 1e-6);
         let mut o = Over::default();
         assert!((o.add(&ab.frags[0]) - 0.37).abs() < 1e-6);
         assert!((o.add(&ab.frags[1]) - 0.63).abs() < 1e-6);
         // Without masks: the paper's compositing.
         let mut ab = ABuffer::new(16);
-        ab.insert(smp(1.0, 0.1, 0.5, Vec3::ONE));
-        ab.insert(smp(5.0, 0.1, 0.5, Vec3::ONE));
+        ab.insert(&pc(smp(1.0, 0.1, 0.5, Vec3::ONE)));
+        ab.insert(&pc(smp(5.0, 0.1, 0.5, Vec3::ONE)));
         assert!((ab.alpha() - 0.75).abs() < 1e-6);
     }
 
@@ -793,7 +846,7 @@ mod tests {
     fn capacity_is_bounded() {
         let mut ab = ABuffer::new(4);
         for i in 0..20 {
-            ab.insert(smp(i as f32, 0.1, 0.01, Vec3::ONE));
+            ab.insert(&pc(smp(i as f32, 0.1, 0.01, Vec3::ONE)));
         }
         assert!(ab.frags.len() <= 4);
         let w: f32 = ab.frags.iter().map(|f| f.w).sum();
@@ -814,13 +867,13 @@ mod tests {
     #[test]
     fn third_mesh_joins_the_nearer_group() {
         let mut ab = ABuffer::new(16);
-        ab.insert(piece(5.0, 0.1, 1.0, Vec3::X, 1));
-        ab.insert(piece(8.0, 0.5, 2.0, Vec3::Y, 2));
-        ab.insert(piece(8.2, 0.5, 1.0, Vec3::Z, 3));
+        ab.insert(&pc(piece(5.0, 0.1, 1.0, Vec3::X, 1)));
+        ab.insert(&pc(piece(8.0, 0.5, 2.0, Vec3::Y, 2)));
+        ab.insert(&pc(piece(8.2, 0.5, 1.0, Vec3::Z, 3)));
         assert_eq!(ab.frags.len(), 2);
         assert!(ab.frags[1].other.w > 0.0, "the second fragment holds two meshes");
         // A faint sample of mesh 1 bridges the two fragments: the first absorbs the second.
-        ab.insert(piece(6.3, 1.25, 0.01, Vec3::X, 1));
+        ab.insert(&pc(piece(6.3, 1.25, 0.01, Vec3::X, 1)));
         assert_eq!(ab.frags.len(), 1);
         let (parts, n) = ab.frags[0].parts();
         assert_eq!(n, 2);
@@ -837,9 +890,9 @@ mod tests {
     #[test]
     fn a_final_fragment_grown_past_the_front_is_not_final() {
         let mut ab = ABuffer::new(16);
-        ab.insert(piece(1.5, 0.5, 0.6, Vec3::X, 0));
+        ab.insert(&pc(piece(1.5, 0.5, 0.6, Vec3::X, 0)));
         assert!(!ab.opaque_before(3.0));
-        ab.insert(piece(3.45, 1.55, 0.6, Vec3::Y, 0));
+        ab.insert(&pc(piece(3.45, 1.55, 0.6, Vec3::Y, 0)));
         assert_eq!(ab.frags.len(), 1);
         assert!(ab.frags[0].z1 > 3.0);
         assert!(!ab.opaque_before(3.0), "ended on the fragment [{}, {}], which reaches past the front 3", ab.frags[0].z0, ab.frags[0].z1);

@@ -47,7 +47,7 @@
 //! avoided, as in the paper, by a minimum distance from the outgoing cone's footprint size
 //! and angle.
 
-use super::abuffer::{ABuffer, Elem, Frag};
+use super::abuffer::{ABuffer, Elem, Frag, Piece};
 use super::build::{mat_props, BuildParams, MatRanges, PointSoa, PointTree, TriSoa, NO_CHILD};
 use super::cone::{self, Cone, Outgoing};
 use super::group::GroupPoints;
@@ -2046,7 +2046,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
             }
             let tw = t * inv_s;
             let wb = if away { w } else { 0.0 };
-            let mut f = Frag { z0: tw - dz, z1: tw + dz, w, wt: w * tw, best_w: w, wb, key, ..Default::default() };
+            let mut p = Piece::new(tw - dz, tw + dz, w, tw, key);
+            let f = &mut p.g;
+            f.wb = wb;
             if mode == Collect::Shade {
                 let m = ranges.decode(pts.rgb[j], pts.mat[j]);
                 f.col = m.color * w;
@@ -2064,7 +2066,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 }
                 f.best = best(j);
             }
-            ab.insert(f);
+            ab.insert(&p);
         }
     }
 
@@ -2152,10 +2154,12 @@ impl<'s, 'a> Tracer<'s, 'a> {
             0.0
         };
         let key = self.mesh_key(leaf.mesh);
-        let mut f = Frag { z0: z0 * inv_s, z1: z1 * inv_s, w, wt: w * tw, best_w: w, wb, key, ..Default::default() };
+        let mut p = Piece::new(z0 * inv_s, z1 * inv_s, w, tw, key);
+        p.g.wb = wb;
         if self.p.coverage_masks {
-            f.mask = super::mask::tri_mask(super::mask::whiten(lc, pw, t, self.clamp, self.floor * s));
+            p.mask = super::mask::tri_mask(super::mask::whiten(lc, pw, t, self.clamp, self.floor * s));
         }
+        let f = &mut p.g;
         if mode == Collect::Shade {
             let mat = &self.ms.scene.materials[leaf.material.unwrap_or(mesh.mat[tri as usize]) as usize];
             let b0 = 1.0 - b1 - b2;
@@ -2171,7 +2175,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             }
             f.best = Elem::Tri { leaf: li, tri, b1, b2 };
         }
-        ab.insert(f);
+        ab.insert(&p);
     }
 
     /// World-space shape operator W (n(p+δ) ≈ normalize(n + W·δ)) of a fragment's best
