@@ -1650,6 +1650,8 @@ impl<'s, 'a> Tracer<'s, 'a> {
     pub fn traverse_own(&self, cone: &Cone, own: Own, ab: &mut ABuffer, mode: Collect, sc: &mut Scratch, c: &mut Counters) {
         let tl = &self.ms.tlas;
         let own_tmin = cone.tmin;
+        // The cone as given: the instance-tree slots' points skip up to its own `tmin`.
+        let given = cone;
         let mut wcone = *cone;
         if own.tree != u32::MAX {
             wcone.tmin = own.tmin.min(cone.tmin);
@@ -1720,16 +1722,15 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 let mut blend = e.blend;
                 if self.p.group_points && self.p.points && e.eig != u32::MAX && g.h[gi] > 0.0 {
                     let boxe = clamp_eigen(&sc.eigs[e.eig as usize], clamp);
-                    let gc = Cone { tmin: own_tmin, ..*cone };
                     if e.kind == K_TLAS_TERMINAL {
-                        self.test_group(&gc, gi, &boxe, e.blend, ab, &mut sc.hits, mode, c);
+                        self.test_group(given, gi, &boxe, e.blend, ab, &mut sc.hits, mode, c);
                         continue;
                     }
                     let hg = g.h[gi];
                     if self.p.lod_scale * boxe.s2 >= hg {
                         let x = if self.p.mipmap { (self.p.lod_scale * boxe.s2 / hg).log2().clamp(0.0, 1.0) } else { 1.0 };
                         if x > 0.0 {
-                            self.test_group(&gc, gi, &boxe, e.blend * x, ab, &mut sc.hits, mode, c);
+                            self.test_group(given, gi, &boxe, e.blend * x, ab, &mut sc.hits, mode, c);
                         }
                         if x >= 1.0 {
                             continue;
