@@ -1906,3 +1906,75 @@ fn stop_58_inputs_survive_and_odd_geometry_is_refused() {
         assert!(!d.join(f).exists(), "a refused run wrote {f}");
     }
 }
+
+/// Bad input found by the robustness sweep of stop 65: an infinite pixel against a finite
+/// one in `compare` is said (the metrics count it as 0, so +inf passed `--min-psnr`
+/// unremarked), two depth maps with the same infinities compare quietly; refused with one
+/// line, exit 2: `--min-psnr -inf`; a bench spec whose first pass exceeds its
+/// spp (as `render --first-pass-spp` is refused); a lod spec out of range names its spec.
+#[test]
+fn stop65_sweep_findings_are_refused() {
+    let d = tmp("sweep65");
+    let p = |name: &str| d.join(name).to_str().unwrap().to_string();
+    let mut v = vec![0.25f32; 4 * 4];
+    lodtrace::film::io::write_exr_scalar(std::path::Path::new(&p("a.exr")), 4, 4, &v).unwrap();
+    v[5] = f32::INFINITY;
+    lodtrace::film::io::write_exr_scalar(std::path::Path::new(&p("inf.exr")), 4, 4, &v).unwrap();
+    lodtrace::film::io::write_exr_scalar(std::path::Path::new(&p("inf2.exr")), 4, 4, &v).unwrap();
+    for (a, b) in [("a.exr", "inf.exr"), ("inf.exr", "a.exr")] {
+        let (code, _, err) = lodtrace(&["compare", &p(a), &p(b), "--min-psnr", "10"]);
+        assert_eq!(code, 0, "{err}");
+        assert!(err.contains("1 pixel is infinite in one image and not the other (the first at (1, 1))"), "{err}");
+    }
+    let (code, out, err) = lodtrace(&["compare", &p("inf.exr"), &p("inf2.exr"), "--min-psnr", "10"]);
+    assert_eq!(code, 0, "the same infinities (a depth AOV's background) compare: {out} {err}");
+    assert!(!err.contains("infinite"), "{err}");
+    let (code, _, err) = lodtrace(&["compare", &p("a.exr"), &p("inf2.exr"), "--min-psnr=-inf"]);
+    assert_eq!(code, 2, "{err}");
+    let (code, _, err) = lodtrace(&["compare", &p("a.exr"), &p("a.exr"), "--min-psnr=-inf"]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    let small = ["--width", "16", "--height", "16", "--quiet", "--out"];
+    for (spec, says) in [
+        ("distributed:fps=8:spp=4", "fps=8 exceeds spp=4"),
+        ("distributed:fps=8", "fps=8 exceeds spp=1"),
+        ("lod:levels=0", "method spec 'lod:levels=0': --lod-levels 0 out of range"),
+    ] {
+        let mut args = vec!["bench", "plane", "--methods", spec];
+        args.extend_from_slice(&small);
+        let o = p("b");
+        args.push(&o);
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{spec}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(says), "{spec}: {err}");
+        assert!(!d.join("b").exists(), "{spec} left its folder");
+    }
+    // As the reference, too; a sweep caps the first pass at each of its points instead.
+    let o = p("r");
+    let (code, _, err) = lodtrace(&[
+        "bench",
+        "plane",
+        "--methods",
+        "whitted",
+        "--reference",
+        "distributed:fps=8:spp=4",
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--quiet",
+        "--out",
+        &o,
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("fps=8 exceeds spp=4"), "{err}");
+    // `--debug-pixel` explains a cone; the surfel tracer ignored it and wrote an image.
+    let o = p("s.png");
+    let (code, _, err) =
+        lodtrace(&["render", "bend", "--method", "surfel", "--debug-pixel", "1,1", "--width", "16", "--height", "16", "--out", &o]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains("--debug-pixel explains a cone"), "{err}");
+    assert!(!d.join("s.png").exists());
+}

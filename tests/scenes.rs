@@ -449,6 +449,12 @@ fn bad_input_exits_2_with_one_error_line_and_no_output() {
     let all_nan = f("nan.off", "OFF\n4 2 0\nnan 0 0\n1 0 0\n0 1 0\n1 1 nan\n3 0 1 2\n3 1 3 2\n");
     let empty_obj = f("empty.obj", "");
     let comment_obj = f("comments.obj", "# no geometry here\no nothing\n");
+    // Faces naming normals or texture coordinates the file lacks: tobj dropped them, and
+    // with them every normal of the mesh, without a word (sweep of stop 65).
+    let cube = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nvn 0 0 1\nf 1 2 3\n";
+    let normal_ref = f("normal_ref.obj", &format!("{cube}f 1//7 2//7 3//7\n"));
+    let texture_ref = f("texture_ref.obj", &format!("{cube}f 1/5 2/5 3/5\n"));
+    let relative_ref = f("relative_ref.obj", &format!("{cube}f 1//-2 2//-2 4//-2\n"));
     let bad_toml = f("bad.toml", &format!("{GOOD_MESH}[[instances]]\ntarget = \"nope\"\n"));
     let missing = d.join("missing.off").to_str().unwrap().to_string();
     let no_assets = d.join("no-assets").to_str().unwrap().to_string();
@@ -468,6 +474,9 @@ fn bad_input_exits_2_with_one_error_line_and_no_output() {
         ("empty_obj", &empty_obj, vec![], vec![]),
         ("obj_without_faces", &comment_obj, vec![], vec![]),
         ("bad_toml", &bad_toml, vec![], vec![]),
+        ("obj_normal_index_past_the_end", &normal_ref, vec![], vec![]),
+        ("obj_texture_index_past_the_end", &texture_ref, vec![], vec![]),
+        ("obj_relative_normal_before_the_start", &relative_ref, vec![], vec![]),
         ("width_0", "plane", vec!["--width", "0"], vec![]),
         ("unknown_scene", "no-such-scene", vec![], vec![]),
         ("unknown_method", "plane", vec!["--method", "bogus"], vec![]),
@@ -485,6 +494,8 @@ fn bad_input_exits_2_with_one_error_line_and_no_output() {
         &[("LODTRACE_ASSETS", &no_assets)],
     );
     assert!(r.stderr.contains("tools/setup"), "{}", r.stderr);
+    let r = lodtrace(&["render", &normal_ref, "--width", "16", "--height", "16", "--out", d.join("n.png").to_str().unwrap()], &[]);
+    assert!(r.stderr.contains("line 7: a face names normal 7, but the file has 1 of them"), "{}", r.stderr);
     let r = lodtrace(
         &["render", &bad_toml, "--accel", "bvh", "--width", "16", "--height", "16", "--out", d.join("b.png").to_str().unwrap()],
         &[],

@@ -403,7 +403,18 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     let setup_seconds = t_setup.elapsed().as_secs_f64();
     let frames = a.frames.unwrap_or(seq.frames);
     let t0 = Instant::now();
-    let rec = seq.record(frames).map_err(derr)?;
+    // The motion is simulated whole before the first frame is traced (about 2 ms a frame
+    // for the built-in sequences): shown, so that a long run does not look hung.
+    let sim_bar = if a.quiet {
+        ProgressBar::hidden()
+    } else {
+        let b = ProgressBar::new(frames as u64);
+        b.set_style(ProgressStyle::with_template("{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} frames, eta {eta}").unwrap());
+        b.set_prefix(format!("simulate {}", seq.name));
+        b
+    };
+    let rec = seq.record_with(frames, || sim_bar.inc(1)).map_err(derr)?;
+    sim_bar.finish_and_clear();
     let simulate_seconds = t0.elapsed().as_secs_f64();
     let t0 = Instant::now();
     let mut tracer = DeformTracer::new(

@@ -167,7 +167,12 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
         }
     }
     // Mean FLIP lies in [0, 1]; a negative bound could never pass. (`--min-psnr inf` is
-    // meaningful: it asks for identical images.)
+    // meaningful: it asks for identical images; −inf would pass anything.)
+    if let Some(m) = a.min_psnr {
+        if m == f64::NEG_INFINITY || m.abs() > 1e6 && m.is_finite() {
+            return Err(Error::Usage(format!("--min-psnr {m:e} out of range: a PSNR bound in dB, or inf for identical images")));
+        }
+    }
     if let Some(m) = a.max_flip {
         if !(0.0..=1.0).contains(&m) {
             let m = if m.abs() < 1e9 { format!("{m}") } else { format!("{m:e}") };
@@ -192,6 +197,20 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
         )));
     }
     let (w, h) = (wa, ha);
+    // The metrics count a non-finite channel as 0: right where both images have the same
+    // infinity, an error of the finite value where only one has (a depth AOV where one view
+    // meets nothing), and a hidden fault in a beauty image (+inf against 0.25 counted as an
+    // error of 0.25; the sweep of stop 65). Said, so that a gate passed is not misread.
+    let inf = |p: &glam::Vec3, q: &glam::Vec3| (0..3).any(|c| (p[c].is_infinite() || q[c].is_infinite()) && p[c] != q[c]);
+    let n_inf = ia.iter().zip(&ib).filter(|(p, q)| inf(p, q)).count();
+    if let Some(i) = ia.iter().zip(&ib).position(|(p, q)| inf(p, q)) {
+        crate::error::warn(format!(
+            "{n_inf} pixel{} infinite in one image and not the other (the first at ({}, {})): the metrics count an infinite value as 0, as for a depth AOV where a ray meets nothing; in a beauty image it is a fault they do not measure",
+            if n_inf == 1 { " is" } else { "s are" },
+            i as u32 % w,
+            i as u32 / w
+        ));
+    }
     // FLIP and SSIM judge display values clamped to [0, 1]: above 1 (HDR highlights, depth
     // AOVs) every value looks alike to them (two depth maps of different views: FLIP 0, SSIM 1).
     let over = ia.iter().zip(&ib).filter(|(p, q)| p.max_element() > 1.0 || q.max_element() > 1.0).count();

@@ -206,6 +206,9 @@ pub(crate) fn check(a: &RenderArgs) -> Result<PathBuf> {
     paths.extend(a.aov.iter().map(|(_, p)| p.as_path()));
     paths.extend(a.stats.as_deref());
     io::check_outputs_apart_from_scene(&a.scene, &paths)?;
+    if a.debug_pixel.is_some() && !matches!(a.method, crate::cli::Method::Multires | crate::cli::Method::Cone) {
+        return Err(Error::Usage("--debug-pixel explains a cone: --method multires or cone".into()));
+    }
     if a.method == crate::cli::Method::Surfel {
         if a.no_shadows {
             return Err(Error::Usage("--no-shadows is not available for --method surfel".into()));
@@ -213,9 +216,6 @@ pub(crate) fn check(a: &RenderArgs) -> Result<PathBuf> {
         return Ok(out);
     }
     if a.debug_pixel.is_some() {
-        if !matches!(a.method, crate::cli::Method::Multires | crate::cli::Method::Cone) {
-            return Err(Error::Usage("--debug-pixel explains a cone: --method multires or cone".into()));
-        }
         if a.out.is_some() || !a.aov.is_empty() || a.stats.is_some() {
             return Err(Error::Usage("--debug-pixel writes no image, AOV or stats".into()));
         }

@@ -163,12 +163,20 @@ impl Sequence {
 
     /// Records `frames` frames: the current state, then `frames − 1` steps.
     pub fn record(&mut self, frames: u32) -> Result<Recording, DeformError> {
+        self.record_with(frames, || {})
+    }
+
+    /// [`Sequence::record`], calling `tick` after each frame (a progress bar: a long
+    /// sequence simulates for minutes before its first frame is traced).
+    pub fn record_with(&mut self, frames: u32, mut tick: impl FnMut()) -> Result<Recording, DeformError> {
         if frames == 0 {
             return Err(DeformError::ZeroFrames);
         }
         let mut v = vec![self.current()];
+        tick();
         for _ in 1..frames {
             v.push(self.step());
+            tick();
         }
         Ok(Recording { name: self.name.clone(), dt: self.world.dt, frames: v })
     }

@@ -180,7 +180,7 @@ impl MethodSpec {
                         bad(if v.parse::<u128>().is_ok() {
                             format!("{k}={v} is too large")
                         } else {
-                            format!("bad value '{v}' for {k}: a whole number (0, 1, 2, ...)")
+                            format!("bad value '{v}' for {k}: a whole number")
                         })
                     })
                 };
@@ -794,6 +794,16 @@ pub(crate) fn plan(a: &BenchArgs) -> Result<Plan> {
         r.seed = REFERENCE_SEED;
     }
     let sweeps: Vec<MethodSpec> = a.sweep.iter().map(|s| MethodSpec::parse(s)).collect::<Result<_>>()?;
+    // As `render --first-pass-spp`: above the per-pixel maximum it would be capped unseen.
+    // (A sweep caps it at each of its points, which is its purpose.)
+    for sp in specs.iter().chain(&reference) {
+        if sp.text.split(':').any(|p| p.starts_with("fps=")) && sp.first_pass_spp > sp.spp {
+            return Err(Error::Usage(format!(
+                "method spec '{}': fps={} exceeds spp={} (the per-pixel maximum, which caps it): raise spp",
+                sp.text, sp.first_pass_spp, sp.spp
+            )));
+        }
+    }
     if specs.iter().any(|s| s.method == Method::Surfel) && (!a.regions.is_empty() || !sweeps.is_empty()) {
         // Before "needs --reference", which they would refuse as well.
         return Err(Error::Usage(
@@ -877,6 +887,9 @@ pub(crate) fn plan(a: &BenchArgs) -> Result<Plan> {
         if matches!(s.method, Method::Multires | Method::Cone) {
             let (_, tp) = s.multires.params(s.method == Method::Multires).map_err(named)?;
             tp.validate().map_err(named)?;
+        }
+        if s.method == Method::Lod {
+            s.lod.params().map_err(named)?;
         }
     }
     let scenes: Vec<Scene> = a.scenes.iter().map(|s| crate::scene::load::load_scene(s)).collect::<Result<_>>()?;

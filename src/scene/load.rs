@@ -167,6 +167,58 @@ struct SurfaceLines<R> {
     line: Vec<u8>,
     at: usize,
     dropped: usize,
+    /// The faces' texture-coordinate and normal references, checked here: tobj drops a
+    /// reference to an element the file lacks without a word, and with it every normal of
+    /// the mesh (the sweep of stop 65). `refs` = [vt, vn].
+    refs: FaceRefs,
+}
+
+/// Counts of `vt` and `vn` lines so far, the largest index the faces name of each (with its
+/// line) and the first face line naming a relative index before the file's start.
+#[derive(Default)]
+struct FaceRefs {
+    line_no: usize,
+    count: [i64; 2],
+    max: [(i64, usize); 2],
+    before_start: Option<(usize, &'static str, i64)>,
+}
+
+const REF_KIND: [&str; 2] = ["texture coordinate", "normal"];
+
+impl FaceRefs {
+    fn scan(&mut self, kw: &[u8]) {
+        self.line_no += 1;
+        let text = String::from_utf8_lossy(kw);
+        let mut w = text.split_whitespace();
+        match w.next() {
+            Some("vt") => self.count[0] += 1,
+            Some("vn") => self.count[1] += 1,
+            Some("f") => {
+                for v in w {
+                    for (k, part) in v.split('/').skip(1).take(2).enumerate() {
+                        let Ok(i) = part.parse::<i64>() else { continue };
+                        if i < 0 && self.count[k] + i < 0 && self.before_start.is_none() {
+                            self.before_start = Some((self.line_no, REF_KIND[k], i));
+                        }
+                        if i > self.max[k].0 {
+                            self.max[k] = (i, self.line_no);
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    /// The first bad reference, as an error message.
+    fn error(&self) -> Option<String> {
+        if let Some((line, kind, i)) = self.before_start {
+            return Some(format!("line {line}: a face names {kind} {i}, before the file's first"));
+        }
+        (0..2).find(|&k| self.max[k].0 > self.count[k]).map(|k| {
+            let (i, line) = self.max[k];
+            format!("line {line}: a face names {} {i}, but the file has {} of them", REF_KIND[k], self.count[k])
+        })
+    }
 }
 
 impl<R: std::io::BufRead> std::io::Read for SurfaceLines<R> {
@@ -192,6 +244,7 @@ impl<R: std::io::BufRead> std::io::BufRead for SurfaceLines<R> {
                 let first = self.line.iter().position(|c| !c.is_ascii_whitespace());
                 let kw = first.map(|i| &self.line[i..]).unwrap_or(&[]);
                 let is = |k: u8| kw.first() == Some(&k) && kw.get(1).is_some_and(|c| c.is_ascii_whitespace());
+                self.refs.scan(kw);
                 if is(b'l') || is(b'p') {
                     self.dropped += 1;
                     self.line.clear();
@@ -341,8 +394,13 @@ pub fn load_obj(path: &Path, mat: u32, default: u32) -> Result<(Mesh, Vec<Materi
         let text = std::fs::read(&full).map_err(|_| tobj::LoadError::ReadError)?;
         tobj::load_mtl_buf(&mut std::io::Cursor::new(mtl_colours_complete(&text)?))
     };
-    let mut reader = SurfaceLines { inner: std::io::BufReader::new(file), line: Vec::new(), at: 0, dropped: 0 };
-    let (models, mtls) = tobj::load_obj_buf(&mut reader, &opts, load_mtl).map_err(|e| match obj_bad_line(path) {
+    let mut reader = SurfaceLines { inner: std::io::BufReader::new(file), line: Vec::new(), at: 0, dropped: 0, refs: FaceRefs::default() };
+    let loaded = tobj::load_obj_buf(&mut reader, &opts, load_mtl);
+    // Before tobj's own error, which names no line ("face normal index out of bounds").
+    if let Some(m) = reader.refs.error() {
+        return Err(Error::parse(path, m));
+    }
+    let (models, mtls) = loaded.map_err(|e| match obj_bad_line(path) {
         // tobj's "read error" on a regular file: a line that is not UTF-8.
         Some(line) if matches!(e, tobj::LoadError::ReadError) => {
             Error::parse(path, format!("line {line}: not text (a byte that is not UTF-8)"))
@@ -375,6 +433,16 @@ pub fn load_obj(path: &Path, mat: u32, default: u32) -> Result<(Mesh, Vec<Materi
         let nv = (mm.positions.len() / 3) as u32;
         for v in mm.positions.chunks_exact(3) {
             mesh.push_vertex(Vec3::new(v[0], v[1], v[2]));
+        }
+        if !mm.normals.is_empty() && mm.normals.len() != mm.positions.len() {
+            // Some faces name normals, others none or ones the file lacks (tobj keeps what it
+            // found): the mesh's normals are computed from its faces instead.
+            crate::error::warn(format!(
+                "{}: {} of {} vertices have a normal (faces name normals the file lacks, or none); the file's normals are ignored",
+                path.display(),
+                mm.normals.len() / 3,
+                nv
+            ));
         }
         if mm.normals.len() == mm.positions.len() && normals_ok {
             for n in mm.normals.chunks_exact(3) {
