@@ -125,7 +125,7 @@ pub struct Group {
 /// [`Group`] (`g.z0` where it begins, `g.best_w` its own weight), its depth interval's end
 /// and its coverage. About half a [`Frag`], which also carries a second mesh's group: the
 /// callers build and pass one per weighted element (stop 65: building and copying whole
-/// fragments was 3 % of a `complex` frame).
+/// fragments instead cost 2 % of a `complex` frame's instructions).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Piece {
     pub g: Group,

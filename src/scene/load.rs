@@ -434,16 +434,6 @@ pub fn load_obj(path: &Path, mat: u32, default: u32) -> Result<(Mesh, Vec<Materi
         for v in mm.positions.chunks_exact(3) {
             mesh.push_vertex(Vec3::new(v[0], v[1], v[2]));
         }
-        if !mm.normals.is_empty() && mm.normals.len() != mm.positions.len() {
-            // Some faces name normals, others none or ones the file lacks (tobj keeps what it
-            // found): the mesh's normals are computed from its faces instead.
-            crate::error::warn(format!(
-                "{}: {} of {} vertices have a normal (faces name normals the file lacks, or none); the file's normals are ignored",
-                path.display(),
-                mm.normals.len() / 3,
-                nv
-            ));
-        }
         if mm.normals.len() == mm.positions.len() && normals_ok {
             for n in mm.normals.chunks_exact(3) {
                 let n = Vec3::new(n[0], n[1], n[2]).normalize_or_zero();
