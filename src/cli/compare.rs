@@ -202,8 +202,9 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
     // meets nothing), and a hidden fault in a beauty image (+inf against 0.25 counted as an
     // error of 0.25; the sweep of stop 65). Said, so that a gate passed is not misread.
     let inf = |p: &glam::Vec3, q: &glam::Vec3| (0..3).any(|c| (p[c].is_infinite() || q[c].is_infinite()) && p[c] != q[c]);
-    let n_inf = ia.iter().zip(&ib).filter(|(p, q)| inf(p, q)).count();
-    if let Some(i) = ia.iter().zip(&ib).position(|(p, q)| inf(p, q)) {
+    let mut at = ia.iter().zip(&ib).enumerate().filter(|(_, (p, q))| inf(p, q)).map(|(i, _)| i);
+    if let Some(i) = at.next() {
+        let n_inf = 1 + at.count();
         crate::error::warn(format!(
             "{n_inf} pixel{} infinite in one image and not the other (the first at ({}, {})): the metrics count an infinite value as 0, as for a depth AOV where a ray meets nothing; in a beauty image it is a fault they do not measure",
             if n_inf == 1 { " is" } else { "s are" },
