@@ -514,6 +514,9 @@ impl ABuffer {
     /// reach (module docs); a fragment straddling the front counts with the weight gathered so
     /// far. Called before every node; incremental while the front advances and nothing is
     /// inserted.
+    /// Inlined into the traversal's loop (stop 65: its call was half its cost, −0.6 % of
+    /// the render's instructions).
+    #[inline]
     pub fn opaque(&mut self, t_front: f32) -> bool {
         if self.dirty || t_front < self.front {
             self.n_begun = 0;
