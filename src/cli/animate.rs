@@ -405,14 +405,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     let t0 = Instant::now();
     // The motion is simulated whole before the first frame is traced (about 2 ms a frame
     // for the built-in sequences): shown, so that a long run does not look hung.
-    let sim_bar = if a.quiet {
-        ProgressBar::hidden()
-    } else {
-        let b = ProgressBar::new(frames as u64);
-        b.set_style(ProgressStyle::with_template("{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} frames, eta {eta}").unwrap());
-        b.set_prefix(format!("simulate {}", seq.name));
-        b
-    };
+    let sim_bar = frames_bar(a.quiet, frames, format!("simulate {}", seq.name));
     let rec = seq.record_with(frames, || sim_bar.inc(1)).map_err(derr)?;
     sim_bar.finish_and_clear();
     let simulate_seconds = t0.elapsed().as_secs_f64();
@@ -442,14 +435,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         seq.scene.objects.iter().map(|o| o.model.collections.iter().map(|c| Vec3::from(c.color)).collect()).collect();
     let inst_obj: Vec<usize> = seq.scene.instances.iter().map(|&o| o as usize).collect();
     crate::error::flush_warnings();
-    let bar = if a.quiet {
-        ProgressBar::hidden()
-    } else {
-        let b = ProgressBar::new(frames as u64);
-        b.set_style(ProgressStyle::with_template("{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} frames, eta {eta}").unwrap());
-        b.set_prefix(format!("animate {} {}", seq.name, a.update));
-        b
-    };
+    let bar = frames_bar(a.quiet, frames, format!("animate {} {}", seq.name, a.update));
     let mut rows = Vec::new();
     let mut total = Counters::default();
     let mut dtotal = DeformCounters::default();
@@ -772,6 +758,16 @@ fn shade_x8(tr: &DeformTracer, rays: &[Ray], slots: &[Option<u32>], sc: &ShadeCt
     out
 }
 
+/// A progress bar over `frames` frames (hidden with `--quiet`).
+fn frames_bar(quiet: bool, frames: u32, prefix: String) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let b = ProgressBar::new(frames as u64);
+    b.set_style(ProgressStyle::with_template("{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} frames, eta {eta}").unwrap());
+    b.set_prefix(prefix);
+    b
+}
 #[cfg(test)]
 mod tests {
     /// Every `lodtrace animate` command in the README passes animate's option checks (as

@@ -1649,8 +1649,8 @@ impl<'s, 'a> Tracer<'s, 'a> {
     /// others up to `own.tmin`.
     pub fn traverse_own(&self, cone: &Cone, own: Own, ab: &mut ABuffer, mode: Collect, sc: &mut Scratch, c: &mut Counters) {
         let tl = &self.ms.tlas;
-        let own_tmin = cone.tmin;
-        // The cone as given: the instance-tree slots' points skip up to its own `tmin`.
+        // The cone as given: the instance-tree slots' points, and the instances of the
+        // spawning surface's own hierarchy, skip up to its `tmin`.
         let given = cone;
         let mut wcone = *cone;
         if own.tree != u32::MAX {
@@ -1698,7 +1698,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                     let leaf = &self.ms.leaves[li as usize];
                     let (mut lc, s) = cone.to_object(&leaf.inv);
                     if leaf.tree == own.tree {
-                        lc.tmin = own_tmin * s;
+                        lc.tmin = given.tmin * s;
                     }
                     let tree = &self.ms.trees[leaf.tree as usize];
                     let lf = floor * s;
