@@ -127,6 +127,18 @@
 //! one; the rest axes are precomputed; Eq. 1's sum is fused where the build has FMA. A
 //! whole-object refit (`elastic-balls`) takes 17 % fewer instructions, and its update
 //! 24 → 19 ms per frame (BENCHMARKS.md, "Stop 62").
+//!
+//! *Overlapped misses* (stop 66). The lazy traversals wait on memory, not on arithmetic:
+//! perf on `heads` put about half of `intersect_x8`'s samples on the first use of a child's
+//! stamp, the right child's slot (far away in pre-order) the most. Each stamp check is a
+//! branch, and a child's load did not start before its sibling's branch had resolved. So a
+//! node's right child's slot (or its surfel's) is prefetched before the left child's is read
+//! (`prefetch_node`, closest and shadow rays); an MLS iteration requests its 16 neighbours'
+//! slots before it reads the first (both modes); and a packet's cache lookups, three
+//! dependent loads per ray, are staged so each stage's eight loads overlap
+//! (`prefetch_cached`: without it the §4.2.2 cache, which rarely hits under front-to-back
+//! traversal, made `lazy-cache` 3–8 % slower than `lazy`). Same images; times in
+//! BENCHMARKS.md, "Stop 66".
 
 use super::displace::{deform_point, DeformField, DeformedSurfel};
 use super::miniball::miniball;
@@ -1129,8 +1141,10 @@ impl DeformTracer {
     #[inline(always)]
     fn child_spheres(&self, ii: &Instance, n: usize, (leaf1, leaf2): (bool, bool)) -> ((Vec3, f32), (Vec3, f32)) {
         let topo = self.topo(ii);
+        let rc = topo.right_child(n);
+        self.prefetch_node(ii, rc, leaf2);
         let s1 = self.sphere_as(ii, n + 1, leaf1);
-        let s2 = self.sphere_as(ii, topo.right_child(n), leaf2);
+        let s2 = self.sphere_as(ii, rc, leaf2);
         // A node inside a refitted subtree took Eq. 11 from its final children when it was
         // refitted (`refit_subtree`), so it is skipped here. Median splits halve the counts,
         // so a node of fewer than exact_below/2 surfels is inside one; a subtree's own root
@@ -1142,6 +1156,20 @@ impl DeformTracer {
             self.tighten(ii, n, c, s1, s2);
         }
         (s1, s2)
+    }
+
+    /// Starts the load of node n's lazy state (its slot, or its surfel's for a leaf) so
+    /// that it overlaps the load of its sibling's.
+    #[inline(always)]
+    fn prefetch_node(&self, ii: &Instance, n: usize, leaf: bool) {
+        if ii.naive.is_some() {
+            return;
+        }
+        if leaf {
+            prefetch(&ii.surf.slot[ii.obj.tree.topo.surfel[n] as usize]);
+        } else {
+            prefetch(&ii.nodes.slot[n]);
+        }
     }
 
     /// §4.4's shadow-ray order at inner node n: whether the left child goes first (it is
@@ -1372,7 +1400,13 @@ impl DeformTracer {
         // `objects_far_from_the_origin_are_hit_as_near_it`).
         let mut nb = MlsNbr::default();
         let nk = obj.nk.min(MAX_NBR);
-        for q in obj.nbr[s * obj.nk..s * obj.nk + nk].iter().take_while(|&&q| q != NO_NBR) {
+        let nbr = &obj.nbr[s * obj.nk..s * obj.nk + nk];
+        // All the neighbours' slots are requested before the first is read: the loop below
+        // branches on each stamp (and may deform), which kept its loads from overlapping.
+        for &q in nbr.iter().take_while(|&&q| q != NO_NBR) {
+            prefetch(&ii.surf.slot[q as usize]);
+        }
+        for q in nbr.iter().take_while(|&&q| q != NO_NBR) {
             let (p, n) = self.surfel_pn(ii, *q as usize);
             nb.push(p - sc, n);
         }
@@ -1515,6 +1549,42 @@ impl DeformTracer {
         match self.cache[sl as usize].load(Relaxed) {
             NO_CACHE => (u32::MAX, u32::MAX),
             v => self.search_cached_node(v, ray, best, first, dc, ctr),
+        }
+    }
+
+    /// Requests what the packet's cache searches will read, lane by lane, before the first
+    /// of them runs: each lookup is a chain of three loads (the slot, the cached node's
+    /// topology, its surfel's or its own lazy state), most of them misses, and searched one
+    /// ray after another the eight chains ran one after another. Stage by stage, a stage's
+    /// eight loads overlap.
+    #[inline(never)]
+    fn prefetch_cached(&self, slot: &[Option<u32>; 8], valid: u8) {
+        let mut v = [NO_CACHE; 8];
+        for i in lanes(valid) {
+            if let Some(sl) = slot[i] {
+                v[i] = self.cache[sl as usize].load(Relaxed);
+            }
+        }
+        let node = |v: u64| -> Option<(&Instance, usize)> {
+            let (k, n) = ((v >> 32) as usize, (v & 0xffff_ffff) as usize);
+            let ii = self.inst.get(k)?;
+            (v != NO_CACHE && n < ii.obj.tree.len()).then_some((ii, n))
+        };
+        for &x in &v {
+            if let Some((ii, n)) = node(x) {
+                let topo = &ii.obj.tree.topo;
+                prefetch(&topo.right[n]);
+                prefetch(&topo.surfel[n]);
+                prefetch(&ii.nodes.slot[n]);
+            }
+        }
+        for &x in &v {
+            if let Some((ii, n)) = node(x) {
+                let s = ii.obj.tree.topo.surfel[n];
+                if s != u32::MAX {
+                    prefetch(&ii.surf.slot[s as usize]);
+                }
+            }
         }
     }
 
@@ -1775,6 +1845,9 @@ impl DeformTracer {
         let (mut active, mut first) = (valid, true);
         let mut sc = take_scratch();
         let tfar = f32x8::from(std::array::from_fn::<f32, 8, _>(|i| if valid & (1 << i) != 0 { rays[i].tfar } else { f32::NEG_INFINITY }));
+        if self.mode == UpdateMode::LazyCache {
+            self.prefetch_cached(&slot, valid);
+        }
         loop {
             // §4.2.2: each ray's cached node first, as in `intersect_ex`.
             let mut skip = [(u32::MAX, u32::MAX); 8];
@@ -1988,6 +2061,7 @@ impl DeformTracer {
                 let lv = lv.min(UNTESTED - 2);
                 let (kl, kr) = (if leaf_l { IS_LEAF } else { 0 }, if leaf_r { IS_LEAF } else { 0 });
                 // Each child's sphere if it is current (one stamp check and load each).
+                self.prefetch_node(ii, r, leaf_r);
                 let sl = self.current_sphere(ii, l, leaf_l);
                 let sr = if sl.is_some() || self.params.shadow_updated_first { self.current_sphere(ii, r, leaf_r) } else { None };
                 if let (Some((cl, rl)), Some((cr, rr))) = (sl, sr) {
