@@ -1575,14 +1575,14 @@ impl DeformTracer {
                 let topo = &ii.obj.tree.topo;
                 prefetch(&topo.right[n]);
                 prefetch(&topo.surfel[n]);
-                prefetch(&ii.nodes.slot[n]);
             }
         }
         for &x in &v {
             if let Some((ii, n)) = node(x) {
-                let s = ii.obj.tree.topo.surfel[n];
-                if s != u32::MAX {
-                    prefetch(&ii.surf.slot[s as usize]);
+                // A leaf (the default cache holds leaves) keeps its sphere with its surfel.
+                match ii.obj.tree.topo.surfel[n] {
+                    u32::MAX => prefetch(&ii.nodes.slot[n]),
+                    s => prefetch(&ii.surf.slot[s as usize]),
                 }
             }
         }
