@@ -139,6 +139,17 @@
 //! (`prefetch_cached`: without it the §4.2.2 cache, which rarely hits under front-to-back
 //! traversal, made `lazy-cache` 3–8 % slower than `lazy`). Same images; times in
 //! BENCHMARKS.md, "Stop 66".
+//!
+//! *Compact balls* (stop 67). A subtree refit also writes every sphere it computes, leaves
+//! included, into a 16-byte [`Ball`] per node in pre-order (the static tree's layout). A
+//! current inner node of at most [`DeformTracer::compact_max`] surfels (64) was refitted
+//! whole before it was published, so the packet traversals read its children from the
+//! balls: no stamp check, sequence lock or branch per child, and a leaf child's sphere no
+//! longer costs its surfel's 64-byte line (which only a leaf test needs). Below that size
+//! a lazy traversal reads the same bytes per node as the naive tree's. The refit also
+//! prefetches Eq. 1's inputs of the surfels it is about to deform (`prefetch_surfel_inputs`:
+//! perf put two thirds of `deform_surfel`'s samples on those four loads). Same spheres,
+//! same sphere tests, same images.
 
 use super::displace::{deform_point, DeformField, DeformedSurfel};
 use super::miniball::miniball;
@@ -550,14 +561,41 @@ struct NodeSlot {
     c: [AtomicU32; 3],
     r: AtomicU32,
     seq: AtomicU32,
-    /// The frame whose subtree refit of this node a thread has taken on
-    /// (`DeformTracer::refit_subtree`).
+    /// `frame << 1` when a thread has taken on this frame's subtree refit of this node
+    /// (`DeformTracer::refit_subtree`), `frame << 1 | 1` once the refit has written every
+    /// [`Ball`] of the subtree ("complete", `DeformTracer::compact_children`). Frames are
+    /// counted in 31 bits here: after 2³¹ frames a stale value could read as this frame's.
     claim: AtomicU32,
 }
 
 const _: () = assert!(std::mem::size_of::<NodeSlot>() == 32);
 
 impl NodeSlot {
+    /// Takes on this frame's refit of the node's subtree, unless a thread already has.
+    #[inline]
+    fn try_claim(&self, frame: u32) -> bool {
+        let mine = frame << 1;
+        let mut old = self.claim.load(Relaxed);
+        loop {
+            if old >> 1 == mine >> 1 {
+                return false;
+            }
+            match self.claim.compare_exchange_weak(old, mine, AcqRel, Relaxed) {
+                Ok(_) => return true,
+                Err(v) => old = v,
+            }
+        }
+    }
+    /// After every ball of the subtree has been written this frame (release: a reader that
+    /// sees it with [`Self::complete`] sees the balls).
+    #[inline(always)]
+    fn mark_complete(&self, frame: u32) {
+        self.claim.store(frame << 1 | 1, Release);
+    }
+    #[inline(always)]
+    fn complete(&self, frame: u32) -> bool {
+        self.claim.load(Acquire) == frame << 1 | 1
+    }
     #[inline(always)]
     fn try_lock(&self) -> bool {
         let v = self.seq.load(Relaxed);
@@ -648,11 +686,33 @@ impl NodeState {
     }
 }
 
+/// A node's sphere as this frame's subtree refit computed it ([`DeformTracer::refit_subtree`]),
+/// for every node of the static tree, leaves included, in its pre-order: the compact copy
+/// that traversals read below [`DeformTracer::compact_max`] (module docs, "Compact balls").
+#[repr(C, align(16))]
+struct Ball([AtomicU32; 4]);
+
+impl Ball {
+    #[inline(always)]
+    fn load(&self) -> (Vec3, f32) {
+        let g = |i: usize| f32::from_bits(self.0[i].load(Relaxed));
+        (Vec3::new(g(0), g(1), g(2)), g(3))
+    }
+    #[inline(always)]
+    fn store(&self, (c, r): (Vec3, f32)) {
+        for (a, x) in self.0.iter().zip([c.x, c.y, c.z, r]) {
+            a.store(x.to_bits(), Relaxed);
+        }
+    }
+}
+
 struct Instance {
     obj: Arc<SurfelObject>,
     field: DeformField,
     surf: SurfelState,
     nodes: NodeState,
+    /// [`Ball`]s of the static tree's nodes (written only by subtree refits).
+    ball: Vec<Ball>,
     naive: Option<Topology>,
     refit: Option<Bvh2>,
     /// Some collection of the object has clipping partners (§4.3).
@@ -781,6 +841,7 @@ impl DeformTracer {
                 field: DeformField::identity(&obj.nodes),
                 surf: SurfelState::new(ns),
                 nodes: NodeState::new(nn),
+                ball: (0..nn).map(|_| Ball(std::array::from_fn(|_| AtomicU32::new(0)))).collect(),
                 naive: None,
                 refit: (mode == UpdateMode::Refit).then(|| refit_build(&obj)),
                 clipped: obj.clip_partners.iter().any(|p| !p.is_empty()),
@@ -1061,7 +1122,7 @@ impl DeformTracer {
     fn refit_subtree(&self, ii: &Instance, n: usize, exclusive: bool) -> Option<(Vec3, f32)> {
         let topo = &ii.obj.tree.topo;
         let (s0, cnt) = (topo.start[n] as usize, topo.count[n] as usize);
-        if cnt > REFIT_CLAIM_MIN as usize && ii.nodes.slot[n].claim.swap(self.frame, AcqRel) == self.frame {
+        if cnt > REFIT_CLAIM_MIN as usize && !ii.nodes.slot[n].try_claim(self.frame) {
             return None;
         }
         Some(REFIT_SCRATCH.with(|cell| {
@@ -1074,6 +1135,7 @@ impl DeformTracer {
             for (i, &s) in perm.iter().enumerate() {
                 if let Some(&a) = perm.get(i + PREFETCH_AHEAD) {
                     prefetch(&ii.surf.slot[a as usize]);
+                    prefetch_surfel_inputs(&ii.obj, a as usize);
                 }
                 let (c, rr) = self.surfel_ball(ii, s as usize);
                 (x.push(c.x), y.push(c.y), z.push(c.z), r.push(rr));
@@ -1094,6 +1156,7 @@ impl DeformTracer {
             for q in (n..n + m).rev() {
                 if q >= n + PREFETCH_AHEAD {
                     prefetch(&ii.nodes.slot[q - PREFETCH_AHEAD]);
+                    prefetch(&ii.ball[q - PREFETCH_AHEAD]);
                 }
                 let (a, k) = (topo.start[q] as usize - s0, topo.count[q] as usize);
                 let b = if topo.right[q] == LEAF {
@@ -1121,6 +1184,13 @@ impl DeformTracer {
                     }
                 };
                 sph[q - n] = b;
+                // Before q's stamp (below, or the caller's for n): a reader that sees q
+                // current finds every ball of q's subtree written (`compact_max`).
+                ii.ball[q].store(b);
+                if k > REFIT_CLAIM_MIN as usize {
+                    // q's whole subtree is written (bottom up): complete, for `compact_children`.
+                    ii.nodes.slot[q].mark_complete(self.frame);
+                }
                 if q != n && k > 1 && ii.nodes.slot[q].stamp.load(Relaxed) != self.frame {
                     // Without the lock where every writer writes these same values: a node
                     // of at most REFIT_CLAIM_MIN surfels is never claimed, so never bounded
@@ -1142,9 +1212,10 @@ impl DeformTracer {
     fn child_spheres(&self, ii: &Instance, n: usize, (leaf1, leaf2): (bool, bool)) -> ((Vec3, f32), (Vec3, f32)) {
         let topo = self.topo(ii);
         let rc = topo.right_child(n);
-        self.prefetch_node(ii, rc, leaf2);
-        let s1 = self.sphere_as(ii, n + 1, leaf1);
-        let s2 = self.sphere_as(ii, rc, leaf2);
+        let (s1, s2) = self.compact_children(ii, n, rc).unwrap_or_else(|| {
+            self.prefetch_node(ii, rc, leaf2);
+            (self.sphere_as(ii, n + 1, leaf1), self.sphere_as(ii, rc, leaf2))
+        });
         // A node inside a refitted subtree took Eq. 11 from its final children when it was
         // refitted (`refit_subtree`), so it is skipped here. Median splits halve the counts,
         // so a node of fewer than exact_below/2 surfels is inside one; a subtree's own root
@@ -1170,6 +1241,34 @@ impl DeformTracer {
         } else {
             prefetch(&ii.nodes.slot[n]);
         }
+    }
+
+    /// Of how many surfels at most a current inner node's subtree is complete: every ball
+    /// in it written by a subtree refit (module docs, "Compact balls"). Such a node is
+    /// never bounded by Eq. 9 (it is refitted, `cnt ≤ exact_below`, and never claimed,
+    /// `cnt ≤ REFIT_CLAIM_MIN`), and its refit writes its descendants' balls before it
+    /// publishes the node (bottom up, descending pre-order indices), so a reader that saw
+    /// its stamp (acquire) reads this frame's balls below it without stamp checks.
+    #[inline(always)]
+    fn compact_max(&self) -> u32 {
+        self.params.exact_below.min(MAX_EXACT_BELOW).min(REFIT_CLAIM_MIN)
+    }
+
+    /// The children's spheres of current inner node n (right child `rc`) from the compact
+    /// [`Ball`]s, if n's subtree is complete: by its size ([`compact_max`](Self::compact_max)),
+    /// or, for a larger node, because a refit that covered it has finished and said so
+    /// ([`NodeSlot::mark_complete`]; n's slot was just read, so this costs no miss). Lazy
+    /// modes only. The balls hold each node's refitted sphere, no looser than its slot's
+    /// (which may hold Eq. 9's while a claimed refit runs): no stamp, lock or branch per
+    /// child.
+    #[inline(always)]
+    fn compact_children(&self, ii: &Instance, n: usize, rc: usize) -> Option<((Vec3, f32), (Vec3, f32))> {
+        if ii.naive.is_some() {
+            return None;
+        }
+        let cnt = ii.obj.tree.topo.count[n];
+        let complete = cnt <= self.compact_max() || (cnt > REFIT_CLAIM_MIN && ii.nodes.slot[n].complete(self.frame));
+        complete.then(|| (ii.ball[n + 1].load(), ii.ball[rc].load()))
     }
 
     /// §4.4's shadow-ray order at inner node n: whether the left child goes first (it is
@@ -2060,10 +2159,16 @@ impl DeformTracer {
                 // Levels past 30 share the counters' last level anyway (`LEVELS`).
                 let lv = lv.min(UNTESTED - 2);
                 let (kl, kr) = (if leaf_l { IS_LEAF } else { 0 }, if leaf_r { IS_LEAF } else { 0 });
-                // Each child's sphere if it is current (one stamp check and load each).
-                self.prefetch_node(ii, r, leaf_r);
-                let sl = self.current_sphere(ii, l, leaf_l);
-                let sr = if sl.is_some() || self.params.shadow_updated_first { self.current_sphere(ii, r, leaf_r) } else { None };
+                // Each child's sphere if it is current (one stamp check and load each), both
+                // from the compact balls in a complete subtree (n is current: it was tested).
+                let (sl, sr) = match self.compact_children(ii, n, r) {
+                    Some((a, b)) => (Some(a), Some(b)),
+                    None => {
+                        self.prefetch_node(ii, r, leaf_r);
+                        let sl = self.current_sphere(ii, l, leaf_l);
+                        (sl, if sl.is_some() || self.params.shadow_updated_first { self.current_sphere(ii, r, leaf_r) } else { None })
+                    }
+                };
                 if let (Some((cl, rl)), Some((cr, rr))) = (sl, sr) {
                     let cnt = 2 * m.count_ones() as u64;
                     dc.sphere_tests += cnt;
@@ -2359,6 +2464,21 @@ impl DeformTracer {
                         return Some(format!("instance {k} node {n} (level {}): surfel {s} reaches {reach}, radius {r}", topo.level[n]));
                     }
                 }
+                // The compact balls that traversals would read below n instead of slots: every
+                // ball of a complete subtree is a child of one of its current inner nodes.
+                let rc = topo.right_child(n);
+                if let Some(balls) = self.compact_children(ii, n, rc) {
+                    for (q, (c, r)) in [(n + 1, balls.0), (rc, balls.1)] {
+                        let (st, ct) = (topo.start[q] as usize, topo.count[q] as usize);
+                        for &s in &topo.perm[st..st + ct] {
+                            let d = deform_surfel(&ii.obj, &ii.field, s as usize);
+                            let reach = (d.p - c).length() + d.extent();
+                            if !(reach <= r) {
+                                return Some(format!("instance {k} ball {q} (below complete {n}): surfel {s} reaches {reach}, radius {r}"));
+                            }
+                        }
+                    }
+                }
                 None
             })
             .min();
@@ -2484,6 +2604,37 @@ fn prefetch<T>(x: &T) {
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = x;
+}
+
+/// Asks for the cache lines of a read (a hint; no effect elsewhere than x86-64).
+#[inline(always)]
+fn prefetch_read<T>(x: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is a hint and never faults; `x` is a valid reference anyway.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(x as *const T as *const i8);
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = x;
+}
+
+/// Starts the loads of Eq. 1's per-surfel inputs of surfel `s` (reference position and
+/// axes, node indices and weights; [`deform_surfel`]). A subtree refit deforms its surfels
+/// in leaf order, and perf put two thirds of `deform_surfel`'s samples on the first use of
+/// these four arrays (stop 67): each is a miss, and the loop's other work hid none of them.
+#[inline(always)]
+fn prefetch_surfel_inputs(obj: &SurfelObject, s: usize) {
+    let k = obj.weights.k;
+    prefetch_read(&obj.pos[s]);
+    prefetch_read(&obj.axes[s]);
+    if k == 0 {
+        return;
+    }
+    // A row of k = 16 entries is one line's worth but rarely line-aligned: ask for both ends.
+    prefetch_read(&obj.weights.idx[s * k]);
+    prefetch_read(&obj.weights.idx[s * k + k - 1]);
+    prefetch_read(&obj.weights.w[s * k]);
+    prefetch_read(&obj.weights.w[s * k + k - 1]);
 }
 
 #[inline]
@@ -2654,7 +2805,7 @@ mod tests {
         // Next frame, with the subtree claimed by "another thread": Eq. 9 for n alone.
         tr.begin_frame(&[bent]).unwrap();
         let ii = &tr.inst[0];
-        ii.nodes.slot[n].claim.store(tr.frame, Relaxed);
+        assert!(ii.nodes.slot[n].try_claim(tr.frame) && !ii.nodes.slot[n].try_claim(tr.frame));
         let (c, r) = tr.sphere(ii, n);
         let eq9 = ii.obj.tree.update_eq9(n, &ii.field, &ii.obj.nodes.rest, true, true);
         assert_eq!((c, r), eq9);
