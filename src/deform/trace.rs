@@ -1437,7 +1437,18 @@ impl DeformTracer {
         dc: &mut DeformCounters,
         ctr: &mut Counters,
     ) -> (DeformedSurfel, u8, [f32; 8], [[f32; 8]; 3]) {
-        let ds = self.surfel(&self.inst[k], s);
+        let ii = &self.inst[k];
+        if ii.clipped {
+            // The clipping neighbours' row, which the clip test after a hit reads first; its
+            // collection was prefetched with the leaf (`prefetch_leaf`).
+            let obj = &*ii.obj;
+            let c = obj.coll[s] as usize;
+            let np = obj.clip_partners[c].len();
+            if np > 0 {
+                prefetch_read(&obj.clip_nb[obj.clip_base[c] + (s - obj.model.collections[c].start as usize) * np]);
+            }
+        }
+        let ds = self.surfel(ii, s);
         let cnt = m.count_ones() as u64;
         dc.leaf_tests += cnt;
         ctr.add(Counter::surfel_tests, cnt);
@@ -1567,7 +1578,15 @@ impl DeformTracer {
         // absolute coordinates; stored normals are unit (or zero: never clipped here, as in
         // `clipped_by`'s both-positive case), within far less than the 0.1 %.
         let m = sr * 1.001 + 1e-6 * sc.abs().max_element();
-        (0..obj.clip_partners[obj.coll[s] as usize].len()).any(|slot| {
+        let np = obj.clip_partners[obj.coll[s] as usize].len();
+        // Every partner's two slots requested before the first is read (as the MLS
+        // neighbours': the test below branches on each).
+        for slot in 0..np {
+            for q in obj.clip_pair(s, slot) {
+                prefetch_read(&ii.surf.slot[q as usize]);
+            }
+        }
+        (0..np).any(|slot| {
             let [a, b] = obj.clip_pair(s, slot);
             let ((pa, na), (pb, nb)) = (self.surfel_pn(ii, a as usize), self.surfel_pn(ii, b as usize));
             na.dot(sc - pa) > m && nb.dot(sc - pb) > m
