@@ -2647,24 +2647,26 @@ const PREFETCH_AHEAD: usize = 8;
 #[inline(always)]
 fn prefetch<T>(x: &T) {
     #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch is a hint and never faults; `x` is a valid reference anyway.
-    unsafe {
-        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_ET0 }>(x as *const T as *const i8);
-    }
+    prefetch_hint::<{ std::arch::x86_64::_MM_HINT_ET0 }, T>(x);
     #[cfg(not(target_arch = "x86_64"))]
     let _ = x;
 }
 
-/// Asks for the cache lines of a read (a hint; no effect elsewhere than x86-64).
+/// Asks for the cache line of `x` ahead of a read of it (a hint; no effect elsewhere than
+/// x86-64).
 #[inline(always)]
 fn prefetch_read<T>(x: &T) {
     #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch is a hint and never faults; `x` is a valid reference anyway.
-    unsafe {
-        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(x as *const T as *const i8);
-    }
+    prefetch_hint::<{ std::arch::x86_64::_MM_HINT_T0 }, T>(x);
     #[cfg(not(target_arch = "x86_64"))]
     let _ = x;
+}
+
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn prefetch_hint<const HINT: i32, T>(x: &T) {
+    // SAFETY: a prefetch is a hint and never faults; `x` is a valid reference anyway.
+    unsafe { std::arch::x86_64::_mm_prefetch::<HINT>(x as *const T as *const i8) }
 }
 
 /// Starts the loads of Eq. 1's per-surfel inputs of surfel `s` (reference position and
