@@ -2504,31 +2504,26 @@ impl DeformTracer {
             .filter_map(|&(k, n, _)| {
                 let ii = &self.inst[k];
                 let topo = self.topo(ii);
-                let (c, r) = self.sphere_now(ii, n);
-                let (st, ct) = (topo.start[n] as usize, topo.count[n] as usize);
-                for &s in &topo.perm[st..st + ct] {
-                    let d = deform_surfel(&ii.obj, &ii.field, s as usize);
-                    let reach = (d.p - c).length() + d.extent();
-                    if !(reach <= r) {
-                        return Some(format!("instance {k} node {n} (level {}): surfel {s} reaches {reach}, radius {r}", topo.level[n]));
-                    }
+                // The first surfel of node q's subtree that pokes out of (c, r), and how far.
+                let outside = |q: usize, (c, r): (Vec3, f32)| {
+                    let (st, ct) = (topo.start[q] as usize, topo.count[q] as usize);
+                    topo.perm[st..st + ct].iter().find_map(|&s| {
+                        let d = deform_surfel(&ii.obj, &ii.field, s as usize);
+                        let reach = (d.p - c).length() + d.extent();
+                        (!(reach <= r)).then_some((s, reach, r))
+                    })
+                };
+                if let Some((s, reach, r)) = outside(n, self.sphere_now(ii, n)) {
+                    return Some(format!("instance {k} node {n} (level {}): surfel {s} reaches {reach}, radius {r}", topo.level[n]));
                 }
                 // The compact balls that traversals would read below n instead of slots: every
                 // ball of a complete subtree is a child of one of its current inner nodes.
                 let rc = topo.right_child(n);
-                if let Some(balls) = self.compact_children(ii, n, rc) {
-                    for (q, (c, r)) in [(n + 1, balls.0), (rc, balls.1)] {
-                        let (st, ct) = (topo.start[q] as usize, topo.count[q] as usize);
-                        for &s in &topo.perm[st..st + ct] {
-                            let d = deform_surfel(&ii.obj, &ii.field, s as usize);
-                            let reach = (d.p - c).length() + d.extent();
-                            if !(reach <= r) {
-                                return Some(format!("instance {k} ball {q} (below complete {n}): surfel {s} reaches {reach}, radius {r}"));
-                            }
-                        }
-                    }
-                }
-                None
+                let (b1, b2) = self.compact_children(ii, n, rc)?;
+                [(n + 1, b1), (rc, b2)].into_iter().find_map(|(q, b)| {
+                    outside(q, b)
+                        .map(|(s, reach, r)| format!("instance {k} ball {q} (below complete {n}): surfel {s} reaches {reach}, radius {r}"))
+                })
             })
             .min();
         match bad {
@@ -2646,27 +2641,32 @@ const PREFETCH_AHEAD: usize = 8;
 /// x86-64).
 #[inline(always)]
 fn prefetch<T>(x: &T) {
-    #[cfg(target_arch = "x86_64")]
-    prefetch_hint::<{ std::arch::x86_64::_MM_HINT_ET0 }, T>(x);
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = x;
+    prefetch_hint::<true, T>(x)
 }
 
-/// Asks for the cache line of `x` ahead of a read of it (a hint; no effect elsewhere than
-/// x86-64).
+/// Asks for the cache line of `x` ahead of a read of it (a hint, as [`prefetch`]).
 #[inline(always)]
 fn prefetch_read<T>(x: &T) {
-    #[cfg(target_arch = "x86_64")]
-    prefetch_hint::<{ std::arch::x86_64::_MM_HINT_T0 }, T>(x);
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = x;
+    prefetch_hint::<false, T>(x)
 }
 
-#[cfg(target_arch = "x86_64")]
 #[inline(always)]
-fn prefetch_hint<const HINT: i32, T>(x: &T) {
-    // SAFETY: a prefetch is a hint and never faults; `x` is a valid reference anyway.
-    unsafe { std::arch::x86_64::_mm_prefetch::<HINT>(x as *const T as *const i8) }
+fn prefetch_hint<const WRITE: bool, T>(x: &T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_ET0, _MM_HINT_T0};
+        let p = x as *const T as *const i8;
+        // SAFETY: a prefetch is a hint and never faults; `x` is a valid reference anyway.
+        unsafe {
+            if WRITE {
+                _mm_prefetch::<_MM_HINT_ET0>(p)
+            } else {
+                _mm_prefetch::<_MM_HINT_T0>(p)
+            }
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = x;
 }
 
 /// Starts the loads of Eq. 1's per-surfel inputs of surfel `s` (reference position and
