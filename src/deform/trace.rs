@@ -345,8 +345,8 @@ struct RefitScratch {
 #[derive(Default)]
 struct PacketScratch {
     roots: Vec<(f32, usize, u8, f32x8)>,
-    stack: Vec<(u32, u8, u8, f32x8)>,
-    any: Vec<(u32, u8, u8)>,
+    stack: Vec<(u32, u32, u8, u8, f32x8)>,
+    any: Vec<(u32, u32, u8, u8)>,
 }
 
 thread_local! {
@@ -452,9 +452,6 @@ pub struct DeformCounters {
 
 /// Levels of [`DeformCounters::level_tests`].
 pub const LEVELS: usize = 32;
-
-/// Flag of a packet traversal's stack entry (in its level byte): the node is a leaf.
-const IS_LEAF: u8 = 0x80;
 
 impl DeformCounters {
     pub fn merge(&mut self, o: &DeformCounters) {
@@ -1035,7 +1032,7 @@ impl DeformTracer {
     }
 
     /// [`sphere`](Self::sphere) of a node whose leafness the caller knows
-    /// ([`Topology::leaf_children`]): the node's slot (or its surfel's) is loaded without
+    /// (a count of 1, [`Topology::split`]): the node's slot (or its surfel's) is loaded without
     /// waiting for the load of its `right` first, a second cache miss in a row for a far
     /// right child.
     #[inline(always)]
@@ -1059,7 +1056,7 @@ impl DeformTracer {
 
     /// Node n's sphere if it is current in this frame (always in the naive tree), else None
     /// (nothing is updated): [`current`](Self::current) and [`sphere`](Self::sphere) in one
-    /// stamp check. The caller knows whether n is a leaf ([`Topology::leaf_children`]).
+    /// stamp check. The caller knows whether n is a leaf ([`Topology::split`]).
     #[inline(always)]
     fn current_sphere(&self, ii: &Instance, n: usize, leaf: bool) -> Option<(Vec3, f32)> {
         if let Some(t) = &ii.naive {
@@ -1206,13 +1203,14 @@ impl DeformTracer {
         }))
     }
 
-    /// The spheres of inner node n's two children (updating them lazily), and Eq. 11 for n.
-    /// `(leaf1, leaf2)` are the children's kinds, [`Topology::leaf_children`].
+    /// The spheres of inner node n's two children (updating them lazily), and Eq. 11 for n;
+    /// `c` is n's surfel count (its children's kinds and the right child follow from it,
+    /// [`Topology::split`]).
     #[inline(always)]
-    fn child_spheres(&self, ii: &Instance, n: usize, (leaf1, leaf2): (bool, bool)) -> ((Vec3, f32), (Vec3, f32)) {
-        let topo = self.topo(ii);
-        let rc = topo.right_child(n);
-        let (s1, s2) = self.compact_children(ii, n, rc).unwrap_or_else(|| {
+    fn child_spheres(&self, ii: &Instance, n: usize, c: u32) -> ((Vec3, f32), (Vec3, f32)) {
+        let (rc, c1, c2) = Topology::split(n, c);
+        let (leaf1, leaf2) = (c1 == 1, c2 == 1);
+        let (s1, s2) = self.compact_children(ii, n, c, rc).unwrap_or_else(|| {
             self.prefetch_node(ii, rc, leaf2);
             (self.sphere_as(ii, n + 1, leaf1), self.sphere_as(ii, rc, leaf2))
         });
@@ -1220,7 +1218,7 @@ impl DeformTracer {
         // refitted (`refit_subtree`), so it is skipped here. Median splits halve the counts,
         // so a node of fewer than exact_below/2 surfels is inside one; a subtree's own root
         // (≥ exact_below/2) may carry the Eq. 9 sphere of a claimed refit and is tightened.
-        if ii.naive.is_none() && self.params.eq11 && 2 * topo.count[n] >= self.params.exact_below {
+        if ii.naive.is_none() && self.params.eq11 && 2 * c >= self.params.exact_below {
             // n was tested before the descent, so it is current; its centre is read only for
             // the paper's Eq. 11 (the re-centred form encloses the two child spheres).
             let c = if self.params.recentre_eq11 { Vec3::NAN } else { self.sphere(ii, n).0 };
@@ -1262,11 +1260,10 @@ impl DeformTracer {
     /// (which may hold Eq. 9's while a claimed refit runs): no stamp, lock or branch per
     /// child.
     #[inline(always)]
-    fn compact_children(&self, ii: &Instance, n: usize, rc: usize) -> Option<((Vec3, f32), (Vec3, f32))> {
+    fn compact_children(&self, ii: &Instance, n: usize, cnt: u32, rc: usize) -> Option<((Vec3, f32), (Vec3, f32))> {
         if ii.naive.is_some() {
             return None;
         }
-        let cnt = ii.obj.tree.topo.count[n];
         let complete = cnt <= self.compact_max() || (cnt > REFIT_CLAIM_MIN && ii.nodes.slot[n].complete(self.frame));
         complete.then(|| (ii.ball[n + 1].load(), ii.ball[rc].load()))
     }
@@ -1862,7 +1859,7 @@ impl DeformTracer {
                 continue;
             }
             let (l, r) = (n + 1, topo.right_child(n));
-            let (s1, s2) = self.child_spheres(ii, n, topo.leaf_children(n));
+            let (s1, s2) = self.child_spheres(ii, n, topo.count[n]);
             dc.sphere_tests += 2;
             dc.tests_at(topo.level[l], 2);
             ctr.add(Counter::node_tests, 2);
@@ -2063,7 +2060,7 @@ impl DeformTracer {
         skip: &[(u32, u32); 8],
         dc: &mut DeformCounters,
         ctr: &mut Counters,
-        stack: &mut Vec<(u32, u8, u8, f32x8)>,
+        stack: &mut Vec<(u32, u32, u8, u8, f32x8)>,
         tfar: f32x8,
     ) {
         let ii = &self.inst[k];
@@ -2073,11 +2070,12 @@ impl DeformTracer {
         let skip8 = u32x8::from(skipn);
         let mut tb = best_t(best);
         stack.clear();
-        // (node, its level | IS_LEAF, lanes, entries): the level rides on the stack for
-        // `level_tests` and the kind for the visit, rather than costing a load per node.
-        stack.push((0, if topo.right[0] == LEAF { IS_LEAF } else { 0 }, mask, entry));
-        while let Some((n, lv, m, te)) = stack.pop() {
-            let (leaf, lv) = (lv & IS_LEAF != 0, lv & !IS_LEAF);
+        // (node, its surfel count, its level, lanes, entries): the level rides on the stack
+        // for `level_tests` and the count for the node's kind and children
+        // ([`Topology::split`]), rather than costing a load per node.
+        stack.push((0, topo.count[0], 0, mask, entry));
+        while let Some((n, c, lv, m, te)) = stack.pop() {
+            let leaf = c == 1;
             let mut m = m & te.simd_le(tb).to_bitmask() as u8;
             if any_skip {
                 // The lanes whose cached node (searched already) this is, in one compare.
@@ -2097,12 +2095,15 @@ impl DeformTracer {
                 tb = best_t(best);
                 continue;
             }
-            let (l, r) = (n + 1, topo.right_child(n));
-            let (leaf1, leaf2) = topo.leaf_children(n);
-            let (s1, s2) = self.child_spheres(ii, n, (leaf1, leaf2));
+            let (l, (r, c1, c2)) = (n + 1, Topology::split(n, c));
+            let (leaf1, leaf2) = (c1 == 1, c2 == 1);
+            let (s1, s2) = self.child_spheres(ii, n, c);
+            // The children's level; past 254 they share the counters' last level anyway
+            // (`LEVELS`).
+            let lv = lv.saturating_add(1);
             let cnt = 2 * m.count_ones() as u64;
             dc.sphere_tests += cnt;
-            dc.tests_at(lv + 1, cnt);
+            dc.tests_at(lv, cnt);
             ctr.add(Counter::node_tests, cnt);
             let (m1, e1) = pk.test(s1.0, s1.1, tb);
             let (m2, e2) = pk.test(s2.0, s2.1, tb);
@@ -2113,21 +2114,18 @@ impl DeformTracer {
             if leaf2 && m2 != 0 {
                 self.prefetch_leaf(ii, r);
             }
-            // Levels past 126 share the counters' last level anyway (`LEVELS`).
-            let lv = lv.min(IS_LEAF - 2) + 1;
-            let (lv1, lv2) = (lv | if leaf1 { IS_LEAF } else { 0 }, lv | if leaf2 { IS_LEAF } else { 0 });
             match (m1 != 0, m2 != 0) {
                 (true, true) => {
                     if !self.params.ordered || hmin(e1, m1) <= hmin(e2, m2) {
-                        stack.push((r as u32, lv2, m2, e2));
-                        stack.push((l as u32, lv1, m1, e1));
+                        stack.push((r as u32, c2, lv, m2, e2));
+                        stack.push((l as u32, c1, lv, m1, e1));
                     } else {
-                        stack.push((l as u32, lv1, m1, e1));
-                        stack.push((r as u32, lv2, m2, e2));
+                        stack.push((l as u32, c1, lv, m1, e1));
+                        stack.push((r as u32, c2, lv, m2, e2));
                     }
                 }
-                (true, false) => stack.push((l as u32, lv1, m1, e1)),
-                (false, true) => stack.push((r as u32, lv2, m2, e2)),
+                (true, false) => stack.push((l as u32, c1, lv, m1, e1)),
+                (false, true) => stack.push((r as u32, c2, lv, m2, e2)),
                 (false, false) => {}
             }
         }
@@ -2172,7 +2170,7 @@ impl DeformTracer {
         valid: u8,
         tfar: f32x8,
         roots: &[(f32, usize, u8, f32x8)],
-        stack: &mut Vec<(u32, u8, u8)>,
+        stack: &mut Vec<(u32, u32, u8, u8)>,
         dc: &mut DeformCounters,
         ctr: &mut Counters,
     ) -> u8 {
@@ -2188,66 +2186,66 @@ impl DeformTracer {
                 done |= self.leaf_x8(k, 0, rays, pk, m, tfar, dc, ctr);
                 continue;
             }
-            // Stack entries are (node, level | UNTESTED, lanes): a node whose sphere was
+            // Stack entries are (node, count, level | UNTESTED, lanes): a node whose sphere was
             // tested already, together with its sibling, when both were current (one load of
             // each and two independent tests, so the two misses overlap), or one still to test
             // (the paper's shadow-ray order: the current child first, and the other updated
             // only if the ray still needs it, §4.4).
-            // The level byte also carries IS_LEAF (the node's kind, known from its parent's
-            // count: no load of the node's own `right`).
-            const UNTESTED: u8 = 0x20;
-            let expand = |stack: &mut Vec<(u32, u8, u8)>, n: usize, lv: u8, m: u8, dc: &mut DeformCounters, ctr: &mut Counters| {
-                let (l, r) = (n + 1, topo.right_child(n));
-                let (leaf_l, leaf_r) = topo.leaf_children(n);
-                // Levels past 30 share the counters' last level anyway (`LEVELS`).
-                let lv = lv.min(UNTESTED - 2);
-                let (kl, kr) = (if leaf_l { IS_LEAF } else { 0 }, if leaf_r { IS_LEAF } else { 0 });
-                // Each child's sphere if it is current (one stamp check and load each), both
-                // from the compact balls in a complete subtree (n is current: it was tested).
-                let (sl, sr) = match self.compact_children(ii, n, r) {
-                    Some((a, b)) => (Some(a), Some(b)),
-                    None => {
-                        self.prefetch_node(ii, r, leaf_r);
-                        let sl = self.current_sphere(ii, l, leaf_l);
-                        (sl, if sl.is_some() || self.params.shadow_updated_first { self.current_sphere(ii, r, leaf_r) } else { None })
+            // The count (n's kind and children, [`Topology::split`]) rides on the stack
+            // rather than costing a load per node.
+            const UNTESTED: u8 = 0x80;
+            let expand =
+                |stack: &mut Vec<(u32, u32, u8, u8)>, n: usize, c: u32, lv: u8, m: u8, dc: &mut DeformCounters, ctr: &mut Counters| {
+                    let (l, (r, nl, nr)) = (n + 1, Topology::split(n, c));
+                    let (leaf_l, leaf_r) = (nl == 1, nr == 1);
+                    // Levels past 126 share the counters' last level anyway (`LEVELS`).
+                    let lv = lv.min(UNTESTED - 2);
+                    // Each child's sphere if it is current (one stamp check and load each), both
+                    // from the compact balls in a complete subtree (n is current: it was tested).
+                    let (sl, sr) = match self.compact_children(ii, n, c, r) {
+                        Some((a, b)) => (Some(a), Some(b)),
+                        None => {
+                            self.prefetch_node(ii, r, leaf_r);
+                            let sl = self.current_sphere(ii, l, leaf_l);
+                            (sl, if sl.is_some() || self.params.shadow_updated_first { self.current_sphere(ii, r, leaf_r) } else { None })
+                        }
+                    };
+                    if let (Some((cl, rl)), Some((cr, rr))) = (sl, sr) {
+                        let cnt = 2 * m.count_ones() as u64;
+                        dc.sphere_tests += cnt;
+                        dc.tests_at(lv + 1, cnt);
+                        ctr.add(Counter::node_tests, cnt);
+                        let (ml, mr) = (m & pk.test_any(cl, rl, tfar), m & pk.test_any(cr, rr, tfar));
+                        if leaf_l && ml != 0 {
+                            self.prefetch_leaf(ii, l);
+                        }
+                        if leaf_r && mr != 0 {
+                            self.prefetch_leaf(ii, r);
+                        }
+                        if mr != 0 {
+                            stack.push((r as u32, nr, lv + 1, mr));
+                        }
+                        if ml != 0 {
+                            stack.push((l as u32, nl, lv + 1, ml));
+                        }
+                    } else if !self.params.shadow_updated_first || sl.is_some() || sr.is_none() {
+                        // §4.4: the current child first (`left_first`).
+                        stack.push((r as u32, nr, (lv + 1) | UNTESTED, m));
+                        stack.push((l as u32, nl, (lv + 1) | UNTESTED, m));
+                    } else {
+                        stack.push((l as u32, nl, (lv + 1) | UNTESTED, m));
+                        stack.push((r as u32, nr, (lv + 1) | UNTESTED, m));
                     }
                 };
-                if let (Some((cl, rl)), Some((cr, rr))) = (sl, sr) {
-                    let cnt = 2 * m.count_ones() as u64;
-                    dc.sphere_tests += cnt;
-                    dc.tests_at(lv + 1, cnt);
-                    ctr.add(Counter::node_tests, cnt);
-                    let (ml, mr) = (m & pk.test_any(cl, rl, tfar), m & pk.test_any(cr, rr, tfar));
-                    if leaf_l && ml != 0 {
-                        self.prefetch_leaf(ii, l);
-                    }
-                    if leaf_r && mr != 0 {
-                        self.prefetch_leaf(ii, r);
-                    }
-                    if mr != 0 {
-                        stack.push((r as u32, (lv + 1) | kr, mr));
-                    }
-                    if ml != 0 {
-                        stack.push((l as u32, (lv + 1) | kl, ml));
-                    }
-                } else if !self.params.shadow_updated_first || sl.is_some() || sr.is_none() {
-                    // §4.4: the current child first (`left_first`).
-                    stack.push((r as u32, (lv + 1) | UNTESTED | kr, m));
-                    stack.push((l as u32, (lv + 1) | UNTESTED | kl, m));
-                } else {
-                    stack.push((l as u32, (lv + 1) | UNTESTED | kl, m));
-                    stack.push((r as u32, (lv + 1) | UNTESTED | kr, m));
-                }
-            };
             stack.clear();
-            expand(stack, 0, 0, m, dc, ctr);
-            while let Some((n, lv, m)) = stack.pop() {
+            expand(stack, 0, topo.count[0], 0, m, dc, ctr);
+            while let Some((n, c, lv, m)) = stack.pop() {
                 let mut m = m & !done;
                 if m == 0 {
                     continue;
                 }
                 let n = n as usize;
-                let (untested, leaf, lv) = (lv & UNTESTED != 0, lv & IS_LEAF != 0, lv & !(UNTESTED | IS_LEAF));
+                let (untested, leaf, lv) = (lv & UNTESTED != 0, c == 1, lv & !UNTESTED);
                 if untested {
                     let (c, r) = self.sphere_as(ii, n, leaf);
                     let cnt = m.count_ones() as u64;
@@ -2265,7 +2263,7 @@ impl DeformTracer {
                         return done;
                     }
                 } else {
-                    expand(stack, n, lv, m, dc, ctr);
+                    expand(stack, n, c, lv, m, dc, ctr);
                 }
             }
         }
@@ -2519,7 +2517,7 @@ impl DeformTracer {
                 // The compact balls that traversals would read below n instead of slots: every
                 // ball of a complete subtree is a child of one of its current inner nodes.
                 let rc = topo.right_child(n);
-                let (b1, b2) = self.compact_children(ii, n, rc)?;
+                let (b1, b2) = self.compact_children(ii, n, topo.count[n], rc)?;
                 [(n + 1, b1), (rc, b2)].into_iter().find_map(|(q, b)| {
                     outside(q, b)
                         .map(|(s, reach, r)| format!("instance {k} ball {q} (below complete {n}): surfel {s} reaches {reach}, radius {r}"))

@@ -108,24 +108,24 @@ impl Topology {
     pub fn depth(&self) -> usize {
         self.level.iter().copied().max().map(|l| l as usize + 1).unwrap_or(0)
     }
-    /// Whether inner node n's children (n + 1 and `right[n]`) are leaves, from n's own surfel
-    /// count: the median split puts ⌊c/2⌋ of n's c surfels on the left (`build`), so the left
-    /// child is a leaf iff c ≤ 3 and the right one iff c = 2. Traversals learn a child's kind
-    /// without loading the child's `right`, a cache miss before the one for its sphere.
-    #[inline(always)]
-    pub fn leaf_children(&self, n: usize) -> (bool, bool) {
-        let c = self.count[n];
-        (c <= 3, c == 2)
-    }
     /// Inner node n's right child, `right[n]`, from n's surfel count: the left subtree's
-    /// ⌊c/2⌋ surfels take 2⌊c/2⌋ − 1 nodes after n (`build`). The hot traversals read `count`
-    /// (for [`leaf_children`](Self::leaf_children)) anyway: one array load per node instead of
-    /// two, each a likely cache miss on a tree of millions of nodes.
+    /// ⌊c/2⌋ surfels take 2⌊c/2⌋ − 1 nodes after n (`build`); see [`split`](Self::split).
     #[inline(always)]
     pub fn right_child(&self, n: usize) -> usize {
         let r = n + 2 * (self.count[n] as usize / 2);
         debug_assert_eq!(r, self.right[n] as usize, "node {n}");
         r
+    }
+    /// The split of an inner node n of `c` surfels without loading anything: its right
+    /// child and its children's counts, (⌊c/2⌋, c − ⌊c/2⌋) by the median split (`build`),
+    /// so a child is a leaf iff its count is 1 (the left iff c ≤ 3, the right iff c = 2).
+    /// The packet traversals carry each node's count on their stacks and read no `count`
+    /// at all: the root's is loaded once and every child's follows from its parent's
+    /// (stop 68; that load, a likely miss on a tree of millions of nodes, was one of the
+    /// closest-hit traversal's most sampled lines).
+    #[inline(always)]
+    pub fn split(n: usize, c: u32) -> (usize, u32, u32) {
+        (n + 2 * (c as usize / 2), c / 2, c - c / 2)
     }
     #[inline(always)]
     pub fn center(&self, n: usize) -> Vec3 {
@@ -1033,9 +1033,10 @@ mod tests {
             let pts: Vec<Vec3> = (0..m).map(|_| Vec3::new(s.next(), s.next(), s.next())).collect();
             let t = Topology::build(&pts, &vec![0.01; m]);
             for n in (0..t.len()).filter(|&n| t.right[n] != LEAF) {
-                assert_eq!(t.leaf_children(n), (t.right[n + 1] == LEAF, t.right[t.right[n] as usize] == LEAF), "{m} surfels, node {n}");
                 // `debug_assert` inside checks it only in debug builds: here in every build.
                 assert_eq!(t.right_child(n), t.right[n] as usize, "{m} surfels, node {n}");
+                let (r, cl, cr) = Topology::split(n, t.count[n]);
+                assert_eq!((r, cl, cr), (t.right[n] as usize, t.count[n + 1], t.count[r]), "{m} surfels, node {n}");
             }
         }
         let pts: Vec<Vec3> = (0..3000).map(|_| Vec3::new(s.next(), s.next() * 3.0, s.next())).collect();
@@ -1049,9 +1050,10 @@ mod tests {
             }
             if t.right[n] != LEAF {
                 assert_eq!(t.count[n + 1] + t.count[t.right[n] as usize], t.count[n]);
-                // The traversals' shortcut for the children's kind.
-                assert_eq!(t.leaf_children(n), (t.right[n + 1] == LEAF, t.right[t.right[n] as usize] == LEAF), "node {n}");
                 assert_eq!(t.right_child(n), t.right[n] as usize, "node {n}");
+                // The packet traversals' counts from the parent's alone.
+                let (r, cl, cr) = Topology::split(n, t.count[n]);
+                assert_eq!((r, cl, cr), (t.right[n] as usize, t.count[n + 1], t.count[r]), "node {n}");
             }
         }
         assert!(t.depth() <= 14);
