@@ -453,6 +453,10 @@ pub struct DeformCounters {
 /// Levels of [`DeformCounters::level_tests`].
 pub const LEVELS: usize = 32;
 
+/// Flag of a closest-hit packet traversal's stack entry (in its level byte): the node's
+/// subtree is known to be complete (`DeformTracer::compact_children`).
+const COMPLETE: u8 = 0x80;
+
 impl DeformCounters {
     pub fn merge(&mut self, o: &DeformCounters) {
         self.sphere_tests += o.sphere_tests;
@@ -1205,15 +1209,20 @@ impl DeformTracer {
 
     /// The spheres of inner node n's two children (updating them lazily), and Eq. 11 for n;
     /// `c` is n's surfel count (its children's kinds and the right child follow from it,
-    /// [`Topology::split`]).
+    /// [`Topology::split`]) and `known` whether n's subtree is known to be complete (its
+    /// parent's is, [`compact_children`](Self::compact_children)). The third value says
+    /// whether n's subtree is complete, and so its children's.
     #[inline(always)]
-    fn child_spheres(&self, ii: &Instance, n: usize, c: u32) -> ((Vec3, f32), (Vec3, f32)) {
+    fn child_spheres(&self, ii: &Instance, n: usize, c: u32, known: bool) -> ((Vec3, f32), (Vec3, f32), bool) {
         let (rc, c1, c2) = Topology::split(n, c);
         let (leaf1, leaf2) = (c1 == 1, c2 == 1);
-        let (s1, s2) = self.compact_children(ii, n, c, rc).unwrap_or_else(|| {
-            self.prefetch_node(ii, rc, leaf2);
-            (self.sphere_as(ii, n + 1, leaf1), self.sphere_as(ii, rc, leaf2))
-        });
+        let ((s1, s2), compact) = match self.compact_children(ii, n, c, rc, known) {
+            Some(b) => (b, true),
+            None => {
+                self.prefetch_node(ii, rc, leaf2);
+                ((self.sphere_as(ii, n + 1, leaf1), self.sphere_as(ii, rc, leaf2)), false)
+            }
+        };
         // A node inside a refitted subtree took Eq. 11 from its final children when it was
         // refitted (`refit_subtree`), so it is skipped here. Median splits halve the counts,
         // so a node of fewer than exact_below/2 surfels is inside one; a subtree's own root
@@ -1224,7 +1233,7 @@ impl DeformTracer {
             let c = if self.params.recentre_eq11 { Vec3::NAN } else { self.sphere(ii, n).0 };
             self.tighten(ii, n, c, s1, s2);
         }
-        (s1, s2)
+        (s1, s2, compact)
     }
 
     /// Starts the load of node n's lazy state (its slot, or its surfel's for a leaf) so
@@ -1254,18 +1263,29 @@ impl DeformTracer {
 
     /// The children's spheres of current inner node n (right child `rc`) from the compact
     /// [`Ball`]s, if n's subtree is complete: by its size ([`compact_max`](Self::compact_max)),
-    /// or, for a larger node, because a refit that covered it has finished and said so
-    /// ([`NodeSlot::mark_complete`]; n's slot was just read, so this costs no miss). Lazy
-    /// modes only. The balls hold each node's refitted sphere, no looser than its slot's
-    /// (which may hold Eq. 9's while a claimed refit runs): no stamp, lock or branch per
-    /// child.
+    /// because its parent's is (`known`: the refit that wrote the parent's subtree wrote
+    /// n's), or because a refit that covered it has finished and said so
+    /// ([`NodeSlot::mark_complete`]). Lazy modes only. The balls hold each node's refitted
+    /// sphere, no looser than its slot's (which may hold Eq. 9's while a claimed refit
+    /// runs): no stamp, lock or branch per child. The traversals pass `known` down
+    /// their stacks, so below the first complete node no slot is read at all (stop
+    /// 68; the claim's load was a miss on every node of more than 64 surfels there).
     #[inline(always)]
-    fn compact_children(&self, ii: &Instance, n: usize, cnt: u32, rc: usize) -> Option<((Vec3, f32), (Vec3, f32))> {
+    fn compact_children(&self, ii: &Instance, n: usize, cnt: u32, rc: usize, known: bool) -> Option<((Vec3, f32), (Vec3, f32))> {
         if ii.naive.is_some() {
             return None;
         }
-        let complete = cnt <= self.compact_max() || (cnt > REFIT_CLAIM_MIN && ii.nodes.slot[n].complete(self.frame));
+        let complete = known || cnt <= self.compact_max() || (cnt > REFIT_CLAIM_MIN && ii.nodes.slot[n].complete(self.frame));
         complete.then(|| (ii.ball[n + 1].load(), ii.ball[rc].load()))
+    }
+
+    /// Starts the load of the far one of node n's two child balls (`c` its count), if n is
+    /// an inner node some lane `m` still needs, in a complete subtree.
+    #[inline(always)]
+    fn prefetch_far_ball(&self, ii: &Instance, n: usize, c: u32, m: u8) {
+        if m != 0 && c > 1 {
+            prefetch_read(&ii.ball[Topology::split(n, c).0]);
+        }
     }
 
     /// Starts the loads a leaf test of leaf `n` may need after its surfel's slot: the MLS
@@ -1859,7 +1879,7 @@ impl DeformTracer {
                 continue;
             }
             let (l, r) = (n + 1, topo.right_child(n));
-            let (s1, s2) = self.child_spheres(ii, n, topo.count[n]);
+            let (s1, s2, _) = self.child_spheres(ii, n, topo.count[n], false);
             dc.sphere_tests += 2;
             dc.tests_at(topo.level[l], 2);
             ctr.add(Counter::node_tests, 2);
@@ -2070,12 +2090,13 @@ impl DeformTracer {
         let skip8 = u32x8::from(skipn);
         let mut tb = best_t(best);
         stack.clear();
-        // (node, its surfel count, its level, lanes, entries): the level rides on the stack
-        // for `level_tests` and the count for the node's kind and children
-        // ([`Topology::split`]), rather than costing a load per node.
+        // (node, its surfel count, its level | COMPLETE, lanes, entries): the level rides on
+        // the stack for `level_tests`, the count for the node's kind and children
+        // ([`Topology::split`]) and the flag for a subtree known to be complete
+        // (`compact_children`), rather than costing a load per node.
         stack.push((0, topo.count[0], 0, mask, entry));
         while let Some((n, c, lv, m, te)) = stack.pop() {
-            let leaf = c == 1;
+            let (leaf, known, lv) = (c == 1, lv & COMPLETE != 0, lv & !COMPLETE);
             let mut m = m & te.simd_le(tb).to_bitmask() as u8;
             if any_skip {
                 // The lanes whose cached node (searched already) this is, in one compare.
@@ -2097,10 +2118,10 @@ impl DeformTracer {
             }
             let (l, (r, c1, c2)) = (n + 1, Topology::split(n, c));
             let (leaf1, leaf2) = (c1 == 1, c2 == 1);
-            let (s1, s2) = self.child_spheres(ii, n, c);
-            // The children's level; past 254 they share the counters' last level anyway
+            let (s1, s2, compact) = self.child_spheres(ii, n, c, known);
+            // The children's level; past 126 they share the counters' last level anyway
             // (`LEVELS`).
-            let lv = lv.saturating_add(1);
+            let lv = lv.min(COMPLETE - 2) + 1;
             let cnt = 2 * m.count_ones() as u64;
             dc.sphere_tests += cnt;
             dc.tests_at(lv, cnt);
@@ -2114,6 +2135,13 @@ impl DeformTracer {
             if leaf2 && m2 != 0 {
                 self.prefetch_leaf(ii, r);
             }
+            if compact {
+                // The far one of a hit inner child's two child balls (the near one shares
+                // the child's own line), a level ahead of its visit.
+                self.prefetch_far_ball(ii, l, c1, m1);
+                self.prefetch_far_ball(ii, r, c2, m2);
+            }
+            let lv = lv | if compact { COMPLETE } else { 0 };
             match (m1 != 0, m2 != 0) {
                 (true, true) => {
                     if !self.params.ordered || hmin(e1, m1) <= hmin(e2, m2) {
@@ -2193,21 +2221,27 @@ impl DeformTracer {
             // only if the ray still needs it, §4.4).
             // The count (n's kind and children, [`Topology::split`]) rides on the stack
             // rather than costing a load per node.
+            // COMPLETE in the level byte: the node's subtree is known to be complete, as in
+            // `closest_in_x8` (only on tested entries: a complete node's children are).
             const UNTESTED: u8 = 0x80;
+            const COMPLETE: u8 = 0x40;
             let expand =
                 |stack: &mut Vec<(u32, u32, u8, u8)>, n: usize, c: u32, lv: u8, m: u8, dc: &mut DeformCounters, ctr: &mut Counters| {
                     let (l, (r, nl, nr)) = (n + 1, Topology::split(n, c));
                     let (leaf_l, leaf_r) = (nl == 1, nr == 1);
-                    // Levels past 126 share the counters' last level anyway (`LEVELS`).
-                    let lv = lv.min(UNTESTED - 2);
+                    let known = lv & COMPLETE != 0;
+                    // Levels past 62 share the counters' last level anyway (`LEVELS`).
+                    let lv = (lv & !COMPLETE).min(COMPLETE - 2);
                     // Each child's sphere if it is current (one stamp check and load each), both
                     // from the compact balls in a complete subtree (n is current: it was tested).
-                    let (sl, sr) = match self.compact_children(ii, n, c, r) {
-                        Some((a, b)) => (Some(a), Some(b)),
+                    let (sl, sr, compact) = match self.compact_children(ii, n, c, r, known) {
+                        Some((a, b)) => (Some(a), Some(b), true),
                         None => {
                             self.prefetch_node(ii, r, leaf_r);
                             let sl = self.current_sphere(ii, l, leaf_l);
-                            (sl, if sl.is_some() || self.params.shadow_updated_first { self.current_sphere(ii, r, leaf_r) } else { None })
+                            let sr =
+                                if sl.is_some() || self.params.shadow_updated_first { self.current_sphere(ii, r, leaf_r) } else { None };
+                            (sl, sr, false)
                         }
                     };
                     if let (Some((cl, rl)), Some((cr, rr))) = (sl, sr) {
@@ -2222,11 +2256,19 @@ impl DeformTracer {
                         if leaf_r && mr != 0 {
                             self.prefetch_leaf(ii, r);
                         }
+                        let kc = if compact {
+                            // As in `closest_in_x8`: the far grandchild balls a level ahead.
+                            self.prefetch_far_ball(ii, l, nl, ml);
+                            self.prefetch_far_ball(ii, r, nr, mr);
+                            COMPLETE
+                        } else {
+                            0
+                        };
                         if mr != 0 {
-                            stack.push((r as u32, nr, lv + 1, mr));
+                            stack.push((r as u32, nr, (lv + 1) | kc, mr));
                         }
                         if ml != 0 {
-                            stack.push((l as u32, nl, lv + 1, ml));
+                            stack.push((l as u32, nl, (lv + 1) | kc, ml));
                         }
                     } else if !self.params.shadow_updated_first || sl.is_some() || sr.is_none() {
                         // §4.4: the current child first (`left_first`).
@@ -2517,7 +2559,7 @@ impl DeformTracer {
                 // The compact balls that traversals would read below n instead of slots: every
                 // ball of a complete subtree is a child of one of its current inner nodes.
                 let rc = topo.right_child(n);
-                let (b1, b2) = self.compact_children(ii, n, topo.count[n], rc)?;
+                let (b1, b2) = self.compact_children(ii, n, topo.count[n], rc, false)?;
                 [(n + 1, b1), (rc, b2)].into_iter().find_map(|(q, b)| {
                     outside(q, b)
                         .map(|(s, reach, r)| format!("instance {k} ball {q} (below complete {n}): surfel {s} reaches {reach}, radius {r}"))
