@@ -150,7 +150,11 @@ impl TopTree {
     /// Packet form: for the lanes `mask` of `pk`, each instance whose leaf one of them reaches
     /// within `tfar` is passed to `visit` with the lanes that reach it (no allocation: this
     /// runs once per packet). Returns the number of sphere tests counted per active lane (as
-    /// the per-object traversal counts them).
+    /// the per-object traversal counts them). The nodes are culled by the square-root-free
+    /// segment test ([`RayPacketX8::test_any`]): only the mask counts here, the caller tests
+    /// each candidate's root for its entry (stop 68: `elastic-balls` spent 7 % of its frame
+    /// in this tree and its roots). Both tests are conservative, so the candidates hold
+    /// every instance a lane reaches; at a rim they may differ from [`Self::candidates_1`]'s.
     pub fn candidates_x8(&self, pk: &RayPacketX8, mask: u8, tfar: f32x8, mut visit: impl FnMut(u32, u8)) -> u64 {
         if self.single() {
             self.order.iter().for_each(|&k| visit(k, mask));
@@ -165,7 +169,7 @@ impl TopTree {
             let (n, m) = stack[sp];
             let n = n as usize;
             tests += m.count_ones() as u64;
-            let m = m & pk.test(self.c[n], self.r[n], tfar).0;
+            let m = m & pk.test_any(self.c[n], self.r[n], tfar);
             if m == 0 {
                 continue;
             }
@@ -228,13 +232,14 @@ mod tests {
     }
 
     /// The candidates contain every instance whose sphere the ray hits (scalar and packet
-    /// forms, which agree), and with 40 instances far fewer than all of them.
+    /// forms), and with 40 instances far fewer than all of them; the two forms agree but
+    /// for a rare rim case (their node tests' slacks differ).
     #[test]
     fn candidates_hold_every_hit_instance() {
         let s = spheres(40, 7);
         let t = TopTree::build(&s);
         let mut g = Rng::new(3, 0, 0);
-        let mut total = 0;
+        let (mut total, mut differ) = (0, 0);
         for _ in 0..64 {
             let rays: Vec<Ray> = (0..8)
                 .map(|_| {
@@ -258,15 +263,17 @@ mod tests {
                 cx.sort();
                 let mut c1s = c1.clone();
                 c1s.sort();
-                assert_eq!(cx, c1s, "packet lane {i} and scalar disagree");
+                differ += (cx != c1s) as usize;
                 for (k, &(c, r)) in s.iter().enumerate() {
                     if sphere_test_1(ray.org, ray.dir, c, r, ray.tnear, f32::INFINITY).is_some() {
                         assert!(c1.contains(&(k as u32)), "instance {k} hit but culled");
+                        assert!(cx.contains(&(k as u32)), "instance {k} hit but culled in packet lane {i}");
                     }
                 }
             }
         }
         assert!(total < 64 * 8 * 40 / 2, "the tree culls little: {total} candidates");
+        assert!(differ <= 8, "packet and scalar candidates differ for {differ} of 512 rays");
     }
 
     #[test]
