@@ -465,9 +465,10 @@ pub struct DeformCounters {
 /// Levels of [`DeformCounters::level_tests`].
 pub const LEVELS: usize = 32;
 
-/// Flag of a closest-hit packet traversal's stack entry (in its level byte): the node's
-/// subtree is known to be complete (`DeformTracer::compact_children`).
-const COMPLETE: u8 = 0x80;
+/// Flag of a packet traversal's stack entry (in its level byte, below the shadow
+/// traversal's `UNTESTED`): the node's subtree is known to be complete
+/// (`DeformTracer::compact_children`).
+const COMPLETE: u8 = 0x40;
 
 impl DeformCounters {
     pub fn merge(&mut self, o: &DeformCounters) {
@@ -2142,7 +2143,7 @@ impl DeformTracer {
             let (l, (r, c1, c2)) = (n + 1, Topology::split(n, c));
             let (leaf1, leaf2) = (c1 == 1, c2 == 1);
             let (s1, s2, compact) = self.child_spheres(ii, n, c, known);
-            // The children's level; past 126 they share the counters' last level anyway
+            // The children's level; past 62 they share the counters' last level anyway
             // (`LEVELS`).
             let lv = lv.min(COMPLETE - 2) + 1;
             let cnt = 2 * m.count_ones() as u64;
@@ -2244,10 +2245,9 @@ impl DeformTracer {
             // only if the ray still needs it, §4.4).
             // The count (n's kind and children, [`Topology::split`]) rides on the stack
             // rather than costing a load per node.
-            // COMPLETE in the level byte: the node's subtree is known to be complete, as in
-            // `closest_in_x8` (only on tested entries: a complete node's children are).
+            // COMPLETE in the level byte as in `closest_in_x8` (only on tested entries: both
+            // children of a complete node are current, so they are tested together).
             const UNTESTED: u8 = 0x80;
-            const COMPLETE: u8 = 0x40;
             let expand =
                 |stack: &mut Vec<(u32, u32, u8, u8)>, n: usize, c: u32, lv: u8, m: u8, dc: &mut DeformCounters, ctr: &mut Counters| {
                     let (l, (r, nl, nr)) = (n + 1, Topology::split(n, c));
