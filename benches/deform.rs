@@ -19,12 +19,18 @@
 //! `mls`: the MLS iteration (§4.2.1) from a surfel-ellipse start on 1024 noisy 16-surfel
 //! neighbourhoods of a sphere — [`mls_intersect`] vs [`mls_intersect_x8`]; throughput in
 //! intersections.
+//!
+//! `deform_point`: Eq. 1 for 6000 surfels of a sphere, 16 of 500 simulation nodes each,
+//! under a random non-rigid motion (what a lazy refit of one `elastic-balls` ball does per
+//! surfel before it stores it); throughput in surfels.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::Vec3;
 use lodtrace::core::rng::Sampler;
+use lodtrace::deform::displace::{deform_point, NodeWeights};
 use lodtrace::deform::mls::{ellipse_hit, mls_intersect, mls_intersect_x8, MlsNbr, MlsParams};
 use lodtrace::deform::tree::{sphere_test_1, sphere_test_x8_rays, sphere_test_x8_spheres, RayPacketX8};
+use lodtrace::deform::{DeformField, SimNodes};
 use std::hint::black_box;
 use wide::f32x8;
 
@@ -231,5 +237,30 @@ fn mls(cr: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench, packet_nodes, packet_ellipse, mls);
+fn deform(cr: &mut Criterion) {
+    let mut s = Sampler::new(11, 0, 0);
+    let mut unit = || Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5).normalize_or(Vec3::Z);
+    let rest: Vec<Vec3> = (0..500).map(|_| unit() * 0.9).collect();
+    let pts: Vec<Vec3> = (0..6000).map(|_| unit()).collect();
+    let axes: Vec<(Vec3, Vec3)> =
+        pts.iter().map(|p| (p.any_orthonormal_vector() * 0.02, p.cross(p.any_orthonormal_vector()) * 0.02)).collect();
+    let nodes = SimNodes::new(rest.clone(), vec![1.0; rest.len()], 8).unwrap();
+    let q = glam::Quat::from_axis_angle(Vec3::new(1.0, 2.0, 0.5).normalize(), 0.7);
+    let def: Vec<Vec3> = rest.iter().map(|x| q * (*x * Vec3::new(1.2, 0.8, 1.0) + 0.05 * Vec3::new(x.y, x.z, x.x) * x.x)).collect();
+    let f = DeformField::compute(&nodes, &def, true).unwrap();
+    let w = NodeWeights::new(&pts, &nodes, 16);
+    let k = w.k;
+    let mut g = cr.benchmark_group("deform_point");
+    g.throughput(Throughput::Elements(pts.len() as u64));
+    g.bench_function("eq1", |b| {
+        b.iter(|| {
+            for (i, (p, a)) in black_box(&pts).iter().zip(&axes).enumerate() {
+                black_box(deform_point(&f, *p, *a, &w.idx[i * k..i * k + k], &w.w[i * k..i * k + k]));
+            }
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench, packet_nodes, packet_ellipse, mls, deform);
 criterion_main!(benches);
