@@ -1281,3 +1281,63 @@ fn shape_matching_energy_stays_bounded() {
         }
     }
 }
+
+/// The cache gate (`TraceParams::cache_gate`, stop 70). Under front-to-back descent a frame
+/// whose lookups (at least 256) hit less than the gate's share closes the cache: the next
+/// frames look nothing up except the probes every `CACHE_PROBE` frames, and a probe that
+/// hits enough reopens it. A cache whose lookups hit (the same frame again) stays open;
+/// `cache_gate = 0` and the unordered descent look up every frame. The hits equal `lazy`'s
+/// throughout.
+#[test]
+fn cache_gate_closes_on_misses_and_probes() {
+    use lodtrace::deform::trace::CACHE_PROBE;
+    let opts = SequenceOptions { detail: 0.05, ..Default::default() };
+    let mut seq = Sequence::builtin("elastic-balls", &opts).unwrap();
+    let n = 2 * CACHE_PROBE as usize + 2;
+    let rec = seq.record(n as u32).unwrap();
+    let (w, h) = (64, 48);
+    // (lookups, hits) per frame.
+    let run = |params: TraceParams, still: bool| -> Vec<(u64, u64)> {
+        let mut plain = DeformTracer::new(&seq.scene, UpdateMode::Lazy, params.clone()).unwrap();
+        let mut tr = DeformTracer::new(&seq.scene, UpdateMode::LazyCache, params).unwrap();
+        tr.set_cache_slots((w * h) as usize);
+        (0..n)
+            .map(|f| {
+                let fr = &rec.frames[if still { n - 1 } else { f }];
+                plain.begin_frame(fr).unwrap();
+                tr.begin_frame(fr).unwrap();
+                let mut dc = DeformCounters::default();
+                let img = render(&tr, &seq.camera, w, h, &mut dc);
+                same_hits(&render(&plain, &seq.camera, w, h, &mut DeformCounters::default()), &img).unwrap();
+                tr.end_frame(0.0, &dc);
+                (dc.cache_lookups, dc.cache_hits)
+            })
+            .collect()
+    };
+    let gate = TraceParams::default().cache_gate;
+    assert!(gate > 0.0);
+    let moving = run(TraceParams::default(), false);
+    eprintln!("moving: {moving:?}");
+    // The tracer counts frames from 1: frame index f is the tracer's frame f + 1.
+    let probe = |f: usize| (f + 1) % CACHE_PROBE as usize == 0;
+    let mut open = true;
+    let mut closed = 0;
+    for (f, &(l, hits)) in moving.iter().enumerate() {
+        if f > 0 {
+            assert_eq!(l > 0, open || probe(f), "frame {f}: {moving:?}");
+        }
+        if l >= 256 {
+            open = hits as f64 >= gate as f64 * l as f64;
+            closed += !open as u32;
+        }
+    }
+    assert!(closed > 0, "the moving balls' cache never closed: {moving:?}");
+    for (what, params, still) in [
+        ("still", TraceParams::default(), true),
+        ("gate 0", TraceParams { cache_gate: 0.0, ..TraceParams::default() }, false),
+        ("unordered", TraceParams { ordered: false, ..TraceParams::default() }, false),
+    ] {
+        let r = run(params, still);
+        assert!(r[1..].iter().all(|&(l, _)| l >= 256), "{what}: {r:?}");
+    }
+}

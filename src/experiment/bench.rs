@@ -11,7 +11,7 @@
 //! (`--lod-selective-on`), `levels`, `dist`
 //! (distance criterion), `force` (fixed LOD), `net=1` (net disparity), `select=cone` (the
 //! ray-cone selector); for `surfel`: `update`, `frames`, `detail`, `shadows=0`, `exact`,
-//! `warm=1`, `cache_up`, `climb=1`, `ordered=0`, `top=0` (`--no-instance-tree`), `nearest=mls`.
+//! `warm=1`, `cache_up`, `climb=1`, `gate`, `ordered=0`, `top=0` (`--no-instance-tree`), `nearest=mls`.
 //!
 //! A `lod` row is also compared with the full-detail row of the same scene (the first
 //! `whitted` row with the same accel, spp, threads and depth): triangle tests and time saved, the maximum
@@ -52,7 +52,7 @@ pub struct BenchArgs {
     /// tracers: k, c, clamp, clamp2, lod, dtol, cs, lens, rough, light, mip, primary, budget,
     /// eigen, tri, stri, facing, split, term, pw, spread, groups, agg, plane, tight, mask;
     /// lod: f, a, thres, sel, select, selon, levels, dist, force, net; surfel: update,
-    /// frames, detail, shadows, exact, warm, cache_up, climb, ordered, top, nearest. Each key is the
+    /// frames, detail, shadows, exact, warm, cache_up, climb, gate, ordered, top, nearest. Each key is the
     /// `render`/`animate` option of the same meaning (README, "Using it").
     #[arg(long, required = true)]
     pub methods: String,
@@ -281,6 +281,7 @@ impl MethodSpec {
                     "warm" => spec.surfel.warm = on(v)?,
                     "cache_up" => spec.surfel.cache_up = int(v)?,
                     "climb" => spec.surfel.cache_climb = on(v)?,
+                    "gate" => spec.surfel.cache_gate = Some(num(v)? as f32),
                     "ordered" => spec.surfel.ordered = on(v)?,
                     "top" => spec.surfel.top = on(v)?,
                     "nearest" => {
@@ -296,7 +297,7 @@ impl MethodSpec {
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, lens, rough, light, mip, primary, budget, eigen, tri, stri, facing, split, term, pw, spread, groups, agg, plane, tight, mask; lod: f, a, thres, sel, select, selon, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, warm, cache_up, climb, ordered, top, nearest)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, lens, rough, light, mip, primary, budget, eigen, tri, stri, facing, split, term, pw, spread, groups, agg, plane, tight, mask; lod: f, a, thres, sel, select, selon, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, warm, cache_up, climb, gate, ordered, top, nearest)"
                         )))
                     }
                 }
@@ -317,7 +318,8 @@ impl MethodSpec {
                     "multires and cone"
                 }
                 "f" | "a" | "thres" | "sel" | "selon" | "levels" | "dist" | "force" | "net" | "select" if method != Method::Lod => "lod",
-                "update" | "frames" | "detail" | "shadows" | "exact" | "warm" | "cache_up" | "climb" | "ordered" | "top" | "nearest"
+                "update" | "frames" | "detail" | "shadows" | "exact" | "warm" | "cache_up" | "climb" | "gate" | "ordered" | "top"
+                | "nearest"
                     if method != Method::Surfel =>
                 {
                     "surfel"

@@ -20,7 +20,7 @@ use serde::Serialize;
 use std::path::Path;
 
 /// `surfel` spec options (keys `update=`, `frames=`, `detail=`, `shadows=`, `exact=`,
-/// `warm=`, `cache_up=`, `climb=`, `ordered=`, `top=`, `nearest=`; the spec's `packet=` chooses packets of 8 or single rays).
+/// `warm=`, `cache_up=`, `climb=`, `gate=`, `ordered=`, `top=`, `nearest=`; the spec's `packet=` chooses packets of 8 or single rays).
 #[derive(Clone, Debug, Serialize)]
 pub struct SurfelSpec {
     pub update: String,
@@ -36,6 +36,8 @@ pub struct SurfelSpec {
     pub cache_up: u32,
     /// `climb=1`: `--cache-climb` of `animate` (lazy-cache only).
     pub cache_climb: bool,
+    /// `gate=R`: `--cache-gate` of `animate` (lazy-cache only; unset: animate's default).
+    pub cache_gate: Option<f32>,
     /// `ordered=0`: `--unordered` of `animate`.
     pub ordered: bool,
     /// `top=0`: `--no-instance-tree` of `animate`.
@@ -55,6 +57,7 @@ impl Default for SurfelSpec {
             warm: false,
             cache_up: 0,
             cache_climb: false,
+            cache_gate: None,
             ordered: true,
             top: true,
             nearest_ellipse: true,
@@ -145,6 +148,7 @@ pub fn run(
                     exact_below: s.exact_below,
                     cache_up: s.cache_up,
                     cache_climb: s.cache_climb,
+                    cache_gate: s.cache_gate,
                     unordered: !s.ordered,
                     no_instance_tree: !s.top,
                     nearest: if s.nearest_ellipse { crate::cli::animate::Nearest::Ellipse } else { crate::cli::animate::Nearest::Mls },
@@ -428,6 +432,9 @@ pub fn update_label(update: &str, spec: &str) -> String {
     if spec.split(':').any(|k| k == "climb=1") {
         l.push_str(", cache climbs");
     }
+    if let Some(g) = spec.split(':').find_map(|k| k.strip_prefix("gate=")) {
+        l.push_str(&if g.parse::<f32>() == Ok(0.0) { ", cache every frame".to_string() } else { format!(", cache gate {g}") });
+    }
     l
 }
 
@@ -450,6 +457,14 @@ pub fn validate(spec: &MethodSpec) -> Result<()> {
     }
     if s.cache_climb && mode != crate::deform::UpdateMode::LazyCache {
         return bad("climb is a key of update=lazy-cache".into());
+    }
+    if let Some(g) = s.cache_gate {
+        if mode != crate::deform::UpdateMode::LazyCache {
+            return bad("gate is a key of update=lazy-cache".into());
+        }
+        if !(0.0..=1.0).contains(&g) {
+            return bad(format!("gate={g}: a share of the lookups, in [0, 1]"));
+        }
     }
     use crate::deform::UpdateMode::{Naive, Refit};
     if s.exact_below.is_some() && matches!(mode, Naive | Refit) {
