@@ -973,8 +973,8 @@ impl DeformTracer {
             // A resting cache is probed every CACHE_PROBE frames, with the slots its
             // previous frame stored.
             let on = self.cache_on || !self.cache_gated();
-            self.cache_look = on || frame % CACHE_PROBE == 0;
-            self.cache_keep = on || frame % CACHE_PROBE == 0 || frame.wrapping_add(1) % CACHE_PROBE == 0;
+            self.cache_look = on || frame.is_multiple_of(CACHE_PROBE);
+            self.cache_keep = on || frame.is_multiple_of(CACHE_PROBE) || frame.wrapping_add(1).is_multiple_of(CACHE_PROBE);
         }
         for (i, f) in self.inst.iter_mut().zip(fields) {
             i.field = f;
