@@ -24,7 +24,7 @@
 //!   the slots), reopening if the probe hits enough. Front-to-back descent reaches the near
 //!   hit that a cached node would bound the ray with by itself, so the cache saves nothing
 //!   there, and under this motion its leaves hit on 0.7–7 % of lookups; its slot loads and
-//!   stores, prefetches and scalar searches made `lazy-cache` 1–4 % slower than `lazy` on
+//!   stores, prefetches and scalar searches made `lazy-cache` 2–4 % slower than `lazy` on
 //!   all four sequences (stop 70 bench). Gated, `elastic-balls` lazy-cache runs 3.4 %
 //!   faster, as fast as `lazy`. `cache_gate = 0` looks up every frame, as the paper does;
 //!   the unordered descent (the paper's, where the cache's bound pays) is never gated.
@@ -946,11 +946,6 @@ impl DeformTracer {
     /// Whether the per-ray cache is gated ([`TraceParams::cache_gate`]).
     fn cache_gated(&self) -> bool {
         self.mode == UpdateMode::LazyCache && self.params.ordered && self.params.cache_gate > 0.0
-    }
-
-    /// Whether this frame looks the per-ray cache up (LazyCache, and the gate open or a probe).
-    pub fn cache_active(&self) -> bool {
-        self.mode == UpdateMode::LazyCache && self.cache_look
     }
 
     /// Sizes the per-ray cache (LazyCache): slots `0..n` (e.g. one per pixel). Clears it.
