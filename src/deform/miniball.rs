@@ -93,8 +93,12 @@ fn mb(pts: &mut [DVec3], n: usize, sup: &mut Vec<DVec3>) -> Ball {
             sup.push(pts[i]);
             ball = mb(pts, i, sup);
             sup.pop();
-            // Move to front.
-            pts[..=i].rotate_right(1);
+            // Move to front. (Written out: `rotate_right(1)`, which the compiler inlined
+            // here or called out of line depending on unrelated code elsewhere in the crate,
+            // moved the naive rebuild's time by 6–9 %, stop 70.)
+            let p = pts[i];
+            pts.copy_within(0..i, 1);
+            pts[0] = p;
         }
         i += 1;
     }
