@@ -354,6 +354,15 @@ pub const MAX_EXACT_BELOW: u32 = 1 << 24;
 /// (`DeformTracer::refit_subtree`); smaller ones cost less to redo than to coordinate.
 const REFIT_CLAIM_MIN: u32 = 64;
 
+/// A refitted node of at most this many surfels takes the smallest sphere around its two
+/// children's (Eq. 11 re-centred) instead of the exact reach from its box centre
+/// (`DeformTracer::refit_subtree`). Around two leaf balls that sphere is the smallest; for
+/// three it is as tight in the sum (sphere tests within 0.2 % on `elastic-balls` and
+/// `armadillo-ball`, stop 71) and saves a reach step of eight lanes for three balls at
+/// about a third of the nodes: whole-ball refits 3 % faster. With 7 the chain of square
+/// roots and divisions up the tree took that back.
+const ENC_MAX: usize = 3;
+
 /// Per-thread buffers of `DeformTracer::refit_subtree`: the subtree's leaf balls in leaf
 /// order (SoA, for [`max_reach_x8`]) and each node's bounding box of leaf-ball centres
 /// (16-byte `Vec3A`: a parent reads its children's boxes right after they were written, and
@@ -1179,8 +1188,8 @@ impl DeformTracer {
     /// (§4.1.2 updates leaves from their surfel), then, bottom up, each inner node is centred
     /// at the middle of its leaf-ball centres' bounding box (the union of its children's)
     /// with the radius reaching its farthest leaf ball ([`max_reach_x8`]) — Eq. 11 taken down
-    /// to the leaves, O(m log m) for m surfels; a node of two surfels takes the smallest
-    /// sphere around its two leaf balls (Eq. 11 re-centred, as `tighten`). This deviates from the
+    /// to the leaves, O(m log m) for m surfels; a node of two or three surfels ([`ENC_MAX`])
+    /// takes the smallest sphere around its two children (Eq. 11 re-centred, as `tighten`). This deviates from the
     /// paper, which uses Eq. 9 for every inner node on its first visit: at 512×384 the rays
     /// deform 93–100 % of the surfels anyway (for the leaf and MLS tests), and with them in
     /// hand an exact sphere costs less than Eq. 9 over a ≈17-entry node list and is much
@@ -1267,13 +1276,14 @@ impl DeformTracer {
                     let (l, rr) = (q + 1 - n, topo.right[q] as usize - n);
                     (lo[q - n], hi[q - n]) = (lo[l].min(lo[rr]), hi[l].max(hi[rr]));
                     // Around two leaf balls the smallest sphere is Eq. 11 re-centred: no
-                    // reach to compute. Above, only the exact reach from the box centre
+                    // reach to compute (nor for three, `ENC_MAX`). Above, only the exact
+                    // reach from the box centre
                     // (stop 71): the sphere around both children, a square root and a
                     // division chained up the tree, was the smaller one at 7-10 % of the
                     // nodes, and dropping it changed the sphere tests by less than 0.1 %
                     // (`elastic-balls`, `heads`, `bend`; +0.3 % on `armadillo-ball`) and
                     // made the whole-ball refits 10 % faster (README, "Stop 71").
-                    if k == 2 {
+                    if k <= ENC_MAX {
                         enclosing_sphere(sph[l], sph[rr])
                     } else {
                         let c = Vec3::from(0.5 * (lo[q - n] + hi[q - n]));
@@ -3042,8 +3052,8 @@ mod tests {
 
     /// `refit_subtree`: the first visit of a node of ≤ `exact_below` surfels publishes its
     /// whole subtree, each sphere holding its leaf balls and no larger (within the padding)
-    /// than the exact reach from their box centre (a node of two surfels: than the sphere
-    /// around its two leaf balls); a
+    /// than the exact reach from their box centre (a node of two or three surfels: than the
+    /// sphere around its two children); a
     /// subtree another thread has claimed in
     /// this frame is bounded by Eq. 9 instead, and either way every surfel stays inside.
     #[test]
@@ -3066,10 +3076,11 @@ mod tests {
                 topo.perm[a..a + k].iter().map(|&s| leaf_sphere(&deform_surfel(&ii.obj, &ii.field, s as usize))).collect();
             let reach_from = |c: Vec3| balls.iter().map(|(p, rr)| (*p - c).length() + rr).fold(0.0f32, f32::max);
             assert!(reach_from(c) <= r, "node {q}: a leaf ball reaches {} > {r}", reach_from(c));
-            // No larger than the exact reach from the box centre; a node of two surfels, than
-            // the sphere around its two leaf balls (Eq. 11, re-centred).
+            // No larger than the exact reach from the box centre; a node of two or three
+            // surfels (`ENC_MAX`), than the sphere around its two children (Eq. 11,
+            // re-centred).
             let (lo, hi) = balls.iter().fold((Vec3::MAX, Vec3::MIN), |(lo, hi), b| (lo.min(b.0), hi.max(b.0)));
-            let best = if k == 2 {
+            let best = if (2..=ENC_MAX).contains(&k) {
                 enclosing_sphere(tr.sphere(ii, q + 1), tr.sphere(ii, topo.right[q] as usize)).1
             } else {
                 reach_from(0.5 * (lo + hi))
