@@ -1188,12 +1188,12 @@ impl DeformTracer {
     /// (§4.1.2 updates leaves from their surfel), then, bottom up, each inner node is centred
     /// at the middle of its leaf-ball centres' bounding box (the union of its children's)
     /// with the radius reaching its farthest leaf ball ([`max_reach_x8`]) — Eq. 11 taken down
-    /// to the leaves, O(m log m) for m surfels; a node of two or three surfels ([`ENC_MAX`])
-    /// takes the smallest sphere around its two children (Eq. 11 re-centred, as `tighten`). This deviates from the
-    /// paper, which uses Eq. 9 for every inner node on its first visit: at 512×384 the rays
-    /// deform 93–100 % of the surfels anyway (for the leaf and MLS tests), and with them in
-    /// hand an exact sphere costs less than Eq. 9 over a ≈17-entry node list and is much
-    /// tighter (module docs, "Subtree refit"). Every leaf ball lies inside, so hits are
+    /// to the leaves, O(m log m) for m surfels; a node of two or three surfels
+    /// ([`ENC_MAX`]) takes the smallest sphere around its two children (Eq. 11 re-centred,
+    /// as `tighten`). This deviates from the paper, which uses Eq. 9 for every inner node on
+    /// its first visit: at 512×384 the rays deform 93–100 % of the surfels anyway (for the
+    /// leaf and MLS tests), and with them in hand an exact sphere costs less than Eq. 9 over a
+    /// ≈17-entry node list and is much tighter (module docs, "Subtree refit"). Every leaf ball lies inside, so hits are
     /// unchanged.
     ///
     /// A subtree of more than [`REFIT_CLAIM_MIN`] surfels is refitted by one thread per
@@ -1277,12 +1277,11 @@ impl DeformTracer {
                     (lo[q - n], hi[q - n]) = (lo[l].min(lo[rr]), hi[l].max(hi[rr]));
                     // Around two leaf balls the smallest sphere is Eq. 11 re-centred: no
                     // reach to compute (nor for three, `ENC_MAX`). Above, only the exact
-                    // reach from the box centre
-                    // (stop 71): the sphere around both children, a square root and a
-                    // division chained up the tree, was the smaller one at 7-10 % of the
-                    // nodes, and dropping it changed the sphere tests by less than 0.1 %
-                    // (`elastic-balls`, `heads`, `bend`; +0.3 % on `armadillo-ball`) and
-                    // made the whole-ball refits 10 % faster (README, "Stop 71").
+                    // reach from the box centre (stop 71): the sphere around both children,
+                    // a square root and a division chained up the tree, was the smaller one
+                    // at 7-10 % of the nodes; without it the sphere tests moved by at most
+                    // 0.3 % and the whole-ball refits got 10 % faster (BENCHMARKS.md,
+                    // "Stop 71").
                     if k <= ENC_MAX {
                         enclosing_sphere(sph[l], sph[rr])
                     } else {
@@ -3053,9 +3052,8 @@ mod tests {
     /// `refit_subtree`: the first visit of a node of ≤ `exact_below` surfels publishes its
     /// whole subtree, each sphere holding its leaf balls and no larger (within the padding)
     /// than the exact reach from their box centre (a node of two or three surfels: than the
-    /// sphere around its two children); a
-    /// subtree another thread has claimed in
-    /// this frame is bounded by Eq. 9 instead, and either way every surfel stays inside.
+    /// sphere around its two children); a subtree another thread has claimed in this frame
+    /// is bounded by Eq. 9 instead, and either way every surfel stays inside.
     #[test]
     fn subtree_refit_is_exact_and_a_claimed_subtree_falls_back_to_eq9() {
         let (nd, scene) = ball_scene(600);

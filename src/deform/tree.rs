@@ -718,9 +718,8 @@ pub const REACH_PAD: usize = 7;
 /// a last step of 1–7 balls loads a full group of eight and gives the lanes past the range a
 /// reach of 0, where the scalar reference starts). (Until stop 62 that step was assembled
 /// lane by lane from bounds-checked reads: with a subtree refit's many nodes of 3–15 balls
-/// it took most of the kernel's instructions.)
-/// Inlined into the subtree refit, its only caller there (stop 71: about 5 % of the
-/// whole-ball refits was the call and the reduction of a separate function).
+/// it took most of the kernel's instructions.) Inlined: in the subtree refit, its hot
+/// caller, the call cost about 5 % of the whole-ball refits (stop 71).
 #[inline(always)]
 pub fn max_reach_x8(x: &[f32], y: &[f32], z: &[f32], r: &[f32], range: std::ops::Range<usize>, c: Vec3) -> f32 {
     let (a, n) = (range.start, range.len());
