@@ -560,6 +560,12 @@ impl RayPacketX8 {
         )
     }
 
+    /// Each lane's tnear.
+    #[inline(always)]
+    pub fn tnear(&self) -> f32x8 {
+        self.tnear
+    }
+
     /// Hit mask only, for any-hit (shadow) traversal: the segment [tnear, tfar] of each ray
     /// against the sphere by the distance from `c` to the segment's nearest point, with no
     /// square root and no entry distance. Conservative like [`Self::test`] (see
