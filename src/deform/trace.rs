@@ -1212,8 +1212,14 @@ impl DeformTracer {
         Some(REFIT_SCRATCH.with(|cell| {
             let mut sc = cell.borrow_mut();
             let RefitScratch { x, y, z, r, lo, hi, sph } = &mut *sc;
+            // Every entry below `cnt` is written before it is read, so the buffers only grow
+            // (zero-filling them per call cost about 3 % of the whole-ball refits, stop 71);
+            // `max_reach_x8` loads whole groups of eight, up to REACH_PAD entries (of any
+            // value) past the end.
             for v in [&mut *x, &mut *y, &mut *z, &mut *r] {
-                v.clear();
+                if v.len() < cnt + REACH_PAD {
+                    v.resize(cnt + REACH_PAD, 0.0);
+                }
             }
             let perm = &topo.perm[s0..s0 + cnt];
             // Eight surfels at a time: those not yet current are deformed (Eq. 1) one by
@@ -1229,15 +1235,14 @@ impl DeformTracer {
                         prefetch_surfel_inputs(&ii.obj, a as usize);
                     }
                     let s = s as usize;
-                    let (c, rr) = if ii.surf.slot[s].stamp.load(Acquire) == self.frame {
-                        load_surfel_ball(&ii.surf, s)
+                    if ii.surf.slot[s].stamp.load(Acquire) == self.frame {
+                        let (c, rr) = load_surfel_ball(&ii.surf, s);
+                        (x[base + j], y[base + j], z[base + j], r[base + j]) = (c.x, c.y, c.z, rr);
                     } else {
                         def[m] = deform_surfel(&ii.obj, &ii.field, s);
                         todo[m] = base + j;
                         m += 1;
-                        (Vec3::ZERO, 0.0)
-                    };
-                    (x.push(c.x), y.push(c.y), z.push(c.z), r.push(rr));
+                    }
                 }
                 if m > 0 {
                     let (nrm, ext) = normal_extent_x8(&def[..m]);
@@ -1249,17 +1254,13 @@ impl DeformTracer {
                     }
                 }
             }
-            // `max_reach_x8` loads whole groups of eight.
-            for v in [&mut *x, &mut *y, &mut *z, &mut *r] {
-                v.extend_from_slice(&[0.0; REACH_PAD]);
-            }
+            // Each node's entry is written before its parent reads it (below): grow only.
             let m = 2 * cnt - 1;
-            lo.clear();
-            lo.resize(m, Vec3A::ZERO);
-            hi.clear();
-            hi.resize(m, Vec3A::ZERO);
-            sph.clear();
-            sph.resize(m, (Vec3::ZERO, 0.0));
+            if lo.len() < m {
+                lo.resize(m, Vec3A::ZERO);
+                hi.resize(m, Vec3A::ZERO);
+                sph.resize(m, (Vec3::ZERO, 0.0));
+            }
             // Pre-order: a node's descendants follow it, so descending indices visit every
             // child before its parent.
             for q in (n..n + m).rev() {
