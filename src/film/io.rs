@@ -50,6 +50,12 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Res
     } else {
         None
     };
+    // The check of INTERRUPTED, the rename and its record in WRITTEN happen under COMMIT,
+    // which the interrupt's cleanup takes after setting the flag: a file is either recorded
+    // before the cleanup reads WRITTEN (and removed by it) or never renamed into place.
+    // (Without the lock a rename between the check and the record outlived the cleanup:
+    // `interrupted_runs_leave_no_outputs` found a frame left behind, stop 72.)
+    let commit = COMMIT.lock();
     let r = match r {
         Err(e) => {
             let _ = std::fs::remove_file(&tmp);
@@ -57,6 +63,7 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Res
         }
         // An interrupted run renames nothing into place ([`remove_outputs_of_interrupted_run`]).
         Ok(()) if INTERRUPTED.load(std::sync::atomic::Ordering::SeqCst) => {
+            drop(commit);
             let _ = std::fs::remove_file(&tmp);
             halt_if_interrupted();
             unreachable!("halted")
@@ -79,8 +86,13 @@ pub fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Res
     }
     r?;
     record_written(path, backup);
+    drop(commit);
     Ok(())
 }
+
+/// Held by [`write_atomic`] from its check of INTERRUPTED until the file is renamed and
+/// recorded, and taken by [`remove_outputs_of_interrupted_run`] after it sets the flag.
+static COMMIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// Whether a [`discard_dir_on_error`] scope is running.
 fn scope_open() -> bool {
@@ -125,6 +137,9 @@ static SCOPES: std::sync::Mutex<Vec<(Option<PathBuf>, Option<PathBuf>, usize)>> 
 /// written; nothing is renamed into place afterwards. Returns the number of outputs removed.
 pub fn remove_outputs_of_interrupted_run() -> usize {
     INTERRUPTED.store(true, std::sync::atomic::Ordering::SeqCst);
+    // A write past its check of the flag finishes its rename and record first (COMMIT);
+    // every later one sees the flag. Held to the end, so that none renames meanwhile.
+    let _commit = COMMIT.lock();
     let mut removed = 0;
     if let Ok(t) = TEMPS.lock() {
         for p in t.iter() {
