@@ -1192,9 +1192,9 @@ impl DeformTracer {
     /// ([`ENC_MAX`]) takes the smallest sphere around its two children (Eq. 11 re-centred,
     /// as `tighten`). This deviates from the paper, which uses Eq. 9 for every inner node on
     /// its first visit: at 512×384 the rays deform 93–100 % of the surfels anyway (for the
-    /// leaf and MLS tests), and with them in hand an exact sphere costs less than Eq. 9 over a
-    /// ≈17-entry node list and is much tighter (module docs, "Subtree refit"). Every leaf ball lies inside, so hits are
-    /// unchanged.
+    /// leaf and MLS tests), and with them in hand an exact sphere costs less than Eq. 9 over
+    /// a ≈17-entry node list and is much tighter (module docs, "Subtree refit"). Every leaf
+    /// ball lies inside, so hits are unchanged.
     ///
     /// A subtree of more than [`REFIT_CLAIM_MIN`] surfels is refitted by one thread per
     /// frame: `None` tells a thread that finds it claimed to bound `n` by Eq. 9 (valid,
