@@ -706,14 +706,20 @@ pub fn per_round_speedups(rounds: &[Vec<f64>]) -> Vec<Vec<f64>> {
 
 /// "median [min–max]" of per-round speed-ups, or "-" for none.
 pub fn median_range(v: &[f64]) -> String {
+    let Some(med) = median(v) else { return "-".into() };
+    let (lo, hi) = v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+    format!("{med:.2}x [{lo:.2}–{hi:.2}]")
+}
+
+/// The median of `v` (the mean of the middle two for an even count), or None if empty.
+pub fn median(v: &[f64]) -> Option<f64> {
     if v.is_empty() {
-        return "-".into();
+        return None;
     }
     let mut s = v.to_vec();
     s.sort_by(f64::total_cmp);
     let n = s.len();
-    let med = if n % 2 == 1 { s[n / 2] } else { 0.5 * (s[n / 2 - 1] + s[n / 2]) };
-    format!("{med:.2}x [{:.2}–{:.2}]", s[0], s[n - 1])
+    Some(if n % 2 == 1 { s[n / 2] } else { 0.5 * (s[n / 2 - 1] + s[n / 2]) })
 }
 
 /// Renders `spec` on `scene` (best of `repeat` renders).

@@ -109,6 +109,14 @@ pub struct DeformRow {
     pub mean_radius_ratio: Option<f64>,
     /// The last frame equals the first spec's last frame, pixel for pixel.
     pub same_image_as_first: bool,
+    /// The `update=naive` spec of this sequence and size whose other options are this spec's
+    /// ([`naive_partner`]): its ms/frame ÷ this one's (best of the repeats each; the paper's
+    /// speed-up, also where the first spec has other options, e.g. `shadows=0`), the same
+    /// ratio round by round, and whether the two last frames are identical. `None` and empty
+    /// without such a spec.
+    pub speedup_vs_naive: Option<f64>,
+    pub per_round_vs_naive: Vec<f64>,
+    pub same_image_as_naive: Option<bool>,
     pub per_frame_ms: Vec<f64>,
     pub per_frame_sphere_tests: Vec<u64>,
     pub radius_ratios: Vec<LevelRatio>,
@@ -132,6 +140,8 @@ pub fn run(
     for seq in seqs {
         let mut first: Option<(f64, Vec<[f32; 3]>)> = None;
         let mut seq_rows: Vec<DeformRow> = Vec::new();
+        // Each row's last frame, for the naive partners' image check.
+        let mut seq_pix: Vec<Vec<[f32; 3]>> = Vec::new();
         let argv: Vec<AnimateArgs> = specs
             .iter()
             .map(|spec| {
@@ -173,7 +183,7 @@ pub fn run(
             let pixels: Vec<[f32; 3]> = st.last_frame.color.iter().map(|c| [c.x, c.y, c.z]).collect();
             let (ms0, same) = match &first {
                 None => {
-                    first = Some((ms, pixels));
+                    first = Some((ms, pixels.clone()));
                     (ms, true)
                 }
                 Some((m0, p0)) => (*m0, *p0 == pixels),
@@ -218,6 +228,9 @@ pub fn run(
                 mean_radius_ratio: (lazy && tot > 0)
                     .then(|| st.radius_ratios.iter().map(|r| r.mean_ratio * r.sampled as f64).sum::<f64>() / tot as f64),
                 same_image_as_first: same,
+                speedup_vs_naive: None,
+                per_round_vs_naive: Vec::new(),
+                same_image_as_naive: None,
                 per_frame_ms: st.per_frame.iter().map(|r| 1e3 * r.seconds).collect(),
                 per_frame_sphere_tests: st.per_frame.iter().map(|r| r.sphere_tests).collect(),
                 radius_ratios: st.radius_ratios.clone(),
@@ -227,6 +240,16 @@ pub fn run(
                 crate::status!("  {} {}: {:.1} ms/frame", row.scene, row.spec, row.ms_per_frame);
             }
             seq_rows.push(row);
+            seq_pix.push(pixels);
+        }
+        for (j, partner) in naive_partners(specs).into_iter().enumerate() {
+            if let Some(i) = partner {
+                let ms_i = seq_rows[i].ms_per_frame;
+                let r = &mut seq_rows[j];
+                r.speedup_vs_naive = Some(ms_i / r.ms_per_frame.max(1e-12));
+                r.per_round_vs_naive = if rounds.len() < 2 { Vec::new() } else { rounds.iter().map(|t| t[i] / t[j].max(1e-12)).collect() };
+                r.same_image_as_naive = Some(seq_pix[i] == seq_pix[j]);
+            }
         }
         if let Some(o) = out {
             plots(o, &seq_rows)?;
@@ -237,6 +260,24 @@ pub fn run(
         radius_plot(o, &rows)?;
     }
     Ok(rows)
+}
+
+/// For each spec, the index of its `update=naive` partner among `specs`: the first spec with
+/// `update=naive` whose other `:`-separated options are this spec's (in any order). The
+/// naive spec is its own partner.
+pub fn naive_partners(specs: &[MethodSpec]) -> Vec<Option<usize>> {
+    let rest = |m: &MethodSpec| -> Vec<String> {
+        let mut v: Vec<String> = m.text.split(':').filter(|t| !t.starts_with("update=")).map(str::to_string).collect();
+        v.sort();
+        v
+    };
+    specs
+        .iter()
+        .map(|m| {
+            let key = rest(m);
+            specs.iter().position(|n| n.surfel.update == "naive" && rest(n) == key)
+        })
+        .collect()
 }
 
 /// `radius-ratio.png` (the paper's Fig. 3): the updated / tightest radius per level of the
@@ -295,12 +336,12 @@ fn plots(out: &Path, rows: &[DeformRow]) -> Result<()> {
 /// The rows as a Markdown table.
 pub fn table(rows: &[DeformRow]) -> String {
     let mut s = String::from("\nDeforming sequences (Adams et al.):\n\n");
-    s.push_str("| sequence | method | size | surfels | frames | thr | ms/frame | speed-up vs first | per-round speed-up: median [range] | update ms/frame | rays ms/frame (warm) | BV tests/frame | leaf tests/frame | MLS runs/frame | MLS it. | cache hits | inner nodes updated/frame | root ratio | mean ratio | same image |\n");
-    s.push_str("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
+    s.push_str("| sequence | method | size | surfels | frames | thr | ms/frame | speed-up vs first | per-round speed-up: median [range] | ÷ naive, same options: best (per-round median) | update ms/frame | rays ms/frame (warm) | BV tests/frame | leaf tests/frame | MLS runs/frame | MLS it. | cache hits | inner nodes updated/frame | root ratio | mean ratio | same image |\n");
+    s.push_str("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
     for r in rows {
         let f = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
         s.push_str(&format!(
-            "| {} | {} | {}x{} | {} | {} | {} | {:.1} | {:.2}x | {} | {:.1} | {} | {:.0} | {:.0} | {:.0} | {:.2} | {} | {:.0} | {} | {} | {} |\n",
+            "| {} | {} | {}x{} | {} | {} | {} | {:.1} | {:.2}x | {} | {} | {:.1} | {} | {:.0} | {:.0} | {:.0} | {:.2} | {} | {:.0} | {} | {} | {} |\n",
             r.scene,
             r.spec,
             r.width,
@@ -311,6 +352,7 @@ pub fn table(rows: &[DeformRow]) -> String {
             r.ms_per_frame,
             r.speedup_vs_first,
             super::bench::median_range(&r.per_round_speedups),
+            vs_naive(r),
             r.update_ms_per_frame,
             r.rays_ms_per_frame.map(|v| format!("{v:.1}")).unwrap_or_else(|| "-".into()),
             r.sphere_tests_per_frame,
@@ -325,6 +367,18 @@ pub fn table(rows: &[DeformRow]) -> String {
         ));
     }
     s
+}
+
+/// The table's "÷ naive, same options" cell: "-" without a naive partner, "=" for the naive
+/// spec itself; a trailing "≠ image" if the partners' last frames differ.
+fn vs_naive(r: &DeformRow) -> String {
+    let Some(x) = r.speedup_vs_naive else { return "-".into() };
+    if r.update == "naive" {
+        return "=".into();
+    }
+    let med = super::bench::median(&r.per_round_vs_naive).map(|m| format!(" ({m:.2}x)")).unwrap_or_default();
+    let diff = if r.same_image_as_naive == Some(false) { ", ≠ image" } else { "" };
+    format!("{x:.2}x{med}{diff}")
 }
 
 /// The (width, height) of `rows` in first-seen order.
@@ -484,6 +538,17 @@ mod tests {
     use super::*;
 
     #[test]
+    fn each_spec_pairs_with_the_naive_spec_of_its_other_options() {
+        let specs = crate::experiment::bench::parse_list(
+            "surfel:update=naive:frames=8,surfel:update=lazy-cache:frames=8,surfel:frames=8:shadows=0:update=naive,\
+             surfel:update=lazy:shadows=0:frames=8,surfel:update=lazy:detail=0.5:frames=8,surfel:frames=8",
+        )
+        .unwrap();
+        // The last spec takes the default update (lazy-cache) and pairs like the second.
+        assert_eq!(naive_partners(&specs), [Some(0), Some(0), Some(2), Some(2), None, Some(0)]);
+    }
+
+    #[test]
     fn legends_use_short_labels_unless_ambiguous() {
         let row = |spec: &str, update: &str| DeformRow {
             scene: "bend".into(),
@@ -511,6 +576,9 @@ mod tests {
             root_radius_ratio: None,
             mean_radius_ratio: None,
             same_image_as_first: true,
+            speedup_vs_naive: None,
+            per_round_vs_naive: Vec::new(),
+            same_image_as_naive: None,
             per_frame_ms: Vec::new(),
             per_frame_sphere_tests: Vec::new(),
             radius_ratios: Vec::new(),
