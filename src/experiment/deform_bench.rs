@@ -110,7 +110,7 @@ pub struct DeformRow {
     /// The last frame equals the first spec's last frame, pixel for pixel.
     pub same_image_as_first: bool,
     /// The `update=naive` spec of this sequence and size whose other options are this spec's
-    /// ([`naive_partner`]): its ms/frame ÷ this one's (best of the repeats each; the paper's
+    /// ([`naive_partners`]): its ms/frame ÷ this one's (best of the repeats each; the paper's
     /// speed-up, also where the first spec has other options, e.g. `shadows=0`), the same
     /// ratio round by round, and whether the two last frames are identical. `None` and empty
     /// without such a spec.
@@ -138,9 +138,9 @@ pub fn run(
 ) -> Result<Vec<DeformRow>> {
     let mut rows = Vec::new();
     for seq in seqs {
-        let mut first: Option<(f64, Vec<[f32; 3]>)> = None;
         let mut seq_rows: Vec<DeformRow> = Vec::new();
-        // Each row's last frame, for the naive partners' image check.
+        // Each row's last frame, for the image checks against the first spec and the naive
+        // partner.
         let mut seq_pix: Vec<Vec<[f32; 3]>> = Vec::new();
         let argv: Vec<AnimateArgs> = specs
             .iter()
@@ -181,13 +181,8 @@ pub fn run(
             let n = st.frames.max(1) as f64;
             let ms = 1e3 * st.render_seconds / n;
             let pixels: Vec<[f32; 3]> = st.last_frame.color.iter().map(|c| [c.x, c.y, c.z]).collect();
-            let (ms0, same) = match &first {
-                None => {
-                    first = Some((ms, pixels.clone()));
-                    (ms, true)
-                }
-                Some((m0, p0)) => (*m0, *p0 == pixels),
-            };
+            let ms0 = seq_rows.first().map_or(ms, |r| r.ms_per_frame);
+            let same = seq_pix.first().is_none_or(|p0| *p0 == pixels);
             let lazy = st.update.starts_with("lazy") && st.radius_ratios.iter().any(|r| r.sampled > 0);
             let tot: u64 = st.radius_ratios.iter().map(|r| r.sampled).sum();
             let image = match out {
