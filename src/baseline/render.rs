@@ -5,7 +5,7 @@
 //!
 //! - Whitted (`--method whitted`): one ray through each pixel centre, or `--spp N` jittered
 //!   rays. Primary rays go in packets of K = 8 (one tile row segment) through
-//!   [`Accel::intersect8`]; secondary rays are single.
+//!   [`Accel::intersect8`](super::accel::Accel::intersect8); secondary rays are single.
 //! - Adaptive distributed (`--method distributed`, Wand & Straßer §6): pass 1 shoots
 //!   `first_pass_spp` jittered samples per pixel (paper: 1–3); the luminance variance of the
 //!   pixel means over each 5×5 neighbourhood decides where pass 2 adds g×g stratified jittered
@@ -274,7 +274,7 @@ fn scatter(film: &mut Film, results: Vec<(Vec<PixelOut>, Counters)>) -> Counters
 }
 
 /// Pixel-centre rays of row `j`, columns `x0..x1`, K at a time (`packet` 8: one
-/// [`Accel::intersect8`] call per K; 1: single rays), counted as primary rays and samples;
+/// [`Accel::intersect8`](super::accel::Accel::intersect8) call per K; 1: single rays), counted as primary rays and samples;
 /// `f(i, ray, hit, counters)` sees each pixel in order. Shared by the Whitted and the LOD
 /// tracer so both shoot bit-identical primary rays.
 pub(crate) fn primary_row(

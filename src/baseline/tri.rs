@@ -2,13 +2,13 @@
 //! reference used by the obvhs back-end. Shearing the triangle into ray space makes the
 //! edge tests consistent between neighbouring triangles: a ray through a shared edge or
 //! vertex hits at least one of them, which the watertightness tests check. The hit distance
-//! comes from the triangle's plane, as in Embree (see [`plane_t`]).
+//! comes from the triangle's plane, as in Embree (see `plane_t`).
 
 use glam::Vec3;
 
 /// Per-ray precomputation: the dominant axis permutation and shear, stored as the two rows
 /// of the ray-space matrix that the edge functions use (`x' = mx·p`, `y' = my·p` for `p`
-/// relative to the origin), and the direction for the hit distance ([`plane_t`]). Each row
+/// relative to the origin), and the direction for the hit distance (`plane_t`). Each row
 /// has one zero, so its dot product is bit-identical to the paper's `p[kx] − sx·p[kz]` (a
 /// sum with one exact zero term does not depend on its order), without indexing vectors by a
 /// run-time axis.
@@ -21,7 +21,7 @@ pub struct RayShear {
 }
 
 /// The watertight test's axes: kz the dominant axis of `dir`, (kx, ky) the other two, swapped
-/// when dir[kz] < 0 so the triangle's winding is preserved.
+/// when `dir[kz] < 0` so the triangle's winding is preserved.
 #[inline(always)]
 fn axis_permutation(dir: Vec3) -> (usize, usize, usize) {
     let a = dir.abs();

@@ -311,7 +311,7 @@ pub struct Eigen2Out<'a> {
     pub s2: &'a mut [f32],
 }
 
-/// Decomposes the footprints (a[i], b[i], c[i]) stored as struct-of-arrays into `out`: 8 at a
+/// Decomposes the footprints (`a[i]`, `b[i]`, `c[i]`) stored as struct-of-arrays into `out`: 8 at a
 /// time with [`eigen_x8_avx2`] when the CPU has AVX2 and FMA (checked once per call), else
 /// [`eigen_x8`]; the tail is zero-padded into one more packet. With the `scalar` feature,
 /// [`eigen_1`] per element. All paths give the same bits.

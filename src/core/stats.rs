@@ -1,6 +1,6 @@
 //! Per-frame counters. Each worker owns a [`Counters`] (one per tile), merged at the end by
 //! addition, so counting is cheap enough to stay on and the totals are deterministic.
-//! Declared in one line each in [`counters!`]; they feed `--stats` and the bench tables.
+//! Declared in one line each in `counters!`; they feed `--stats` and the bench tables.
 
 macro_rules! counters {
     ($($name:ident),* $(,)?) => {

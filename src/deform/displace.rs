@@ -8,17 +8,17 @@
 //!    `x̂ = R x + t'` with `t' = x̄' − R x̄`.
 //! 2. Relative node displacements `û_j = x'_j − x̂_j`.
 //! 3. The displacement gradient at each node, by moving least squares over its `k_grad`
-//!    nearest nodes ([MKN*04]): `∇û_j = (Σ_k w_jk (û_k − û_j) d̂_jkᵀ) M̂_j⁻¹`. Written against
+//!    nearest nodes (\[MKN*04\]): `∇û_j = (Σ_k w_jk (û_k − û_j) d̂_jkᵀ) M̂_j⁻¹`. Written against
 //!    the *reference* offsets `d_jk = x_k − x_j` it becomes `K_j = ∇û_j R =
 //!    (Σ_k w_jk (û_k − û_j) d_jkᵀ) M_j⁺`, so `M_j⁺` (pseudo-inverse: surface-sampled nodes
 //!    make `M_j` near-singular across the surface) is precomputed once.
 //!
 //! Eq. 1 then reads `x'_i = R x_i + t' + Σ_j ω̄_ij (û_j + K_j d_ij)` with `d_ij = x_i − x_j`,
-//! the first-order Taylor expansion of the displacement about node j as in [MKN*04]. (The
+//! the first-order Taylor expansion of the displacement about node j as in \[MKN*04\]. (The
 //! paper defines `d_{x,y} = y − x`, which read literally gives the opposite sign and is not
 //! first-order accurate; the bounds of Eq. 9 only use ‖d‖ and are unaffected.) The tangent axes
 //! deform with the same first-order map, `u'_i = (R + Σ_j ω̄_ij K_j) u_i` (§3, after
-//! [PKKG03]); the deformed normal is `u' × v'`. `‖K_j‖_F = ‖∇û_j‖_F` (R is orthogonal): the
+//! \[PKKG03\]); the deformed normal is `u' × v'`. `‖K_j‖_F = ‖∇û_j‖_F` (R is orthogonal): the
 //! Frobenius norm the radius bound (Eq. 9) uses.
 //!
 //! With `factor_rigid = false` (ablation), R = I and t' = 0, i.e. displacements are measured

@@ -250,7 +250,7 @@ pub fn mls_intersect_x8(
     MlsOutcome::Rejected { iters: prm.max_iter }
 }
 
-/// Clipping classification (§4.3, after [WTG04]) of point `x` against a surface represented
+/// Clipping classification (§4.3, after \[WTG04\]) of point `x` against a surface represented
 /// locally by its two nearest surfels (p1, n1), (p2, n2) (normals point out of the solid):
 /// true if x lies outside. Where the signed distances disagree, a convex pair (each surfel
 /// behind the other's plane) bounds the intersection of the two half-spaces, a concave pair

@@ -56,9 +56,9 @@
 //!   a colour per surface. The tracer handles only the deforming objects.
 //!
 //! # Deviations from the paper (details in each module)
-//! - Physics: shape matching with overlapping clusters [MHTG05] instead of [MKN*04]'s
+//! - Physics: shape matching with overlapping clusters \[MHTG05\] instead of \[MKN*04\]'s
 //!   continuum mechanics; the node displacement gradient of Eq. 1 is an MLS fit over node
-//!   neighbourhoods (as in [MKN*04]) computed from the node positions each frame. Eq. 1 uses
+//!   neighbourhoods (as in \[MKN*04\]) computed from the node positions each frame. Eq. 1 uses
 //!   `d = x_i − x_j` (first-order Taylor about the node); the paper's `d_{x,y} = y − x`
 //!   read literally has the opposite sign ([`displace`]).
 //! - Spheres bound the surfel *ellipses*, not only their centres, and B_j of Eq. 9 carries

@@ -1,6 +1,6 @@
 //! The physical model that moves the simulation nodes (Adams et al. §3 use the point-based
-//! continuum mechanics of [MKN*04]; the issue allows a comparable elastic model). We use
-//! *meshless deformations based on shape matching* (Müller et al. 2005, [MHTG05]) with
+//! continuum mechanics of \[MKN*04\]; the issue allows a comparable elastic model). We use
+//! *meshless deformations based on shape matching* (Müller et al. 2005, \[MHTG05\]) with
 //! overlapping clusters:
 //!
 //! - every node j defines a cluster of its `cluster_size` nearest nodes; per step each
@@ -15,7 +15,7 @@
 //!   with restitution and friction;
 //! - kinematic nodes follow a prescribed rotation (e.g. hands on a bar);
 //! - the energy of a world without kinematic nodes is capped at its starting value
-//!   ([`World::cap_energy`]; not in Müller et al.: their scheme is stable in free flight, but
+//!   (`World::cap_energy`; not in Müller et al.: their scheme is stable in free flight, but
 //!   contacts resolved by projection with a restitution near 1 pumped energy in).
 //!
 //! Everything runs in a fixed order on one thread per world: the motion is deterministic
@@ -230,7 +230,7 @@ pub struct World {
     /// ([`World::cap_energy`]). Unset until the first step; not used when a body is driven
     /// by [`Kinematic`] nodes, which may add energy.
     energy_cap: Option<f64>,
-    /// Whether [`World::cap_energy`] runs (default on; off only to test the contacts alone).
+    /// Whether `World::cap_energy` runs (default on; off only to test the contacts alone).
     pub limit_energy: bool,
 }
 

@@ -104,7 +104,7 @@
 //!
 //! **Early clip (deviation, stop 52; `TraceParams::clip_early`).** An ellipse hit of a
 //! clipped surface whose surfel's whole leaf ball lies more than its radius in front of both
-//! clipping neighbours' planes is rejected before the MLS iteration ([`DeformTracer::ball_clipped`]):
+//! clipping neighbours' planes is rejected before the MLS iteration (`DeformTracer::ball_clipped`):
 //! the iterate would lie in that ball and be clipped. Same hits; `heads` runs half the MLS
 //! iterations. (Taking the nearest-ellipse rule for clipped surfaces as well, with such
 //! candidates skipped, halved them again but cost as much in extra passes: not kept.)
@@ -154,8 +154,8 @@
 //! BENCHMARKS.md, "Stop 66".
 //!
 //! *Compact balls* (stop 67). A subtree refit also writes every sphere it computes, leaves
-//! included, into a 16-byte [`Ball`] per node in pre-order (the static tree's layout). A
-//! current inner node of at most [`DeformTracer::compact_max`] surfels (64) was refitted
+//! included, into a 16-byte `Ball` per node in pre-order (the static tree's layout). A
+//! current inner node of at most `DeformTracer::compact_max` surfels (64) was refitted
 //! whole before it was published, so the packet traversals read its children from the
 //! balls: no stamp check, sequence lock or branch per child, and a leaf child's sphere no
 //! longer costs its surfel's 64-byte line (which only a leaf test needs). Below that size
@@ -334,7 +334,7 @@ pub struct TraceParams {
     /// the nearest of the MLS hits of every ellipse hit.
     pub nearest_ellipse: bool,
     /// Reject an ellipse hit without the MLS iteration when its surfel's whole leaf ball is
-    /// clipped (§4.3; [`DeformTracer::ball_clipped`], not in the paper). Same hits; off:
+    /// clipped (§4.3; `DeformTracer::ball_clipped`, not in the paper). Same hits; off:
     /// every ellipse hit of a clipped surface is iterated and then clipped, as in the paper.
     pub clip_early: bool,
     /// Per-ray cache (LazyCache) under front-to-back traversal (`ordered`): the cache is
@@ -489,7 +489,7 @@ pub struct DeformCounters {
     /// Accepted MLS hits rejected by clipping.
     pub clipped: u64,
     /// Ellipse hits whose whole leaf ball is clipped (§4.3), rejected without the MLS
-    /// iteration ([`DeformTracer::ball_clipped`]); not in `mls_runs`.
+    /// iteration (`DeformTracer::ball_clipped`); not in `mls_runs`.
     pub clipped_early: u64,
     pub cache_lookups: u64,
     /// The cached node gave a hit (under the nearest-ellipse rule: the first pass's candidate,

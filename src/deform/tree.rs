@@ -569,7 +569,7 @@ impl RayPacketX8 {
     /// Hit mask only, for any-hit (shadow) traversal: the segment [tnear, tfar] of each ray
     /// against the sphere by the distance from `c` to the segment's nearest point, with no
     /// square root and no entry distance. Conservative like [`Self::test`] (see
-    /// [`any_kernel`]): a sphere the segment truly meets is never missed.
+    /// `any_kernel`): a sphere the segment truly meets is never missed.
     #[inline(always)]
     pub fn test_any(&self, c: Vec3, r: f32, tfar: f32x8) -> u8 {
         any_kernel(self.o, self.d, self.inv, [f32x8::splat(c.x), f32x8::splat(c.y), f32x8::splat(c.z)], f32x8::splat(r), self.tnear, tfar)

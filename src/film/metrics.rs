@@ -11,11 +11,11 @@
 //!   identical images. A constant difference of 0.1 gives RMSE 0.1 and PSNR 20 dB.
 //! - **FLIP** — NVIDIA's perceptual difference (Andersson et al. 2020, "FLIP: A Difference
 //!   Evaluator for Alternating Images"), LDR variant, via the `nv-flip` crate, on the 8-bit
-//!   sRGB versions of both images (as written to PNG, i.e. clamped to [0,1]) at the default
+//!   sRGB versions of both images (as written to PNG, i.e. clamped to \[0, 1\]) at the default
 //!   67 pixels per degree. We report the exact mean of the per-pixel error map (0 = same,
 //!   1 = maximal) and return the map coloured with the magma LUT, as FLIP's own tool does.
 //! - **SSIM** — structural similarity (Wang et al. 2004) on the luma of the sRGB-encoded
-//!   values (`Y' = 0.299 R' + 0.587 G' + 0.114 B'`, the usual `rgb2gray`), in [0,1]
+//!   values (`Y' = 0.299 R' + 0.587 G' + 0.114 B'`, the usual `rgb2gray`), in \[0, 1\]
 //!   so `C1 = (0.01)^2`, `C2 = (0.03)^2`; 11x11 Gaussian window with σ = 1.5, evaluated at
 //!   the "valid" positions only (the window fully inside the image) and averaged, as in the
 //!   reference implementation. Images smaller than 11 pixels on a side use the largest odd
@@ -116,7 +116,7 @@ pub fn mean_finite(v: &[f32]) -> f64 {
     v.iter().map(|&x| finite_or_zero(x)).sum::<f64>() / v.len().max(1) as f64
 }
 
-/// Luma of the sRGB-encoded values, in [0,1].
+/// Luma of the sRGB-encoded values, in \[0, 1\].
 fn luma(a: &[Vec3]) -> Vec<f64> {
     a.iter().map(|c| 0.299 * linear_to_srgb(c.x) as f64 + 0.587 * linear_to_srgb(c.y) as f64 + 0.114 * linear_to_srgb(c.z) as f64).collect()
 }

@@ -30,7 +30,7 @@ impl Film {
     }
 }
 
-/// Linear → sRGB transfer, clamped to [0,1].
+/// Linear → sRGB transfer, clamped to \[0, 1\].
 #[inline]
 pub fn linear_to_srgb(x: f32) -> f32 {
     let x = if x.is_nan() { 0.0 } else { x.clamp(0.0, 1.0) };

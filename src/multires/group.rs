@@ -11,7 +11,7 @@
 //! went straight to the root's points). Here the §3 construction is applied once more, over
 //! each slot of the instance tree: a grid over the slot's bounding cube (spacing h = cube
 //! side / 2k), random surface samples of every instance below it at c per h² (the paper's
-//! oversampling factor; the grid is 2k voxels wide, [`GRID_FACTOR`]), and per occupied voxel
+//! oversampling factor; the grid is 2k voxels wide, `GRID_FACTOR`), and per occupied voxel
 //! one representative with the area-weighted average colour, material and normal, the normal
 //! spread (|mean normal|) and the sampled area (`cover`, the `area` point weight of
 //! [`super::build::PointWeights`]). The traversal uses a

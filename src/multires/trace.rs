@@ -11,7 +11,7 @@
 //! from the per-box test, [`tri_bound_1`]); (2) the minimum
 //! footprint (minor semi-axis after the anisotropy clamp) at the node's depth is compared
 //! with the point spacing h; (3) when λ·σ_min ≥ h (λ = `lod_scale`) the node's points are
-//! intersected — with the mipmap blend of §5.1: weight x = log2(λ·σ_min/h) ∈ [0,1] for this
+//! intersected — with the mipmap blend of §5.1: weight x = log2(λ·σ_min/h) ∈ \[0, 1\] for this
 //! level and 1 − x for the children's points and triangles, one level deeper — otherwise
 //! the children are tested (one cone against the 8 child spheres in one f32x8 step) and
 //! queued. Classic cone tracing (`--method cone`) skips step 2–3 and always descends.
@@ -99,7 +99,7 @@ pub enum TriWeight {
     /// The exact Gaussian mass on the triangle's side of its nearest edge, ½·erfc(±d): two
     /// triangles sharing an edge sum to 1 and an edge pixel gets its true coverage.
     Coverage,
-    /// The Gaussian's exact mass over the whole triangle ([`gauss_tri_mass`]): also right for
+    /// The Gaussian's exact mass over the whole triangle ([`gauss_tri_mass`](super::mass::gauss_tri_mass)): also right for
     /// triangles thinner than the footprint (leaf blades, stems) and at corners, where the
     /// nearest edge's half-plane (`coverage`) overestimates: a blade 0.2 footprint units wide
     /// gets 0.56 there instead of 0.11. Cut and normalised as the point weights are: a
@@ -1597,7 +1597,7 @@ pub struct Tracer<'s, 'a> {
     pub p: &'s TraceParams,
     /// Anisotropy clamp of the cones this tracer traverses: `p.clamp` for primary cones and
     /// their shadows, [`TraceParams::clamp_secondary`] below the first surface
-    /// ([`Tracer::secondary`]).
+    /// (`Tracer::secondary`).
     pub clamp: f32,
     /// Floor of the footprint semi-axes (world units): keeps zero footprints finite.
     pub floor: f32,

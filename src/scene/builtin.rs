@@ -203,7 +203,7 @@ pub fn cube_mesh(mat: u32) -> Mesh {
     m
 }
 
-/// A unit square [0,1]² in the xz-plane (y = 0), normal +y, two triangles.
+/// A unit square \[0, 1\]² in the xz-plane (y = 0), normal +y, two triangles.
 pub fn unit_quad(mat: u32) -> Mesh {
     let mut m = Mesh::new("quad");
     for (x, z) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)] {

@@ -214,7 +214,7 @@ pub fn bumpy_tile(n: u32, thick: f32, amp: f32, mat: u32) -> Mesh {
     m
 }
 
-/// A carved base plate over [0,w]×[0,d]: an n×m grid with a relief of engraved rings and
+/// A carved base plate over \[0, w\]×\[0, d\]: an n×m grid with a relief of engraved rings and
 /// stripes (depth `depth`), materials alternating in stripes. Top surface only.
 pub fn carved_plate(w: f32, d: f32, nx: u32, nz: u32, depth: f32, mat_a: u32, mat_b: u32) -> Mesh {
     let mut m = Mesh::new("carved plate");

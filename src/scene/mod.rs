@@ -36,9 +36,9 @@ pub struct Material {
     pub ks: f32,
     /// Phong exponent.
     pub shininess: f32,
-    /// Mirror reflectivity in [0,1].
+    /// Mirror reflectivity in \[0, 1\].
     pub reflect: f32,
-    /// Transparency (refracted fraction) in [0,1].
+    /// Transparency (refracted fraction) in \[0, 1\].
     pub transmit: f32,
     /// Index of refraction of the inside.
     pub ior: f32,
