@@ -137,6 +137,8 @@ pub fn run(
     quiet: bool,
 ) -> Result<Vec<DeformRow>> {
     let mut rows = Vec::new();
+    // Each spec's update=naive partner (the same for every sequence).
+    let partners = naive_partners(specs);
     for seq in seqs {
         let mut seq_rows: Vec<DeformRow> = Vec::new();
         // Each row's last frame, for the image checks against the first spec and the naive
@@ -237,8 +239,8 @@ pub fn run(
             seq_rows.push(row);
             seq_pix.push(pixels);
         }
-        for (j, partner) in naive_partners(specs).into_iter().enumerate() {
-            if let Some(i) = partner {
+        for (j, partner) in partners.iter().enumerate() {
+            if let Some(i) = *partner {
                 let ms_i = seq_rows[i].ms_per_frame;
                 let r = &mut seq_rows[j];
                 r.speedup_vs_naive = Some(ms_i / r.ms_per_frame.max(1e-12));
