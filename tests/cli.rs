@@ -1978,3 +1978,64 @@ fn stop65_sweep_findings_are_refused() {
     assert!(err.contains("--debug-pixel explains a cone"), "{err}");
     assert!(!d.join("s.png").exists());
 }
+
+/// `--bound paper` (Eq. 9 and Eq. 11 as the paper writes them) changes the radii, never the
+/// frames: with `--exact-below 0` (Eq. 9 at every inner node) every frame is byte-identical
+/// to a naive rebuild's, the stats record the switches, the paper's bound is looser than the
+/// default one at every sampled level (the default takes the smaller of Eq. 9 and its
+/// re-centred form) and costs more sphere tests. `--support-stretch 1` is the paper's fixed
+/// MLS support. Both are refused where they would be ignored or out of range.
+#[test]
+fn animate_paper_bound_keeps_the_frames_and_is_looser() {
+    let args = ["--frames", "4", "--detail", "0.05"];
+    let run = |name: &str, extra: &[&str]| {
+        let d = tmp(name);
+        let mut a = args.to_vec();
+        a.extend_from_slice(extra);
+        (small_animate(&d, "bend", &a), d)
+    };
+    let (_, dn) = run("paperbound_naive", &["--update", "naive"]);
+    let (tight, dt) = run("paperbound_tight", &["--update", "lazy", "--exact-below", "0"]);
+    let (paper, dp) = run("paperbound_paper", &["--update", "lazy", "--exact-below", "0", "--bound", "paper"]);
+    for f in 0..4 {
+        let name = format!("frame_{f:04}.png");
+        let n = std::fs::read(dn.join(&name)).unwrap();
+        assert_eq!(n, std::fs::read(dt.join(&name)).unwrap(), "{name}: tight bound differs from naive");
+        assert_eq!(n, std::fs::read(dp.join(&name)).unwrap(), "{name}: paper bound differs from naive");
+    }
+    for k in ["recentred_bound", "node_rotation", "recentre_eq11"] {
+        assert_eq!(tight["trace_params"][k], true, "{k}");
+        assert_eq!(paper["trace_params"][k], false, "{k}");
+    }
+    let ratios = |v: &serde_json::Value| -> Vec<(u64, f64)> {
+        v["radius_ratios"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|l| l["sampled"].as_u64().unwrap() > 0)
+            .map(|l| (l["level"].as_u64().unwrap(), l["mean_ratio"].as_f64().unwrap()))
+            .collect()
+    };
+    let (rt, rp) = (ratios(&tight), ratios(&paper));
+    assert!(!rt.is_empty() && rt.len() == rp.len());
+    let mean = |r: &[(u64, f64)]| r.iter().map(|x| x.1).sum::<f64>() / r.len() as f64;
+    assert!(mean(&rp) > 1.05 * mean(&rt), "paper {rp:?}, tight {rt:?}");
+    let tests =
+        |v: &serde_json::Value| -> u64 { v["per_frame"].as_array().unwrap().iter().map(|r| r["sphere_tests"].as_u64().unwrap()).sum() };
+    assert!(tests(&paper) > tests(&tight), "sphere tests: paper {}, tight {}", tests(&paper), tests(&tight));
+    let (fixed, _) = run("paperbound_fixed", &["--update", "lazy", "--support-stretch", "1"]);
+    assert_eq!(fixed["trace_params"]["max_support_stretch"], 1.0);
+    for bad in [
+        vec!["--update", "naive", "--bound", "paper"],
+        vec!["--update", "refit", "--bound", "paper"],
+        vec!["--support-stretch", "0.5"],
+        vec!["--support-stretch", "NaN"],
+        vec!["--support-stretch", "9"],
+    ] {
+        let mut all = vec!["animate", "bend", "--frames", "1", "--detail", "0.05", "--width", "8", "--height", "6"];
+        all.extend_from_slice(&bad);
+        let (code, _, err) = lodtrace(&all);
+        assert_eq!(code, 2, "{bad:?}: {err}");
+        one_error_line(&err);
+    }
+}

@@ -27,6 +27,18 @@ use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
 
+/// `animate --bound`: how the lazy update bounds an inner node it does not refit.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub enum Bound {
+    /// The smaller of Eq. 9 and the re-centred bound (partition-of-unity maxima, each node's
+    /// own rotation factored out) and Eq. 11 around the smallest sphere of both children
+    /// (`tree` module docs; additions to the paper).
+    Tight,
+    /// Eq. 9 and Eq. 11 as the paper writes them (Eq. 9 around the Eq. 3 centre, Eq. 11
+    /// around the same centre); only the leaf-disc extension of B_j stays (`tree` module docs).
+    Paper,
+}
+
 /// `animate --nearest`: the order of a ray's candidate MLS hits ([`TraceParams::nearest_ellipse`]).
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Nearest {
@@ -74,6 +86,17 @@ pub struct AnimateArgs {
     /// default 4096).
     #[arg(long, value_parser = clap::value_parser!(u32).range(0..=16_777_216))]
     pub exact_below: Option<u32>,
+    /// Lazy modes: the radius bound of an inner node that is not refitted. `tight` (default)
+    /// adds to Eq. 9 a re-centred bound with each node's own rotation factored out, and
+    /// re-centres Eq. 11; `paper` is Eq. 9 and Eq. 11 as written. `--exact-below 0 --bound
+    /// paper` is the paper's update throughout. Same images.
+    #[arg(long, value_enum, default_value_t = Bound::Tight)]
+    pub bound: Bound,
+    /// The MLS support of a surfel grows with its local stretch, at most by this factor (1 =
+    /// the rest-pose support, the paper's fixed neighbourhoods of §4.2.1; 1..=8, default 3).
+    /// A stretched surface keeps enough neighbours inside the support [default: 3].
+    #[arg(long)]
+    pub support_stretch: Option<f32>,
     /// Per-ray cache (`--update lazy-cache`, §4.2.2): cache the ancestor this many levels
     /// above the leaf of each ray's closest hit instead of the leaf itself (0, the paper's
     /// choice; at most 64). Under motion a surfel leaves the ray within a frame or two, a
@@ -312,6 +335,12 @@ pub(crate) fn check(a: &AnimateArgs) -> Result<UpdateMode> {
     if let Some(e) = a.exact_below.filter(|&e| e > crate::deform::trace::MAX_EXACT_BELOW) {
         return Err(Error::Usage(format!("--exact-below {e}: at most {}", crate::deform::trace::MAX_EXACT_BELOW)));
     }
+    if let Some(s) = a.support_stretch.filter(|s| !(s.is_finite() && (1.0..=8.0).contains(s))) {
+        return Err(Error::Usage(format!("--support-stretch {s} out of range [1, 8]")));
+    }
+    if a.bound != Bound::Tight && matches!(mode, UpdateMode::Naive | UpdateMode::Refit) {
+        return Err(Error::Usage(format!("--bound is an option of the lazy updates; --update {} would ignore it", mode.name())));
+    }
     if a.cache_up > crate::deform::trace::MAX_CACHE_UP {
         return Err(Error::Usage(format!("--cache-up {}: at most {}", a.cache_up, crate::deform::trace::MAX_CACHE_UP)));
     }
@@ -440,6 +469,10 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
             instance_tree: !a.no_instance_tree,
             clip_early: !a.no_clip_early,
             nearest_ellipse: a.nearest == Nearest::Ellipse,
+            recentred_bound: a.bound == Bound::Tight,
+            node_rotation: a.bound == Bound::Tight,
+            recentre_eq11: a.bound == Bound::Tight,
+            max_support_stretch: a.support_stretch.unwrap_or(TraceParams::default().max_support_stretch),
             ..TraceParams::default()
         },
     )

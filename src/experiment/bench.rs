@@ -50,9 +50,9 @@ pub struct BenchArgs {
     /// multires, cone, lod, surfel; accelerators: embree, bvh, octree (whitted and
     /// distributed), embree, bvh (lod). Keys: spp, threads, packet, fps, vt, depth; cone
     /// tracers: k, c, clamp, clamp2, lod, dtol, cs, lens, rough, light, mip, primary, budget,
-    /// eigen, tri, stri, facing, split, term, pw, spread, groups, agg, plane, tight, mask;
+    /// eigen, tri, stri, facing, split, term, pw, spread, groups, agg, plane, tight, mask, paper;
     /// lod: f, a, thres, sel, select, selon, levels, dist, force, net; surfel: update,
-    /// frames, detail, shadows, exact, warm, cache_up, climb, gate, ordered, top, nearest. Each key is the
+    /// frames, detail, shadows, exact, bound, stretch, warm, cache_up, climb, gate, ordered, top, nearest. Each key is the
     /// `render`/`animate` option of the same meaning (README, "Using it").
     #[arg(long, required = true)]
     pub methods: String,
@@ -236,6 +236,7 @@ impl MethodSpec {
                     "groups" => spec.multires.no_group_points = !on(v)?,
                     "agg" => spec.multires.no_aggregate_shadow = !on(v)?,
                     "plane" => spec.multires.no_plane_skip = !on(v)?,
+                    "paper" => spec.multires.paper = on(v)?,
                     "tight" => spec.multires.tight_depth = on(v)?,
                     "mask" => spec.multires.coverage_masks = on(v)?,
                     "pw" => {
@@ -284,6 +285,10 @@ impl MethodSpec {
                     "gate" => spec.surfel.cache_gate = Some(num(v)? as f32),
                     "ordered" => spec.surfel.ordered = on(v)?,
                     "top" => spec.surfel.top = on(v)?,
+                    "bound" => {
+                        spec.surfel.bound = crate::cli::animate::Bound::from_str(v, true).map_err(|_| bad(format!("bound={v}: tight or paper")))?
+                    }
+                    "stretch" => spec.surfel.support_stretch = Some(num(v)? as f32),
                     "nearest" => {
                         spec.surfel.nearest_ellipse = match v {
                             "ellipse" => true,
@@ -297,7 +302,7 @@ impl MethodSpec {
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, lens, rough, light, mip, primary, budget, eigen, tri, stri, facing, split, term, pw, spread, groups, agg, plane, tight, mask; lod: f, a, thres, sel, select, selon, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, warm, cache_up, climb, gate, ordered, top, nearest)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, lens, rough, light, mip, primary, budget, eigen, tri, stri, facing, split, term, pw, spread, groups, agg, plane, tight, mask, paper; lod: f, a, thres, sel, select, selon, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, bound, stretch, warm, cache_up, climb, gate, ordered, top, nearest)"
                         )))
                     }
                 }

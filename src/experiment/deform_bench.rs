@@ -20,7 +20,7 @@ use serde::Serialize;
 use std::path::Path;
 
 /// `surfel` spec options (keys `update=`, `frames=`, `detail=`, `shadows=`, `exact=`,
-/// `warm=`, `cache_up=`, `climb=`, `gate=`, `ordered=`, `top=`, `nearest=`; the spec's `packet=` chooses packets of 8 or single rays).
+/// `bound=`, `stretch=`, `warm=`, `cache_up=`, `climb=`, `gate=`, `ordered=`, `top=`, `nearest=`; the spec's `packet=` chooses packets of 8 or single rays).
 #[derive(Clone, Debug, Serialize)]
 pub struct SurfelSpec {
     pub update: String,
@@ -29,6 +29,10 @@ pub struct SurfelSpec {
     pub shadows: bool,
     /// `--exact-below` of `animate` (`exact=N`; unset: animate's default, lazy modes only).
     pub exact_below: Option<u32>,
+    /// `--bound` of `animate` (`bound=tight|paper`, lazy modes only).
+    pub bound: crate::cli::animate::Bound,
+    /// `--support-stretch` of `animate` (`stretch=F`; unset: animate's default).
+    pub support_stretch: Option<f32>,
     /// `--warm-pass` of `animate` (`warm=1`): also time each frame's rays with the hierarchy
     /// already updated, for the table's "rays ms/frame" column.
     pub warm: bool,
@@ -54,6 +58,8 @@ impl Default for SurfelSpec {
             detail: 1.0,
             shadows: true,
             exact_below: None,
+            bound: crate::cli::animate::Bound::Tight,
+            support_stretch: None,
             warm: false,
             cache_up: 0,
             cache_climb: false,
@@ -158,6 +164,8 @@ pub fn run(
                     threads: spec.threads.unwrap_or(threads),
                     packet: spec.packet,
                     exact_below: s.exact_below,
+                    bound: s.bound,
+                    support_stretch: s.support_stretch,
                     cache_up: s.cache_up,
                     cache_climb: s.cache_climb,
                     cache_gate: s.cache_gate,
@@ -259,12 +267,17 @@ pub fn run(
     Ok(rows)
 }
 
+/// Keys of a `surfel` spec that only the lazy updates take (`naive` refuses them), so they
+/// do not count in the pairing of [`naive_partners`].
+const LAZY_KEYS: [&str; 6] = ["update=", "exact=", "bound=", "cache_up=", "climb=", "gate="];
+
 /// For each spec, the index of its `update=naive` partner among `specs`: the first spec with
-/// `update=naive` whose other `:`-separated options are this spec's (in any order). The
-/// naive spec is its own partner.
+/// `update=naive` whose other `:`-separated options are this spec's (in any order), the keys
+/// only the lazy updates take left aside (`exact=0:bound=paper` pairs with the plain naive
+/// spec). The naive spec is its own partner.
 pub fn naive_partners(specs: &[MethodSpec]) -> Vec<Option<usize>> {
     let rest = |m: &MethodSpec| -> Vec<String> {
-        let mut v: Vec<String> = m.text.split(':').filter(|t| !t.starts_with("update=")).map(str::to_string).collect();
+        let mut v: Vec<String> = m.text.split(':').filter(|t| !LAZY_KEYS.iter().any(|k| t.starts_with(k))).map(str::to_string).collect();
         v.sort();
         v
     };
@@ -480,6 +493,9 @@ pub fn update_label(update: &str, spec: &str) -> String {
     if let Some(n) = spec.split(':').find_map(|k| k.strip_prefix("cache_up=")) {
         l.push_str(&format!(", cache {n} up"));
     }
+    if spec.split(':').any(|k| k == "bound=paper") {
+        l.push_str(", paper bound");
+    }
     if spec.split(':').any(|k| k == "climb=1") {
         l.push_str(", cache climbs");
     }
@@ -521,6 +537,12 @@ pub fn validate(spec: &MethodSpec) -> Result<()> {
     if s.exact_below.is_some() && matches!(mode, Naive | Refit) {
         return bad(format!("exact is a key of the lazy updates; update={} would ignore it", mode.name()));
     }
+    if s.bound != crate::cli::animate::Bound::Tight && matches!(mode, Naive | Refit) {
+        return bad(format!("bound is a key of the lazy updates; update={} would ignore it", mode.name()));
+    }
+    if let Some(x) = s.support_stretch.filter(|x| !(x.is_finite() && (1.0..=8.0).contains(x))) {
+        return bad(format!("stretch={x} out of range [1, 8]"));
+    }
     if !s.ordered && mode == Refit {
         return bad("ordered is a key of the sphere tree's traversal; update=refit (an obvhs BVH2) would ignore it".into());
     }
@@ -538,11 +560,13 @@ mod tests {
     fn each_spec_pairs_with_the_naive_spec_of_its_other_options() {
         let specs = crate::experiment::bench::parse_list(
             "surfel:update=naive:frames=8,surfel:update=lazy-cache:frames=8,surfel:frames=8:shadows=0:update=naive,\
-             surfel:update=lazy:shadows=0:frames=8,surfel:update=lazy:detail=0.5:frames=8,surfel:frames=8",
+             surfel:update=lazy:shadows=0:frames=8,surfel:update=lazy:detail=0.5:frames=8,surfel:frames=8,\
+             surfel:update=lazy:frames=8:exact=0:bound=paper,surfel:update=lazy-cache:gate=0:frames=8:shadows=0:cache_up=2",
         )
         .unwrap();
-        // The last spec takes the default update (lazy-cache) and pairs like the second.
-        assert_eq!(naive_partners(&specs), [Some(0), Some(0), Some(2), Some(2), None, Some(0)]);
+        // The sixth spec takes the default update (lazy-cache) and pairs like the second; the
+        // last two pair across their lazy-only keys.
+        assert_eq!(naive_partners(&specs), [Some(0), Some(0), Some(2), Some(2), None, Some(0), Some(0), Some(2)]);
     }
 
     #[test]

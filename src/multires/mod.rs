@@ -12,7 +12,9 @@
 //! - [`render`]: the image loop of `--method multires` and `--method cone`;
 //! - [`octree_accel`]: `--accel octree`, the conventional tracer on the same octree (§6).
 //!
-//! Each paper parameter is a named option with the paper's default ([`MultiresArgs`]).
+//! Each paper parameter is a named option ([`MultiresArgs`]). Twelve default to a deviation
+//! from the paper, each documented where it is set; `--paper` (`paper=1` in `bench`) gives the
+//! paper's choice for all of them ([`MultiresArgs::PAPER`]).
 pub mod abuffer;
 pub mod build;
 pub mod cache;
@@ -169,6 +171,17 @@ pub struct MultiresArgs {
     /// Stop rendering after this many seconds (the frame is reported as unfinished).
     #[arg(long)]
     pub time_budget: Option<f64>,
+    /// The paper as written: every option that defaults to a deviation takes the paper's
+    /// choice instead ([`MultiresArgs::PAPER`]: voxel point weights, the paper's triangle
+    /// weight, a one-pixel primary cone, lens, roughness and light cones of the full radius,
+    /// alpha and normal summed over a fragment, meshes merged, one normal per fragment, every
+    /// instance visited, shadow cones past the whole footprint, self-shadowing planes
+    /// traversed). Refused beside any of those options. Two things stay: the leaf-disc and
+    /// weight-cut-off details the paper leaves open, and depth of field adds the squares of
+    /// the lens and pixel cones where the paper takes their maximum (a maximum of two
+    /// ellipses is no footprint of the form fp(t); `cone` module docs).
+    #[arg(long)]
+    pub paper: bool,
 }
 
 impl Default for MultiresArgs {
@@ -202,11 +215,56 @@ impl Default for MultiresArgs {
             tight_depth: t.tight_depth,
             coverage_masks: t.coverage_masks,
             no_plane_skip: !t.plane_skip,
+            paper: false,
         }
     }
 }
 
 impl MultiresArgs {
+    /// The options `--paper` sets, by their command-line names: each defaults to a
+    /// deviation from the paper (its documentation says which and why).
+    pub const PAPER: [&'static str; 12] = [
+        "--point-weights",
+        "--tri-weight",
+        "--cone-scale",
+        "--lens-scale",
+        "--rough-scale",
+        "--light-scale",
+        "--no-facing",
+        "--merge-meshes",
+        "--no-normal-spread",
+        "--no-group-points",
+        "--no-aggregate-shadow",
+        "--no-plane-skip",
+    ];
+
+    /// These options with `--paper` applied: the paper's choice for each of [`Self::PAPER`].
+    /// An error if `--paper` comes with one of those options set.
+    pub fn resolved(&self) -> Result<MultiresArgs> {
+        if !self.paper {
+            return Ok(self.clone());
+        }
+        let (b, t) = self.changed();
+        if let Some(o) = b.iter().chain(&t).find(|o| Self::PAPER.contains(o)) {
+            return Err(crate::error::Error::Usage(format!("--paper sets {o} to the paper's choice; give one or the other")));
+        }
+        Ok(MultiresArgs {
+            point_weights: build::PointWeights::Voxel,
+            tri_weight: trace::TriWeight::Paper,
+            cone_scale: 1.0,
+            lens_scale: 1.0,
+            rough_scale: 1.0,
+            light_scale: 1.0,
+            no_facing: true,
+            merge_meshes: true,
+            no_normal_spread: true,
+            no_group_points: true,
+            no_aggregate_shadow: true,
+            no_plane_skip: true,
+            ..self.clone()
+        })
+    }
+
     /// The options set away from their defaults, by their command-line names: first those of
     /// the octree build (`--k`, `--oversampling`, `--point-weights`, which `--accel octree`
     /// uses too), then the cone tracers' own. `render` refuses them for a method that would
@@ -228,42 +286,77 @@ impl MultiresArgs {
             no_mipmap => "--no-mipmap", primary_only => "--primary-only", termination => "--termination",
             no_normal_spread => "--no-normal-spread", no_group_points => "--no-group-points",
             no_aggregate_shadow => "--no-aggregate-shadow", tight_depth => "--tight-depth", coverage_masks => "--coverage-masks",
-            no_plane_skip => "--no-plane-skip", time_budget => "--time-budget",
+            no_plane_skip => "--no-plane-skip", time_budget => "--time-budget", paper => "--paper",
         );
         (build, trace)
     }
 
     pub fn params(&self, points: bool) -> Result<(BuildParams, TraceParams)> {
-        let b = BuildParams { k: self.k, c: self.oversampling, weights: self.point_weights, ..Default::default() };
+        let r = self.resolved()?;
+        let b = BuildParams { k: r.k, c: r.oversampling, weights: r.point_weights, ..Default::default() };
         let t = TraceParams {
-            clamp: self.anisotropy_clamp,
-            secondary_clamp: self.secondary_clamp,
-            lod_scale: self.lod_scale,
-            depth_tol: self.depth_tolerance,
-            eigen: self.eigen,
-            tri_weight: self.tri_weight,
-            shadow_tri_weight: self.shadow_tri_weight,
-            facing: !self.no_facing,
-            split_meshes: !self.merge_meshes,
-            cone_scale: self.cone_scale,
-            lens_scale: self.lens_scale,
-            rough_scale: self.rough_scale,
-            light_scale: self.light_scale,
-            mipmap: !self.no_mipmap,
-            primary_only: self.primary_only,
-            time_budget: self.time_budget,
-            termination: self.termination,
-            normal_spread: !self.no_normal_spread,
-            group_points: !self.no_group_points,
-            aggregate_shadow: !self.no_aggregate_shadow,
-            tight_depth: self.tight_depth,
-            coverage_masks: self.coverage_masks,
-            plane_skip: !self.no_plane_skip,
+            clamp: r.anisotropy_clamp,
+            secondary_clamp: r.secondary_clamp,
+            lod_scale: r.lod_scale,
+            depth_tol: r.depth_tolerance,
+            eigen: r.eigen,
+            tri_weight: r.tri_weight,
+            shadow_tri_weight: r.shadow_tri_weight,
+            facing: !r.no_facing,
+            split_meshes: !r.merge_meshes,
+            cone_scale: r.cone_scale,
+            lens_scale: r.lens_scale,
+            rough_scale: r.rough_scale,
+            light_scale: r.light_scale,
+            mipmap: !r.no_mipmap,
+            primary_only: r.primary_only,
+            time_budget: r.time_budget,
+            termination: r.termination,
+            normal_spread: !r.no_normal_spread,
+            group_points: !r.no_group_points,
+            aggregate_shadow: !r.no_aggregate_shadow,
+            tight_depth: r.tight_depth,
+            coverage_masks: r.coverage_masks,
+            plane_skip: !r.no_plane_skip,
             points,
             ..Default::default()
         };
         b.validate()?;
         t.validate()?;
         Ok((b, t))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `--paper` sets exactly the options of [`MultiresArgs::PAPER`], each to a value other
+    /// than its default (each defaults to a deviation), changes nothing else, and refuses to
+    /// be combined with any of them.
+    #[test]
+    fn paper_sets_every_deviation_and_refuses_a_clash() {
+        let r = MultiresArgs { paper: true, ..Default::default() }.resolved().unwrap();
+        let (b, t) = MultiresArgs { paper: false, ..r.clone() }.changed();
+        let mut set: Vec<&str> = b.into_iter().chain(t).collect();
+        set.sort();
+        let mut want = MultiresArgs::PAPER.to_vec();
+        want.sort();
+        assert_eq!(set, want);
+        let (bp, tp) = MultiresArgs { paper: true, ..Default::default() }.params(true).unwrap();
+        assert_eq!(bp.weights, build::PointWeights::Voxel);
+        assert_eq!(
+            (tp.tri_weight, tp.cone_scale, tp.facing, tp.split_meshes, tp.plane_skip),
+            (trace::TriWeight::Paper, 1.0, false, false, false)
+        );
+        // Without `--paper`, resolved() is the options themselves.
+        let d = MultiresArgs::default();
+        assert!(d.resolved().unwrap().changed() == (Vec::new(), Vec::new()));
+        let clash = MultiresArgs { paper: true, cone_scale: 0.7, ..Default::default() };
+        let e = clash.resolved().unwrap_err().to_string();
+        assert!(e.contains("--cone-scale"), "{e}");
+        // An option --paper does not set combines with it.
+        let ok = MultiresArgs { paper: true, lod_scale: 3.0, ..Default::default() }.params(true).unwrap();
+        assert_eq!(ok.1.lod_scale, 3.0);
     }
 }
