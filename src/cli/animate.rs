@@ -82,8 +82,8 @@ pub struct AnimateArgs {
     pub packet: u32,
     /// Lazy modes: the first visit of an inner node over at most this many surfels bounds it
     /// and its whole subtree from their deformed surfels (the leaf balls' box centre, the exact
-    /// reach) instead of by Eq. 9 node by node; 0 = Eq. 9 everywhere, the paper (at most 2^24;
-    /// default 4096).
+    /// reach) instead of by Eq. 9 node by node; 0 = Eq. 9 everywhere (with `--bound paper`, the
+    /// paper's update as written; at most 2^24; default 4096).
     #[arg(long, value_parser = clap::value_parser!(u32).range(0..=16_777_216))]
     pub exact_below: Option<u32>,
     /// Lazy modes: the radius bound of an inner node that is not refitted. `tight` (default)

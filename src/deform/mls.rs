@@ -11,6 +11,8 @@
 //!
 //! Choices: ε = `eps_rel · h` (scale-free); the returned normal is n(x) at the converged
 //! point (consistently oriented because the surfel normals are).
+//! *Deviation:* the caller's support h is the surfel's rest support times its local stretch
+//! (clamped to [1, 3], `TraceParams::max_support_stretch`; 1 = the paper's fixed support).
 
 use super::displace::spline_weight;
 use glam::Vec3;

@@ -68,6 +68,13 @@
 //! - Eq. 9 also takes the partition-of-unity maxima (max_j instead of Σ_j A_j) and factors
 //!   out each node's own rotation (the paper's §6 suggestion) when that is smaller ([`tree`]).
 //! - Eq. 11 is re-evaluated at every descent (not once), so tightening propagates upwards.
+//! - `animate --bound paper` (`TraceParams::recentred_bound`, `node_rotation`,
+//!   `recentre_eq11` off) drops the three additions above and gives Eq. 9 and Eq. 11 as
+//!   written; with `--exact-below 0` that is the paper's update throughout.
+//! - The MLS support of a surfel (§4.2.1, fixed 16-surfel neighbourhoods) widens with the
+//!   local stretch of the deformation, at most 3× (`TraceParams::max_support_stretch`,
+//!   `animate --support-stretch`; 1 = the rest-pose support, the paper's): a stretched
+//!   surface otherwise leaves too few neighbours inside the support.
 //! - Beyond the paper: the instance tree over the objects' root spheres ([`top`]), rebuilt
 //!   every frame, so that a ray does not test all 40 balls of `elastic-balls`.
 //! - Beyond the paper: `UpdateMode::Auto`, per frame a rebuild or the lazy update, whichever
@@ -92,9 +99,12 @@
 //! # Measured
 //! Current figures and the commands that produce them are in the README ("Adams et al."):
 //! `lodtrace bench SEQ --methods surfel:update=naive,...,surfel:update=refit`. In short, at
-//! the paper's size (512×384, detail 1, 16 frames, stop 37), lazy-cache runs at 1.30–1.63×
-//! the speed of a naive rebuild (lazy 1.31–1.74×), and the refitted BVH2 at 1.01–1.57×.
-//! `animate --warm-pass` splits a frame: the lazy update costs 33–41 % of the rebuild, but the rays cost 1.10–1.27×
+//! the paper's size (512×384, detail 1, 90 frames, stops 71–74), lazy-cache runs at
+//! 2.06–2.25× the speed of a naive rebuild on three sequences and 1.84–1.91× on
+//! `elastic-balls` (2.32× without shadow rays); the paper's update as written (`--exact-below
+//! 0 --bound paper`) at 0.28–0.60× (stop 75, one run on a loaded host). Stop 37's figures, before
+//! the subtree refits:
+//! `animate --warm-pass` split a frame: the lazy update cost 33–41 % of the rebuild, but the rays cost 1.10–1.27×
 //! as much in the lazy tree, which keeps the rest pose's topology (the paper's choice): on
 //! `armadillo-ball` its sphere tests grow from 1.01× the rebuilt tree's in frame 0 to 2.38×
 //! in frame 15 as the model collapses, while its spheres stay within 1.0–1.3× of the tightest

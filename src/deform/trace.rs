@@ -321,7 +321,8 @@ pub struct TraceParams {
     /// The first visit of an inner node over at most this many surfels (≤
     /// [`MAX_EXACT_BELOW`]) bounds it and its whole subtree from their deformed surfels'
     /// leaf balls (Eq. 11 taken down to the leaves) instead of by Eq. 9 node by node; 0 = Eq.
-    /// 9 everywhere, the paper's rule. See [`DeformTracer`]'s `refit_subtree`.
+    /// 9 everywhere (the paper's rule when `recentred_bound`, `node_rotation` and
+    /// `recentre_eq11` are off too: `animate --bound paper`). See [`DeformTracer`]'s `refit_subtree`.
     pub exact_below: u32,
     /// Eq. 11 with the centre moved to the smallest sphere around both children (see
     /// `tighten`); off: the paper's Eq. 11 around the node's Eq. 3 centre.

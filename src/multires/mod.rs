@@ -59,7 +59,9 @@ pub struct MultiresArgs {
     /// stop 28).
     #[arg(long)]
     pub secondary_clamp: Option<f32>,
-    /// Level of detail: use a node's points when lod_scale × minimum footprint ≥ point spacing.
+    /// Level of detail: use a node's points when lod_scale × the footprint's minor semi-axis ≥
+    /// point spacing (2, the default, is the paper's "spacing no larger than the minimum
+    /// diameter", §5.1).
     #[arg(long, default_value_t = 2.0)]
     pub lod_scale: f32,
     /// Depth tolerance of a point sample for fragment merging, in point spacings.

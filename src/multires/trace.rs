@@ -174,7 +174,9 @@ pub struct TraceParams {
     /// own performance lever (§5.1: anisotropic cones against the symmetric octree are what
     /// costs) applied where the cone's width is an estimate from ∇n anyway.
     pub secondary_clamp: Option<f32>,
-    /// Level of detail: points are used when λ·σ_min ≥ h.
+    /// Level of detail: points are used when λ·σ_min ≥ h. λ = 2 (the default) is the paper's
+    /// rule (§5.1: spacing no larger than the footprint's minimum *diameter*, 2·σ_min, σ_min
+    /// the minor semi-axis of exp(−|fp⁻¹x|²)).
     pub lod_scale: f32,
     /// Mipmap blend one level down (§5.1).
     pub mipmap: bool,
