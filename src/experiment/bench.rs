@@ -1318,12 +1318,12 @@ pub fn table_string(report: &BenchReport) -> String {
         }
         return s;
     }
-    s.push_str("| scene | method | thr | build s | render s | Mrays/s | speed-up vs first | per-round speed-up: median [range] | RMSE | PSNR dB | FLIP | triangle tests | node tests |\n");
-    s.push_str("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    s.push_str("| scene | method | thr | build s | render s | Mrays/s | speed-up vs first | per-round speed-up: median [range] | RMSE | PSNR dB | FLIP | triangle tests | node tests | point tests | eigen solves | fragments merged |\n");
+    s.push_str("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for r in &report.rows {
         let f = |x: Option<f64>, p: usize| x.map(|v| format!("{v:.p$}")).unwrap_or_else(|| "-".into());
         s.push_str(&format!(
-            "| {} | {}{} | {} | {:.3} | {:.3} | {:.2} | {:.2}x | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {}{} | {} | {:.3} | {:.3} | {:.2} | {:.2}x | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
             r.scene,
             r.spec,
             if r.stats.finished { "" } else { " (stopped at its time budget: incomplete image)" },
@@ -1338,6 +1338,9 @@ pub fn table_string(report: &BenchReport) -> String {
             f(r.flip, 4),
             counted(&r.stats, "triangle_tests"),
             counted(&r.stats, "node_tests"),
+            counted(&r.stats, "surfel_tests"),
+            counted(&r.stats, "eigen_decompositions"),
+            counted(&r.stats, "fragments_merged"),
         ));
     }
     if let Some(first) = report.rows.iter().find(|r| !r.regions.is_empty()) {
