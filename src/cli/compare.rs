@@ -9,7 +9,8 @@
 //! (taken from the whole image's map), its share of the image's total FLIP error, and its
 //! RMSE — which part of a scene (the plants of `complex`, its floor) carries the error.
 //! Exit codes: 0 all thresholds met, 1 a threshold failed (each failure is named on stderr),
-//! 2 bad input (unreadable files, different sizes, bad thresholds).
+//! 2 bad input (unreadable files, different sizes, a NaN pixel or an infinity in one image
+//! only, bad thresholds).
 
 use crate::error::{Error, Result};
 use crate::film::{io, metrics};
@@ -198,18 +199,24 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
     }
     let (w, h) = (wa, ha);
     // The metrics count a non-finite channel as 0: right where both images have the same
-    // infinity, an error of the finite value where only one has (a depth AOV where one view
-    // meets nothing), and a hidden fault in a beauty image (+inf against 0.25 counted as an
-    // error of 0.25; the sweep of stop 65). Said, so that a gate passed is not misread.
-    let inf = |p: &glam::Vec3, q: &glam::Vec3| (0..3).any(|c| (p[c].is_infinite() || q[c].is_infinite()) && p[c] != q[c]);
-    let mut at = ia.iter().zip(&ib).enumerate().filter(|(_, (p, q))| inf(p, q)).map(|(i, _)| i);
-    if let Some(i) = at.next() {
+    // infinity (a depth AOV's background, where no ray meets anything), but elsewhere +inf
+    // against 0.25 counted as an error of 0.25 and could pass a gate (the sweeps of stops 65
+    // and 75). An infinity in one image only is refused, as a NaN is (`io::read_image_linear`).
+    let inf = |p: &glam::Vec3, q: &glam::Vec3| (0..3).find(|&c| (p[c].is_infinite() || q[c].is_infinite()) && p[c] != q[c]);
+    let mut at = ia.iter().zip(&ib).enumerate().filter_map(|(i, (p, q))| inf(p, q).map(|c| (i, c)));
+    if let Some((i, c)) = at.next() {
         let n_inf = 1 + at.count();
-        crate::error::warn(format!(
-            "{n_inf} pixel{} infinite in one image and not the other (the first at ({}, {})): the metrics count an infinite value as 0, as for a depth AOV where a ray meets nothing; in a beauty image it is a fault they do not measure",
-            if n_inf == 1 { " is" } else { "s are" },
-            i as u32 % w,
-            i as u32 / w
+        let (p, q) = (ia[i][c], ib[i][c]);
+        let (file, v, other, ov) = if p.is_infinite() { (&a.a, p, &a.b, q) } else { (&a.b, q, &a.a, p) };
+        return Err(Error::parse(
+            file,
+            format!(
+                "pixel ({}, {}) is {v} where {} has {ov} ({n_inf} pixel{} infinite in one image only): the metrics cannot measure that difference; only infinities both images share (a depth AOV's background) are compared",
+                i as u32 % w,
+                i as u32 / w,
+                other.display(),
+                if n_inf == 1 { "" } else { "s" }
+            ),
         ));
     }
     // FLIP and SSIM judge display values clamped to [0, 1]: above 1 (HDR highlights, depth
