@@ -1955,12 +1955,26 @@ fn stop65_sweep_findings_are_refused() {
     assert_eq!(code, 2, "{err}");
     one_error_line(&err);
     let small = ["--width", "16", "--height", "16", "--quiet", "--out"];
-    for (spec, says) in [
-        ("distributed:fps=8:spp=4", "fps=8 exceeds spp=4"),
-        ("distributed:fps=8", "fps=8 exceeds spp=1"),
-        ("lod:levels=0", "method spec 'lod:levels=0': --lod-levels 0 out of range"),
+    for (scene, spec, says) in [
+        ("plane", "distributed:fps=8:spp=4", "fps=8 exceeds spp=4"),
+        ("plane", "distributed:fps=8", "fps=8 exceeds spp=1"),
+        ("plane", "lod:levels=0", "method spec 'lod:levels=0': --lod-levels 0 out of range"),
+        // Negative and non-finite values name the range `render` states for the option the
+        // key sets (until stop 75: "bad value '-1' for c" alone).
+        ("plane", "multires:c=-1", "method spec 'multires:c=-1': --oversampling -1 out of range (1..=10000)"),
+        ("plane", "whitted:octree:c=-1", "method spec 'whitted:octree:c=-1': --oversampling -1 out of range (1..=10000)"),
+        ("plane", "multires:clamp=nan", "--anisotropy-clamp NaN out of range (0, 1]"),
+        ("plane", "multires:clamp2=-1", "--secondary-clamp -1 out of range (0, 1]"),
+        ("plane", "multires:lod=inf", "--lod-scale inf out of range [0.25, 64]"),
+        ("plane", "multires:budget=-1", "--time-budget -1 out of range (0, 604800] seconds"),
+        ("plane", "cone:lens=-1", "--lens-scale -1 out of range (0, 16]"),
+        ("plane", "distributed:vt=nan", "--variance-threshold must be a finite number >= 0"),
+        ("plane", "lod:f=nan", "--lod-f NaN out of range (1..=100"),
+        ("plane", "lod:dist=-1", "--lod-distance -1 must be a positive distance"),
+        ("bend", "surfel:detail=nan", "method spec 'surfel:detail=nan': detail=NaN out of range (0, 10]"),
+        ("plane", "multires:c=x", "bad value 'x' for c: a number"),
     ] {
-        let mut args = vec!["bench", "plane", "--methods", spec];
+        let mut args = vec!["bench", scene, "--methods", spec];
         args.extend_from_slice(&small);
         let o = p("b");
         args.push(&o);
