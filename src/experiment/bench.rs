@@ -1359,7 +1359,11 @@ pub fn table_string(report: &BenchReport) -> String {
         for r in report.rows.iter().filter(|r| !r.regions.is_empty()) {
             s.push_str(&format!("| {} | {} |", r.scene, r.spec));
             for g in &r.regions {
-                s.push_str(&format!(" {:+.1} % / {:.0} % |", 100.0 * g.figures.luma_bias, 100.0 * g.figures.smooth_share));
+                s.push_str(&format!(
+                    " {} / {:.0} % |",
+                    crate::cli::compare::luma_bias_text(g.figures.luma_bias, " "),
+                    100.0 * g.figures.smooth_share
+                ));
             }
             s.push('\n');
         }
