@@ -759,6 +759,18 @@ fn bad_input_is_a_typed_error() {
     dup[10] = dup[11];
     assert!(matches!(ply::load_ply(&write("dup.ply", &dup)), Err(DeformError::DuplicatePoint { .. })));
     assert!(matches!(ply::load_ply(&write("few.ply", &good[..2])), Err(DeformError::TooSmall(_))));
+    // Distinct in the file, one f32 position once placed in the scene: refused, saying how
+    // close is too close (stop 75's review: "have the same position", though they differ).
+    let mut near: Vec<[f32; 6]> = (0..100).map(|i| [(i % 10) as f32 * 0.1, (i / 10) as f32 * 0.1, 0.0, 0.0, 0.0, 1.0]).collect();
+    near.push([1e-9, 0.0, 0.0, 0.0, 0.0, 1.0]);
+    let m = ply::load_ply(&write("near.ply", &near)).unwrap();
+    match Sequence::from_points(m, &SequenceOptions { detail: 0.02, ..Default::default() }) {
+        Err(DeformError::Invalid(msg)) => {
+            assert!(msg.contains("surfels 0 and 100 are 1.000e-9 apart, closer than f32 can tell apart"), "{msg}");
+            assert!(msg.contains("in the file's units there"), "{msg}");
+        }
+        r => panic!("{:?}", r.map(|s| s.name)),
+    }
     std::fs::remove_dir_all(&dir).ok();
 
     let mut tiny = Mesh::new("tiny");

@@ -136,7 +136,7 @@ pub enum DeformError {
     Ply { path: PathBuf, msg: String },
     #[error("invalid surfel {index}: {msg}")]
     BadSurfel { index: usize, msg: String },
-    #[error("duplicate points: surfels {a} and {b} have the same position")]
+    #[error("duplicate points: surfels {a} and {b} have the same position (equal as f32 numbers)")]
     DuplicatePoint { a: usize, b: usize },
     #[error("too small to sample: {0}")]
     TooSmall(String),
