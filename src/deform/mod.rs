@@ -123,7 +123,7 @@ pub use displace::{DeformField, DeformedSurfel, SimNodes};
 pub use mls::MlsParams;
 pub use object::{ObjectParams, SurfelObject};
 pub use sequences::{FrameNodes, Recording, Sequence, SequenceOptions};
-pub use sim::{Body, BodyParams, Collider, World};
+pub use sim::{Body, BodyParams, CapStats, Collider, World};
 pub use surfel::{Collection, SurfelModel, SurfelSoa};
 pub use trace::{DeformCounters, DeformScene, DeformTracer, FrameStats, LevelRatio, SurfelHit, TraceParams, UpdateMode};
 
