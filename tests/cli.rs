@@ -1711,13 +1711,17 @@ fn stop_54_researcher_review() {
     let d = tmp("stop54");
     let p = |n: &str| d.join(n).to_str().unwrap().to_string();
     let small = ["--width", "32", "--height", "24", "--quiet"];
-    // Two depth maps of different views: FLIP and SSIM see them clamped to 1 (identical).
-    for (eye, f) in [("0,1,5", "d1.exr"), ("1,2,6", "d2.exr")] {
-        let (code, _, err) = lodtrace(
-            &[&["render", "spheres", "--eye", eye, "--out", &p("x.png"), "--aov", &format!("depth={}", p(f))][..], &small].concat(),
-        );
-        assert_eq!(code, 0, "{err}");
-    }
+    // Two depth maps that differ only above 1: FLIP and SSIM see them clamped to 1
+    // (identical). (Until stop 75 two views of the scene; their backgrounds differ, and an
+    // infinity in one image only is now refused.)
+    let (code, _, err) = lodtrace(
+        &[&["render", "spheres", "--eye", "0,1,5", "--out", &p("x.png"), "--aov", &format!("depth={}", p("d1.exr"))][..], &small].concat(),
+    );
+    assert_eq!(code, 0, "{err}");
+    let (w, h, d1) = lodtrace::film::io::read_image_linear(std::path::Path::new(&p("d1.exr"))).unwrap();
+    let d2: Vec<f32> = d1.iter().map(|v| if v.x.is_finite() { 1.5 * v.x } else { v.x }).collect();
+    assert!(d2.iter().any(|v| v.is_infinite()) && d2.iter().all(|v| *v > 1.0));
+    lodtrace::film::io::write_exr_scalar(std::path::Path::new(&p("d2.exr")), w, h, &d2).unwrap();
     let (code, out, err) = lodtrace(&["compare", &p("d1.exr"), &p("d2.exr")]);
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("FLIP and SSIM see display values clamped"), "{out}\n{err}");
@@ -1908,8 +1912,8 @@ fn stop_58_inputs_survive_and_odd_geometry_is_refused() {
 }
 
 /// Bad input found by the robustness sweep of stop 65: an infinite pixel against a finite
-/// one in `compare` is said (the metrics count it as 0, so +inf passed `--min-psnr`
-/// unremarked), two depth maps with the same infinities compare quietly; refused with one
+/// one in `compare` is refused (the metrics count it as 0, so +inf passed `--min-psnr`;
+/// stop 65 warned, stop 75 refuses), two depth maps with the same infinities compare quietly; refused with one
 /// line, exit 2: `--min-psnr -inf`; a bench spec whose first pass exceeds its
 /// spp (as `render --first-pass-spp` is refused); a lod spec out of range names its spec.
 #[test]
@@ -1921,10 +1925,26 @@ fn stop65_sweep_findings_are_refused() {
     v[5] = f32::INFINITY;
     lodtrace::film::io::write_exr_scalar(std::path::Path::new(&p("inf.exr")), 4, 4, &v).unwrap();
     lodtrace::film::io::write_exr_scalar(std::path::Path::new(&p("inf2.exr")), 4, 4, &v).unwrap();
-    for (a, b) in [("a.exr", "inf.exr"), ("inf.exr", "a.exr")] {
-        let (code, _, err) = lodtrace(&["compare", &p(a), &p(b), "--min-psnr", "10"]);
-        assert_eq!(code, 0, "{err}");
-        assert!(err.contains("1 pixel is infinite in one image and not the other (the first at (1, 1))"), "{err}");
+    // Since stop 75 refused as a NaN is: counted as 0, the infinity passed the gate (exit 0,
+    // "pass": true) with only a warning.
+    v[6] = f32::NEG_INFINITY;
+    lodtrace::film::io::write_exr_scalar(std::path::Path::new(&p("neginf.exr")), 4, 4, &v).unwrap();
+    for (a, b, says) in [
+        ("a.exr", "inf.exr", "inf.exr: pixel (1, 1) is inf where"),
+        ("inf.exr", "a.exr", "inf.exr: pixel (1, 1) is inf where"),
+        ("inf2.exr", "neginf.exr", "neginf.exr: pixel (2, 1) is -inf where"),
+    ] {
+        for json in [false, true] {
+            let mut args = vec!["compare", &p(a), &p(b), "--min-psnr", "10"].into_iter().map(String::from).collect::<Vec<_>>();
+            if json {
+                args.push("--json".into());
+            }
+            let (code, out, err) = lodtrace(&args.iter().map(String::as_str).collect::<Vec<_>>());
+            assert_eq!(code, 2, "{a} {b}: {out} {err}");
+            one_error_line(&err);
+            assert!(err.contains(says) && err.contains("in one image only"), "{a} {b}: {err}");
+            assert!(out.is_empty(), "{a} {b}: a refused comparison printed {out}");
+        }
     }
     let (code, out, err) = lodtrace(&["compare", &p("inf.exr"), &p("inf2.exr"), "--min-psnr", "10"]);
     assert_eq!(code, 0, "the same infinities (a depth AOV's background) compare: {out} {err}");
@@ -1935,12 +1955,26 @@ fn stop65_sweep_findings_are_refused() {
     assert_eq!(code, 2, "{err}");
     one_error_line(&err);
     let small = ["--width", "16", "--height", "16", "--quiet", "--out"];
-    for (spec, says) in [
-        ("distributed:fps=8:spp=4", "fps=8 exceeds spp=4"),
-        ("distributed:fps=8", "fps=8 exceeds spp=1"),
-        ("lod:levels=0", "method spec 'lod:levels=0': --lod-levels 0 out of range"),
+    for (scene, spec, says) in [
+        ("plane", "distributed:fps=8:spp=4", "fps=8 exceeds spp=4"),
+        ("plane", "distributed:fps=8", "fps=8 exceeds spp=1"),
+        ("plane", "lod:levels=0", "method spec 'lod:levels=0': --lod-levels 0 out of range"),
+        // Negative and non-finite values name the range `render` states for the option the
+        // key sets (until stop 75: "bad value '-1' for c" alone).
+        ("plane", "multires:c=-1", "method spec 'multires:c=-1': --oversampling -1 out of range (1..=10000)"),
+        ("plane", "whitted:octree:c=-1", "method spec 'whitted:octree:c=-1': --oversampling -1 out of range (1..=10000)"),
+        ("plane", "multires:clamp=nan", "--anisotropy-clamp NaN out of range (0, 1]"),
+        ("plane", "multires:clamp2=-1", "--secondary-clamp -1 out of range (0, 1]"),
+        ("plane", "multires:lod=inf", "--lod-scale inf out of range [0.25, 64]"),
+        ("plane", "multires:budget=-1", "--time-budget -1 out of range (0, 604800] seconds"),
+        ("plane", "cone:lens=-1", "--lens-scale -1 out of range (0, 16]"),
+        ("plane", "distributed:vt=nan", "--variance-threshold must be a finite number >= 0"),
+        ("plane", "lod:f=nan", "--lod-f NaN out of range (1..=100"),
+        ("plane", "lod:dist=-1", "--lod-distance -1 must be a positive distance"),
+        ("bend", "surfel:detail=nan", "method spec 'surfel:detail=nan': detail=NaN out of range (0, 10]"),
+        ("plane", "multires:c=x", "bad value 'x' for c: a number"),
     ] {
-        let mut args = vec!["bench", "plane", "--methods", spec];
+        let mut args = vec!["bench", scene, "--methods", spec];
         args.extend_from_slice(&small);
         let o = p("b");
         args.push(&o);

@@ -639,8 +639,11 @@ fn clipping_gives_a_sharp_edge() {
     assert!(lh > 0.25, "unclipped surface should extend to x ≈ 0.3: {lh}");
 }
 
-/// The simulation stays bounded: no energy gain beyond collision slack, finite positions,
-/// nothing falls through the floor (single body dropped; several bodies colliding).
+/// The simulation stays bounded: no energy gain, finite positions, nothing falls through the
+/// floor (single body dropped; several bodies colliding). The energy bound is the contacts'
+/// and the damping's own: `World::cap_energy`, which would hold the energy at its start
+/// value whatever the contacts did, never acts here, nor in any built-in sequence (their
+/// frames feed the benchmarks: they must not depend on the cap).
 #[test]
 fn simulation_energy_bounded() {
     // A box mesh, dropped.
@@ -665,8 +668,11 @@ fn simulation_energy_bounded() {
         }
         max_e = max_e.max(seq.world.energy().total());
     }
+    // (Measured: the energy peaks at 0.9986 e0, before the first contact.)
     assert!(max_e <= e0 * 1.02 + 1e-3, "energy grew: {max_e} vs {e0}");
     assert!(min_y > -0.05, "fell through the floor: {min_y}");
+    let cap = seq.world.cap_stats;
+    assert!(cap.checked == 360 && cap.capped == 0, "the energy cap acted: {cap:?}");
     // Several bodies: heads in a box.
     let mut seq = Sequence::builtin("heads", &SequenceOptions { detail: 0.02, ..Default::default() }).unwrap();
     let e0 = seq.world.energy().total();
@@ -675,6 +681,17 @@ fn simulation_energy_bounded() {
         assert!(f.iter().flatten().all(|p| p.is_finite() && p.y > -0.1 && p.x.abs() < 1.6 && p.z.abs() < 1.6));
         let e = seq.world.energy().total();
         assert!(e <= e0 * 1.05 + 1e-3, "energy grew: {e} vs {e0}");
+    }
+    // Every built-in sequence over its suggested length: the cap never acts (`bend` is
+    // driven by kinematic nodes, so the cap does not even run there).
+    for name in Sequence::BUILTIN {
+        let mut seq = Sequence::builtin(name, &SequenceOptions { detail: 0.02, ..Default::default() }).unwrap();
+        for _ in 0..seq.frames {
+            seq.step();
+        }
+        let cap = seq.world.cap_stats;
+        let steps = if name == "bend" { 0 } else { 4 * seq.frames as u64 };
+        assert!(cap.checked == steps && cap.capped == 0 && cap.removed == 0.0, "{name}: the energy cap acted: {cap:?}");
     }
     // Every built-in light is on the free side of every wall and floor (the walls of a
     // hollow box shadow what is inside them).
@@ -759,6 +776,18 @@ fn bad_input_is_a_typed_error() {
     dup[10] = dup[11];
     assert!(matches!(ply::load_ply(&write("dup.ply", &dup)), Err(DeformError::DuplicatePoint { .. })));
     assert!(matches!(ply::load_ply(&write("few.ply", &good[..2])), Err(DeformError::TooSmall(_))));
+    // Distinct in the file, one f32 position once placed in the scene: refused, saying how
+    // close is too close (stop 75's review: "have the same position", though they differ).
+    let mut near: Vec<[f32; 6]> = (0..100).map(|i| [(i % 10) as f32 * 0.1, (i / 10) as f32 * 0.1, 0.0, 0.0, 0.0, 1.0]).collect();
+    near.push([1e-9, 0.0, 0.0, 0.0, 0.0, 1.0]);
+    let m = ply::load_ply(&write("near.ply", &near)).unwrap();
+    match Sequence::from_points(m, &SequenceOptions { detail: 0.02, ..Default::default() }) {
+        Err(DeformError::Invalid(msg)) => {
+            assert!(msg.contains("surfels 0 and 100 are 1.000e-9 apart, closer than f32 can tell apart"), "{msg}");
+            assert!(msg.contains("in the file's units there"), "{msg}");
+        }
+        r => panic!("{:?}", r.map(|s| s.name)),
+    }
     std::fs::remove_dir_all(&dir).ok();
 
     let mut tiny = Mesh::new("tiny");
@@ -785,18 +814,59 @@ fn bad_input_is_a_typed_error() {
     // Rays before the first frame, and invalid rays: misses.
     let mut ctr = Counters::default();
     assert!(tr.intersect(&Ray::new(Vec3::Z * 5.0, -Vec3::Z), None, &mut ctr).is_none());
-    // A crumpled deformation (huge per-node noise): MLS may diverge; hits stay finite.
-    let crumple = Deform { axis: Vec3::Y, angle: 0.3, trans: Vec3::ZERO, stretch: Vec3::ONE, bend: 0.0, twist: 0.0, noise: 1.5, seed: 7 };
-    tr.begin_frame(&[crumple.apply(&obj.nodes.rest)]).unwrap();
-    let mut dc = DeformCounters::default();
-    for ray in random_rays(5, 3000, Vec3::ZERO, 5.0, 2.0) {
-        if let Some(h) = tr.intersect_ex(&ray, None, &mut ctr, &mut dc) {
-            assert!(h.t.is_finite() && h.p.is_finite() && h.n.is_finite() && (h.n.length() - 1.0).abs() < 1e-3);
+    // A crumpled deformation (per-node noise of ±15 on a unit ball): the surface folds and
+    // its neighbourhoods tear apart, and the MLS iterations fail (§4.2.1) — most at the first
+    // step, where the weights vanish, some leaving their leaf's sphere, some not converging
+    // within `max_iter` — and are rejected, never NaN: the hits that remain stay finite.
+    // Until stop 75 the noise was ±0.75, whose rejections (14.8 % of the runs) were no more
+    // than the unfolded ball's grazing rays give (16.4 %, the same rays): the check could not
+    // tell a failing iteration from an ordinary frame.
+    let rays = random_rays(5, 3000, Vec3::ZERO, 5.0, 2.0);
+    let crumple = |noise: f32| {
+        Deform { axis: Vec3::Y, angle: 0.3, trans: Vec3::ZERO, stretch: Vec3::ONE, bend: 0.0, twist: 0.0, noise, seed: 7 }
+            .apply(&obj.nodes.rest)
+    };
+    let mut run = |tr: &mut DeformTracer, noise: f32| {
+        tr.begin_frame(&[crumple(noise)]).unwrap();
+        let (mut dc, mut hits) = (DeformCounters::default(), 0);
+        for ray in &rays {
+            if let Some(h) = tr.intersect_ex(ray, None, &mut ctr, &mut dc) {
+                assert!(h.t.is_finite() && h.p.is_finite() && h.n.is_finite() && (h.n.length() - 1.0).abs() < 1e-3, "noise {noise}: {h:?}");
+                hits += 1;
+            }
         }
-    }
+        for c in rays.chunks(8) {
+            for h in tr.intersect_x8(c, &[None; 8][..c.len()], &mut ctr, &mut DeformCounters::default()).into_iter().flatten() {
+                assert!(h.t.is_finite() && h.p.is_finite() && h.n.is_finite(), "noise {noise}, packet: {h:?}");
+            }
+        }
+        (hits, dc)
+    };
+    let (_, rest) = run(&mut tr, 0.0);
+    let (hits, dc) = run(&mut tr, 30.0);
+    // The same frame with a far higher iteration limit: fewer rejections, so at the default
+    // limit some iterations ran out unconverged and were rejected, not returned.
+    let long = TraceParams { mls: MlsParams { max_iter: 1000, ..Default::default() }, ..TraceParams::default() };
+    let (_, dc_long) = run(&mut DeformTracer::new(&scene1(obj), UpdateMode::Lazy, long).unwrap(), 30.0);
+    let share = |d: &DeformCounters| d.mls_rejected as f64 / d.mls_runs.max(1) as f64;
+    // (Measured: 2625 hits; 7075 of 10386 runs rejected, 68 %, at 1.24 iterations a run;
+    // the unfolded ball 16 %; with max_iter 1000, 61 fewer rejections.)
+    assert!(hits > 1000 && dc.mls_rejected > 0, "{hits} hits, {} of {} MLS runs rejected", dc.mls_rejected, dc.mls_runs);
+    assert!(
+        share(&dc) > 2.0 * share(&rest),
+        "the crumpled surface rejected {:.1} % of the MLS runs, the unfolded ball {:.1} %: nothing failed",
+        100.0 * share(&dc),
+        100.0 * share(&rest)
+    );
+    assert!(
+        dc.mls_rejected > dc_long.mls_rejected,
+        "no iteration ran out unconverged: {} rejections at max_iter {}, {} at 1000",
+        dc.mls_rejected,
+        MlsParams::default().max_iter,
+        dc_long.mls_rejected
+    );
     let nan_ray = Ray::new(Vec3::new(f32::NAN, 0.0, 5.0), -Vec3::Z);
     assert!(tr.intersect(&nan_ray, None, &mut ctr).is_none() && !tr.occluded(&nan_ray, &mut ctr));
-    assert!(dc.mls_runs > 0);
 }
 
 /// Three-surface head: clipped surfaces meet; no hit lies outside the solid.
@@ -1237,10 +1307,17 @@ fn a_small_collection_keeps_the_others_neighbourhoods() {
 
 /// No explosion and bounded energy (the "the simulation conserves what it should"):
 /// a ball of overlapping shape-matching clusters, from soft to rigid, spinning in free flight
-/// or dropped onto a floor with restitution 0 and 1 and no damping, never exceeds its starting
-/// energy over 300 frames (without `World::cap_energy` the elastic drops reach 4× at
-/// stiffness 0.3 and explode at 1), stays above the floor, and keeps most of its energy
-/// where nothing dissipates it (free flight, elastic bounces of a deformable ball).
+/// or dropped onto a floor with restitution 0 and 1 and no damping, over 300 frames. The
+/// energy bounds are the scheme's own wherever it has one, with `World::cap_energy` off or
+/// asserted idle (the cap holds the energy at its start value whatever happens, so a bound
+/// it enforces tests nothing but the cap). Measured at stop 75 (cap off, peak energy ÷ start):
+/// free flight 1.032 / 1.041 / 1.047 at stiffness 0.3 / 0.8 / 1 (16-node clusters), 1.002
+/// rigid; inelastic drops and the rigid elastic drop 0.9986, the cap idle; the elastic drops
+/// of the deformable ball 3.8× at stiffness 0.3, 8.5× at 0.8 and 5.6·10²⁹× at 1 (exploded):
+/// those need the cap, which removes 1.0–4.7 times the drop energy over the 300 frames, from
+/// frame 136–205 on. There the test checks the cap itself: without it the energy grows past
+/// twice the start's, with it never past the start's, and the ball stays above the floor
+/// and keeps most of its energy.
 #[test]
 fn shape_matching_energy_stays_bounded() {
     let c = Vec3::new(0.0, 1.0, 0.0);
@@ -1248,27 +1325,45 @@ fn shape_matching_energy_stays_bounded() {
     for floor in [false, true] {
         for e in [0.0f32, 1.0] {
             for (stiffness, clusters) in [(0.3f32, 16usize), (0.8, 16), (1.0, 16), (1.0, 0)] {
-                let n = x.len();
-                let mut w = World::new(1.0 / 30.0, 4);
-                let params = BodyParams { stiffness, cluster_size: clusters, restitution: e, damping: 0.0, ..Default::default() };
-                let mut b = Body::new(x.clone(), vec![1.0; n], 0.05, params);
-                if !floor {
-                    // A spin and some shear, no gravity.
-                    for (j, v) in b.v.iter_mut().enumerate() {
-                        *v = Vec3::new(0.0, 3.0, 0.0).cross(b.x[j] - c) + Vec3::new(0.0, 0.0, 0.2 * (j % 3) as f32);
+                // The elastic drops of a deformable ball pump energy in at the contacts.
+                let needs_cap = floor && e == 1.0 && clusters > 0;
+                let world = |limit_energy: bool| {
+                    let n = x.len();
+                    let mut w = World::new(1.0 / 30.0, 4);
+                    let params = BodyParams { stiffness, cluster_size: clusters, restitution: e, damping: 0.0, ..Default::default() };
+                    let mut b = Body::new(x.clone(), vec![1.0; n], 0.05, params);
+                    if !floor {
+                        // A spin and some shear, no gravity.
+                        for (j, v) in b.v.iter_mut().enumerate() {
+                            *v = Vec3::new(0.0, 3.0, 0.0).cross(b.x[j] - c) + Vec3::new(0.0, 0.0, 0.2 * (j % 3) as f32);
+                        }
+                        w.gravity = Vec3::ZERO;
+                    } else {
+                        w.colliders.push(Collider::Plane { n: Vec3::Y, d: 0.0 });
                     }
-                    w.gravity = Vec3::ZERO;
-                } else {
-                    w.colliders.push(Collider::Plane { n: Vec3::Y, d: 0.0 });
-                }
-                w.bodies.push(b);
+                    w.bodies.push(b);
+                    w.limit_energy = limit_energy;
+                    w
+                };
+                // The cap on over a floor (asserted idle unless the drop needs it), off in
+                // free flight (it would trim the scheme's few per cent of drift).
+                let mut w = world(floor);
                 let e0 = w.energy().total();
                 let case = format!("floor {floor}, restitution {e}, stiffness {stiffness}, clusters {clusters}");
+                let bound = if floor { 1.0 + 1e-4 } else { 1.06 };
                 for f in 0..300 {
                     w.step_frame();
                     let en = w.energy().total();
-                    assert!(en <= e0 + 1e-4 * e0.abs().max(1.0), "{case}, frame {f}: energy {en} above the start's {e0}");
+                    assert!(en <= e0 * bound, "{case}, frame {f}: energy {en} above {bound} × the start's {e0}");
                     assert!(w.bodies[0].x.iter().all(|p| p.is_finite() && (!floor || p.y > -0.05)), "{case}, frame {f}");
+                }
+                let cap = w.cap_stats;
+                if needs_cap {
+                    assert!(cap.capped > 0 && cap.removed > 0.0, "{case}: the cap never acted: {cap:?}");
+                } else if floor {
+                    assert!(cap.checked == 1200 && cap.capped == 0, "{case}: the cap acted: {cap:?}");
+                } else {
+                    assert_eq!(cap.checked, 0, "{case}: the cap ran in free flight");
                 }
                 let kept = w.energy().total() / e0;
                 if !floor {
@@ -1276,6 +1371,16 @@ fn shape_matching_energy_stays_bounded() {
                 } else if e == 1.0 && clusters > 0 {
                     // (One rigid cluster loses energy at each contact anyway: 0.29 kept.)
                     assert!(kept > 0.5, "{case}: elastic bounces kept {kept} of the energy");
+                }
+                // What the cap is there for: the same drop without it gains energy.
+                if needs_cap && stiffness == 0.3 {
+                    let mut w = world(false);
+                    let peak = (0..300).map(|_| {
+                        w.step_frame();
+                        w.energy().total()
+                    });
+                    let peak = peak.fold(f64::NEG_INFINITY, f64::max);
+                    assert!(peak > 2.0 * e0, "{case}: without the cap the energy peaked at only {peak} (start {e0})");
                 }
             }
         }

@@ -294,6 +294,36 @@ fn compare_regions_split_the_error() {
     let whole_rmse = v["rmse"].as_f64().unwrap();
     assert!((f(1, "rmse").powi(2) * 0.5 + f(2, "rmse").powi(2) * 0.5 - whole_rmse.powi(2)).abs() < 1e-9, "halves' MSE make the whole's");
 
+    // A black reference region has no luminance to take a ratio of: its bias is n/a (null in
+    // JSON), not "+0.0%" (stop 75's review: it read as "no bias" where B is white).
+    let black: Vec<Vec3> = (0..(W * H) as usize).map(|i| if (i as u32 / W) < H / 2 { Vec3::ZERO } else { Vec3::splat(0.5) }).collect();
+    let (pk, pw) = (d.join("black.png"), d.join("white.png"));
+    io::write_png(&pk, &film_from(W, H, black)).unwrap();
+    io::write_png(&pw, &film_from(W, H, vec![Vec3::ONE; (W * H) as usize])).unwrap();
+    let (top, bottom) = (format!("top=0,0,{W},{}", H / 2), format!("bottom=0,{},{W},{H}", H / 2));
+    let args = |json: bool| {
+        let mut v: Vec<&std::ffi::OsStr> = vec!["compare".as_ref(), pk.as_os_str(), pw.as_os_str()];
+        v.extend::<[&std::ffi::OsStr; 4]>(["--region".as_ref(), top.as_ref(), "--region".as_ref(), bottom.as_ref()]);
+        if json {
+            v.push("--json".as_ref());
+        }
+        lodtrace(&v)
+    };
+    let o = args(false);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let row = |name: &str| out.lines().find(|l| l.trim_start().starts_with(name)).unwrap_or_else(|| panic!("{name}: {out}")).to_string();
+    assert!(row("top").contains(" n/a ") && !row("top").contains("+0.0%"), "{out}");
+    // B twice as bright there (8-bit sRGB rounding aside).
+    let bias = row("bottom").split_whitespace().find_map(|t| t.strip_prefix('+')?.strip_suffix('%')?.parse::<f64>().ok());
+    assert!(bias.is_some_and(|b| (b - 100.0).abs() < 2.0), "{out}");
+    let o = args(true);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let r = v["regions"].as_array().unwrap();
+    assert!(r[0].get("luma_bias").is_some_and(|b| b.is_null()), "{}", r[0]);
+    assert!((r[1]["luma_bias"].as_f64().unwrap() - 1.0).abs() < 0.02, "{}", r[1]);
+
     for bad in ["x=0,0,0,4", "x=0,0,4", "x=0,0,4,99999", "=0,0,4,4", "x=a,0,4,4"] {
         let o = lodtrace(&["compare".as_ref(), pa.as_os_str(), pb.as_os_str(), "--region".as_ref(), bad.as_ref()]);
         assert_eq!(o.status.code(), Some(2), "{bad}");

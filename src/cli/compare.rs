@@ -9,7 +9,8 @@
 //! (taken from the whole image's map), its share of the image's total FLIP error, and its
 //! RMSE — which part of a scene (the plants of `complex`, its floor) carries the error.
 //! Exit codes: 0 all thresholds met, 1 a threshold failed (each failure is named on stderr),
-//! 2 bad input (unreadable files, different sizes, bad thresholds).
+//! 2 bad input (unreadable files, different sizes, a NaN pixel or an infinity in one image
+//! only, bad thresholds).
 
 use crate::error::{Error, Result};
 use crate::film::{io, metrics};
@@ -104,7 +105,9 @@ pub struct RegionFigures {
     /// Relative luminance bias, mean Y(b) ÷ mean Y(a) − 1 (Rec. 709 weights on linear
     /// display values, clamped to [0, 1] as FLIP sees them): above 0 the image under test is brighter than the reference there (for
     /// foliage, typically too much coverage of a bright surface or too little of a dark one).
-    pub luma_bias: f64,
+    /// `None` (shown as n/a, `null` in JSON) where the reference region is black: the ratio
+    /// is undefined there.
+    pub luma_bias: Option<f64>,
     /// The part of the region's squared error at scales of [`SMOOTH_BLOCK`] pixels or more:
     /// Σ over blocks of n·(block mean of the difference)² ÷ Σ difference², per channel
     /// summed, on display values (clamped to [0, 1]). It is exact: the remainder is the
@@ -153,9 +156,15 @@ pub fn region_figures(r: &Region, flip: &[f32], total: f64, a: &[glam::Vec3], b:
         flip_mean: fsum / n as f64,
         flip_share: if total > 0.0 { fsum / total } else { 0.0 },
         rmse: (sq / (3 * n) as f64).sqrt(),
-        luma_bias: if ya > 0.0 { yb / ya - 1.0 } else { 0.0 },
+        luma_bias: (ya > 0.0).then(|| yb / ya - 1.0),
         smooth_share: if sq_display > 0.0 { (smooth / sq_display).min(1.0) } else { 0.0 },
     }
+}
+
+/// A luma bias as a signed percentage (`+1.2%`, with `sep` before the `%`), or `n/a` where
+/// it is undefined (a black reference region).
+pub fn luma_bias_text(b: Option<f64>, sep: &str) -> String {
+    b.map_or_else(|| "n/a".to_string(), |b| format!("{:+.1}{sep}%", 100.0 * b))
 }
 
 pub fn run(a: &CompareArgs) -> Result<i32> {
@@ -198,18 +207,24 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
     }
     let (w, h) = (wa, ha);
     // The metrics count a non-finite channel as 0: right where both images have the same
-    // infinity, an error of the finite value where only one has (a depth AOV where one view
-    // meets nothing), and a hidden fault in a beauty image (+inf against 0.25 counted as an
-    // error of 0.25; the sweep of stop 65). Said, so that a gate passed is not misread.
-    let inf = |p: &glam::Vec3, q: &glam::Vec3| (0..3).any(|c| (p[c].is_infinite() || q[c].is_infinite()) && p[c] != q[c]);
-    let mut at = ia.iter().zip(&ib).enumerate().filter(|(_, (p, q))| inf(p, q)).map(|(i, _)| i);
-    if let Some(i) = at.next() {
+    // infinity (a depth AOV's background, where no ray meets anything), but elsewhere +inf
+    // against 0.25 counted as an error of 0.25 and could pass a gate (the sweeps of stops 65
+    // and 75). An infinity in one image only is refused, as a NaN is (`io::read_image_linear`).
+    let inf = |p: &glam::Vec3, q: &glam::Vec3| (0..3).find(|&c| (p[c].is_infinite() || q[c].is_infinite()) && p[c] != q[c]);
+    let mut at = ia.iter().zip(&ib).enumerate().filter_map(|(i, (p, q))| inf(p, q).map(|c| (i, c)));
+    if let Some((i, c)) = at.next() {
         let n_inf = 1 + at.count();
-        crate::error::warn(format!(
-            "{n_inf} pixel{} infinite in one image and not the other (the first at ({}, {})): the metrics count an infinite value as 0, as for a depth AOV where a ray meets nothing; in a beauty image it is a fault they do not measure",
-            if n_inf == 1 { " is" } else { "s are" },
-            i as u32 % w,
-            i as u32 / w
+        let (p, q) = (ia[i][c], ib[i][c]);
+        let (file, v, other, ov) = if p.is_infinite() { (&a.a, p, &a.b, q) } else { (&a.b, q, &a.a, p) };
+        return Err(Error::parse(
+            file,
+            format!(
+                "pixel ({}, {}) is {v} where {} has {ov} ({n_inf} pixel{} infinite in one image only): the metrics cannot measure that difference; only infinities both images share (a depth AOV's background) are compared",
+                i as u32 % w,
+                i as u32 / w,
+                other.display(),
+                if n_inf == 1 { "" } else { "s" }
+            ),
         ));
     }
     // FLIP and SSIM judge display values clamped to [0, 1]: above 1 (HDR highlights, depth
@@ -290,13 +305,13 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
                 let rect = format!("{},{},{},{}", r.x0, r.y0, r.x1, r.y1);
                 let _ = writeln!(
                     text,
-                    "  {:<nw$}  {rect:>19}  {:>5.1}%  {:>9.6}  {:>10.1}%  {:>9.6}  {:>+9.1}%  {:>11.1}%",
+                    "  {:<nw$}  {rect:>19}  {:>5.1}%  {:>9.6}  {:>10.1}%  {:>9.6}  {:>10}  {:>11.1}%",
                     r.name,
                     100.0 * area,
                     g.flip_mean,
                     100.0 * g.flip_share,
                     g.rmse,
-                    100.0 * g.luma_bias,
+                    luma_bias_text(g.luma_bias, ""),
                     100.0 * g.smooth_share
                 );
             }
@@ -332,7 +347,7 @@ mod tests {
         // Blocks cut by the region's edges (21×13 is not a multiple of 8) still sum exactly.
         let g = figures(|_, _| Vec3::splat(0.6), region(0, 0, 21, 13));
         assert!((g.smooth_share - 1.0).abs() < 1e-9, "{g:?}");
-        assert!((g.luma_bias - 0.2).abs() < 1e-6, "{g:?}");
+        assert!((g.luma_bias.unwrap() - 0.2).abs() < 1e-6, "{g:?}");
         assert!((g.rmse - 0.1).abs() < 1e-6, "{g:?}");
         assert!((g.flip_mean - 0.1).abs() < 1e-6 && (g.flip_share - 1.0).abs() < 1e-6, "{g:?}");
     }
@@ -342,7 +357,7 @@ mod tests {
         // ±0.1 in a pixel checkerboard: every 8×8 block (even sides) averages to zero.
         let g = figures(|x, y| Vec3::splat(if (x + y) % 2 == 0 { 0.6 } else { 0.4 }), region(1, 2, 17, 10));
         assert!(g.smooth_share.abs() < 1e-9, "{g:?}");
-        assert!(g.luma_bias.abs() < 1e-6, "{g:?}");
+        assert!(g.luma_bias.unwrap().abs() < 1e-6, "{g:?}");
         assert!((g.rmse - 0.1).abs() < 1e-6, "{g:?}");
     }
 
@@ -352,15 +367,18 @@ mod tests {
         // per pixel and channel, so half the squared error is smooth.
         let g = figures(|x, y| Vec3::splat(if (x + y) % 2 == 0 { 0.7 } else { 0.5 }), region(0, 0, 16, 8));
         assert!((g.smooth_share - 0.5).abs() < 1e-9, "{g:?}");
-        // A black reference region: no bias figure to divide by, reported as 0, not NaN.
+        // A black reference region: no bias figure to divide by, reported as undefined (n/a),
+        // not NaN and not 0 (which read as "no bias").
         let w = 4u32;
         let a = vec![Vec3::ZERO; 16];
         let b = vec![Vec3::ONE; 16];
         let z = region_figures(&region(0, 0, 4, 4), &[0.0; 16], 0.0, &a, &b, w);
-        assert!(z.luma_bias == 0.0 && z.flip_share == 0.0 && z.smooth_share == 1.0, "{z:?}");
+        assert!(z.luma_bias.is_none() && z.flip_share == 0.0 && z.smooth_share == 1.0, "{z:?}");
+        assert_eq!(luma_bias_text(z.luma_bias, ""), "n/a");
+        assert_eq!(luma_bias_text(Some(0.0123), " "), "+1.2 %");
         // A highlight far above 1 counts as display white for bias, not as 9.5² of error.
         let g = figures(|x, y| Vec3::splat(if (x, y) == (3, 3) { 10.0 } else { 0.5 }), region(0, 0, 8, 8));
-        assert!((g.luma_bias - 0.5 / 64.0 / 0.5).abs() < 1e-9, "{g:?}");
+        assert!((g.luma_bias.unwrap() - 0.5 / 64.0 / 0.5).abs() < 1e-9, "{g:?}");
         assert!((g.smooth_share - 1.0 / 64.0).abs() < 1e-9, "{g:?}");
     }
 }

@@ -133,7 +133,7 @@ pub use displace::{DeformField, DeformedSurfel, SimNodes};
 pub use mls::MlsParams;
 pub use object::{ObjectParams, SurfelObject};
 pub use sequences::{FrameNodes, Recording, Sequence, SequenceOptions};
-pub use sim::{Body, BodyParams, Collider, World};
+pub use sim::{Body, BodyParams, CapStats, Collider, World};
 pub use surfel::{Collection, SurfelModel, SurfelSoa};
 pub use trace::{DeformCounters, DeformScene, DeformTracer, FrameStats, LevelRatio, SurfelHit, TraceParams, UpdateMode};
 
@@ -146,7 +146,7 @@ pub enum DeformError {
     Ply { path: PathBuf, msg: String },
     #[error("invalid surfel {index}: {msg}")]
     BadSurfel { index: usize, msg: String },
-    #[error("duplicate points: surfels {a} and {b} have the same position")]
+    #[error("duplicate points: surfels {a} and {b} have the same position (equal as f32 numbers)")]
     DuplicatePoint { a: usize, b: usize },
     #[error("too small to sample: {0}")]
     TooSmall(String),

@@ -123,7 +123,25 @@ impl Sequence {
     /// floor like [`Sequence::from_mesh`]; the file's radii are kept (scaled with the model).
     pub fn from_points(model: SurfelModel, opts: &SequenceOptions) -> Result<Sequence, DeformError> {
         let name = model.collections.first().map(|c| c.name.clone()).unwrap_or_else(|| "points".into());
-        Ok(Self::dropped(&name, surfel_object(&name, model.surfels, opts, 1.0, Vec3::new(0.0, 0.5, 0.0))?))
+        let file = model.surfels.positions();
+        let (lo, hi) = file.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+        let (sc, shift) = placement(lo, hi, 1.0, Vec3::new(0.0, 0.5, 0.0));
+        let obj = surfel_object(&name, model.surfels, opts, 1.0, Vec3::new(0.0, 0.5, 0.0)).map_err(|e| match e {
+            // Distinct in the file (its own duplicates are refused when it is read), but one
+            // f32 position once scaled and moved into the scene: say how close is too close.
+            DeformError::DuplicatePoint { a, b } => {
+                let at = file[a] * sc + shift;
+                let ulp = at.abs().max_element();
+                let ulp = f32::from_bits(ulp.to_bits() + 1) - ulp;
+                DeformError::Invalid(format!(
+                    "'{name}': surfels {a} and {b} are {:.3e} apart, closer than f32 can tell apart once the model is scaled to the sequence's size (about {:.1e} in the file's units there); merge them or drop one",
+                    (file[a] - file[b]).length(),
+                    ulp / sc
+                ))
+            }
+            e => e,
+        })?;
+        Ok(Self::dropped(&name, obj))
     }
 
     fn dropped(name: &str, (obj, nodes, radius): (Arc<SurfelObject>, Vec<Vec3>, f32)) -> Sequence {
@@ -285,6 +303,16 @@ fn mesh_object(mesh: &Mesh, opts: &SequenceOptions, height: f32, base: Vec3) -> 
     })
 }
 
+/// The scale and shift that place points of the box `lo`..`hi` in a sequence
+/// (`p · sc + shift`): the larger of (height, half the longest side) becomes `height` (tall
+/// objects get exactly this height, flat ones are not blown up), the bottom centre goes to
+/// `base`.
+fn placement(lo: Vec3, hi: Vec3, height: f32, base: Vec3) -> (f32, Vec3) {
+    let ext = hi - lo;
+    let sc = height / ext.y.max(0.5 * ext.max_element()).max(1e-20);
+    (sc, base - Vec3::new(0.5 * (lo.x + hi.x), lo.y, 0.5 * (lo.z + hi.z)) * sc)
+}
+
 /// A surfel set (sampled from a mesh or read from a point file) scaled to `height`, standing
 /// on `base`, with simulation nodes clustered from its surfels.
 fn surfel_object(
@@ -299,10 +327,8 @@ fn surfel_object(
         lo = lo.min(s.pos(i));
         hi = hi.max(s.pos(i));
     }
-    // Scale so the larger of (height, half the longest side) becomes `height`: tall objects
-    // get exactly this height, flat ones are not blown up.
     let ext = hi - lo;
-    // The model is rescaled below, but its surfel radii and neighbourhoods were measured in
+    // The model is rescaled below ([`placement`]), but its surfel radii and neighbourhoods were measured in
     // its own units, where squared distances of a 1e-30-sized model underflow f32 (stop 46's
     // sweep: NaN radius ratios and a garbage frame, exit 0).
     let far = lo.abs().max(hi.abs()).max_element();
@@ -312,8 +338,7 @@ fn surfel_object(
             "'{name}' spans only {size:.3e} units at coordinates up to {far:.3e}: too small for f32 (at least 1e-6 × (1 + its largest coordinate)); scale it up"
         )));
     }
-    let sc = height / ext.y.max(0.5 * ext.max_element()).max(1e-20);
-    let shift = base - Vec3::new(0.5 * (lo.x + hi.x), lo.y, 0.5 * (lo.z + hi.z)) * sc;
+    let (sc, shift) = placement(lo, hi, height, base);
     for i in 0..s.len() {
         let p = s.pos(i) * sc + shift;
         s.px[i] = p.x;

@@ -171,9 +171,10 @@ impl MethodSpec {
             }
             seen.push(key);
             if let Some((k, v)) = p.split_once('=') {
-                let num = |v: &str| {
-                    v.parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0).ok_or_else(|| bad(format!("bad value '{v}' for {k}")))
-                };
+                // Any number: its range is checked where `render` checks the option the key
+                // sets (`plan`: `c=-1` is "--oversampling -1 out of range (1..=10000)"), so
+                // the two cannot drift apart and the error names the allowed values.
+                let num = |v: &str| v.parse::<f64>().map_err(|_| bad(format!("bad value '{v}' for {k}: a number")));
                 // Counts are whole numbers: `k=2.5` is an error, not k = 2.
                 let int = |v: &str| {
                     v.parse::<u32>().map_err(|_| {
@@ -897,7 +898,9 @@ pub(crate) fn plan(a: &BenchArgs) -> Result<Plan> {
             e => e,
         };
         s.opts(a.width, a.height, a.threads, true).validate().map_err(named)?;
-        if matches!(s.method, Method::Multires | Method::Cone) {
+        // The octree baseline takes the build keys (k, c, pw) as well.
+        let octree = matches!(s.method, Method::Whitted | Method::Distributed) && s.accel == AccelKind::Octree;
+        if matches!(s.method, Method::Multires | Method::Cone) || octree {
             let (_, tp) = s.multires.params(s.method == Method::Multires).map_err(named)?;
             tp.validate().map_err(named)?;
         }
@@ -1364,7 +1367,11 @@ pub fn table_string(report: &BenchReport) -> String {
         for r in report.rows.iter().filter(|r| !r.regions.is_empty()) {
             s.push_str(&format!("| {} | {} |", r.scene, r.spec));
             for g in &r.regions {
-                s.push_str(&format!(" {:+.1} % / {:.0} % |", 100.0 * g.figures.luma_bias, 100.0 * g.figures.smooth_share));
+                s.push_str(&format!(
+                    " {} / {:.0} % |",
+                    crate::cli::compare::luma_bias_text(g.figures.luma_bias, " "),
+                    100.0 * g.figures.smooth_share
+                ));
             }
             s.push('\n');
         }

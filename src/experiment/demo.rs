@@ -721,10 +721,10 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
                 for g in &row.regions {
                     let _ = write!(
                         h,
-                        "<td>{:.4} ({:.0} %)<br><small>{:+.1} % / {:.0} % smooth</small></td>",
+                        "<td>{:.4} ({:.0} %)<br><small>{} / {:.0} % smooth</small></td>",
                         g.figures.flip_mean,
                         100.0 * g.figures.flip_share,
-                        100.0 * g.figures.luma_bias,
+                        crate::cli::compare::luma_bias_text(g.figures.luma_bias, " "),
                         100.0 * g.figures.smooth_share
                     );
                 }

@@ -288,16 +288,25 @@ pub struct LodScenes {
     pub build_seconds: f64,
 }
 
-impl LodScenes {
-    pub fn build(scene: &Scene, p: &ChainParams) -> Result<LodScenes> {
-        if p.levels == 0 || p.levels > MAX_LEVELS {
-            return Err(Error::Usage(format!("--lod-levels {} out of range (1..=8)", p.levels)));
+impl ChainParams {
+    /// The ranges of `--lod-levels` and `--lod-distance` (checked again by
+    /// [`LodScenes::build`]; `LodArgs::params` checks them before any work).
+    pub fn validate(&self) -> Result<()> {
+        if self.levels == 0 || self.levels > MAX_LEVELS {
+            return Err(Error::Usage(format!("--lod-levels {} out of range (1..={MAX_LEVELS})", self.levels)));
         }
-        if let Some(d) = p.distance {
+        if let Some(d) = self.distance {
             if !(d.is_finite() && d > 0.0) {
                 return Err(Error::Usage(format!("--lod-distance {d} must be a positive distance")));
             }
         }
+        Ok(())
+    }
+}
+
+impl LodScenes {
+    pub fn build(scene: &Scene, p: &ChainParams) -> Result<LodScenes> {
+        p.validate()?;
         let t0 = Instant::now();
         let lvl_max = p.levels - 1;
         let leaves = scene.leaf_instances()?;

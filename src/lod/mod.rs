@@ -106,9 +106,7 @@ impl LodArgs {
         };
         p.validate()?;
         let c = ChainParams { levels: self.lod_levels, distance: self.lod_distance };
-        if c.levels == 0 || c.levels > chain::MAX_LEVELS {
-            return Err(crate::error::Error::Usage(format!("--lod-levels {} out of range (1..=8)", c.levels)));
-        }
+        c.validate()?;
         Ok((c, p))
     }
 }

@@ -174,13 +174,17 @@ struct SurfaceLines<R> {
 }
 
 /// Counts of `vt` and `vn` lines so far, the largest index the faces name of each (with its
-/// line) and the first face line naming a relative index before the file's start.
+/// line), the first face line naming a relative index before the file's start, and the
+/// first face of fewer than 3 vertices (line, face number, vertices): tobj keeps `f 1 2` as
+/// a line and `f 1` as a point, and both were dropped from the mesh without a word.
 #[derive(Default)]
 struct FaceRefs {
     line_no: usize,
     count: [i64; 2],
     max: [(i64, usize); 2],
     before_start: Option<(usize, &'static str, i64)>,
+    faces: usize,
+    short_face: Option<(usize, usize, usize)>,
 }
 
 const REF_KIND: [&str; 2] = ["texture coordinate", "normal"];
@@ -194,6 +198,11 @@ impl FaceRefs {
             Some("vt") => self.count[0] += 1,
             Some("vn") => self.count[1] += 1,
             Some("f") => {
+                let n = w.clone().count();
+                if n < 3 && self.short_face.is_none() {
+                    self.short_face = Some((self.line_no, self.faces, n));
+                }
+                self.faces += 1;
                 for v in w {
                     for (k, part) in v.split('/').skip(1).take(2).enumerate() {
                         let Ok(i) = part.parse::<i64>() else { continue };
@@ -209,15 +218,22 @@ impl FaceRefs {
             _ => {}
         }
     }
-    /// The first bad reference, as an error message.
+    /// The first bad reference or short face (the one on the earliest line), as an error
+    /// message.
     fn error(&self) -> Option<String> {
+        let mut found: Vec<(usize, String)> = Vec::new();
         if let Some((line, kind, i)) = self.before_start {
-            return Some(format!("line {line}: a face names {kind} {i}, before the file's first"));
+            found.push((line, format!("line {line}: a face names {kind} {i}, before the file's first")));
         }
-        (0..2).find(|&k| self.max[k].0 > self.count[k]).map(|k| {
+        if let Some(k) = (0..2).find(|&k| self.max[k].0 > self.count[k]) {
             let (i, line) = self.max[k];
-            format!("line {line}: a face names {} {i}, but the file has {} of them", REF_KIND[k], self.count[k])
-        })
+            found.push((line, format!("line {line}: a face names {} {i}, but the file has {} of them", REF_KIND[k], self.count[k])));
+        }
+        if let Some((line, f, n)) = self.short_face {
+            // As the OFF loader's "face 0 has 2 vertices (3 to 1000)".
+            found.push((line, format!("line {line}: face {f} has {n} vert{} (at least 3)", if n == 1 { "ex" } else { "ices" })));
+        }
+        found.into_iter().min_by_key(|(line, _)| *line).map(|(_, m)| m)
     }
 }
 
