@@ -161,39 +161,83 @@ fn instance_level_points_keep_a_tiled_floor_opaque_and_exact() {
     }
 }
 
-/// Issue test: weight sums ≥ 1 inside a surface at the point levels (spheres and tilted
-/// planes, many footprint sizes), up to the Monte-Carlo noise of the prefiltering.
+/// An 8×8 plane (128×128 cells, one colour) through the origin with unit normal `n`, seen
+/// from 4 units away along `n` turned by `view` radians, in mesh space (the hierarchy is
+/// built there, so the plane is tilted against the octree's axes).
+fn tilted_plane_scene(n: Vec3, view: f32) -> Scene {
+    let mut scene = square_scene(Vec3::splat(0.5), 4.0);
+    scene.meshes[0] = builtin::checkerboard(128, 8.0, 0, 0);
+    let r = glam::Quat::from_rotation_arc(Vec3::Y, n);
+    let m = &mut scene.meshes[0];
+    for v in 0..m.px.len() {
+        let p = r * Vec3::new(m.px[v], m.py[v], m.pz[v]);
+        (m.px[v], m.py[v], m.pz[v]) = (p.x, p.y, p.z);
+        let q = r * Vec3::new(m.nx[v], m.ny[v], m.nz[v]);
+        (m.nx[v], m.ny[v], m.nz[v]) = (q.x, q.y, q.z);
+    }
+    let root = scene.root as usize;
+    scene.groups[root].children[0].xform = Affine3A::IDENTITY;
+    let side = n.cross(if n.x.abs() < 0.9 { Vec3::X } else { Vec3::Z }).normalize();
+    scene.camera.eye = glam::Quat::from_axis_angle(side, view) * n * 4.0;
+    scene.camera.up = side;
+    scene.validate().unwrap();
+    scene
+}
+
+/// Issue test: weight sums ≥ 1 inside a surface at the point levels (§4.3: "the weights of
+/// overlapping points sum to at least one inside the surface"), on a sphere and on tilted
+/// planes (normal (1, 1, 1) seen head-on; 30° off the y axis, seen 60° off its normal), many
+/// footprint sizes (cone scales 3, 6, 12: points, with triangles at the finest), the whole
+/// footprint inside the surface (the planes are 8 units wide, the footprints' 2% ellipses at
+/// most 1.6). The sums are Monte-Carlo estimates (the voxel occupancy and the area per point
+/// come from random samples), held above 1 by the point weights' 10% margin
+/// (`POINT_MARGIN`) and by the mipmap blend (with `mipmap: false` a footprint down to half
+/// the spacing, where λ = 2 lets the points in, samples the grid too coarsely: sums 0.74–0.85
+/// on these planes). Measured minima: 1.023 (sphere), 1.036 and 1.026 (planes); typical
+/// sums 1.05–1.2, about 2 where coverage-weighted triangles join the points (the (1, 1, 1)
+/// plane at scale 3) or the footprint spans the whole sphere (scale 12: front and back
+/// merge). (Until the test review the bound was 0.9 and only the sphere was tested.)
 #[test]
 fn point_weight_sums_cover_the_surface() {
-    let mut scene = Scene::empty("ball");
+    let mut ball = Scene::empty("ball");
     let mut m = builtin::uv_sphere(64, 128, 0);
     m.compute_normals();
-    let id = scene.add_mesh(m);
-    scene.instance(Target::Mesh(id), Affine3A::IDENTITY, None);
-    scene.camera = Camera { eye: Vec3::new(0.3, 0.2, 6.0), look: Vec3::ZERO, up: Vec3::Y, fovy: 30.0, aperture: 0.0, focal_dist: 6.0 };
-    scene.validate().unwrap();
-    let ms = MultiresScene::build(&scene, &BuildParams::default()).unwrap();
-    let abort = AtomicBool::new(false);
-    let cam = scene.camera.frame(64, 64);
-    let mut sc = Scratch::default();
-    let mut c = Counters::default();
-    let mut sums = vec![];
-    for cone_scale in [3.0f32, 6.0, 12.0] {
-        // The whole footprint's sum: no early termination at alpha 1 inside a fragment.
-        let tp = TraceParams { cone_scale, termination: Termination::Final, ..Default::default() };
-        let tr = Tracer::new(&ms, &tp, 1e-7, &abort, None);
-        // Pixels well inside the sphere's disc (radius ≈ 15 pixels around the centre).
-        for (i, j) in [(32, 32), (28, 30), (36, 34), (30, 36), (34, 27)] {
-            let mut ab = ABuffer::new(16);
-            tr.traverse(&Cone::primary(&cam, i, j, cone_scale, 1.0), &mut ab, Collect::Alpha, &mut sc, &mut c);
-            sums.push(ab.frags.first().map(|f| f.w).unwrap_or(0.0));
+    let id = ball.add_mesh(m);
+    ball.instance(Target::Mesh(id), Affine3A::IDENTITY, None);
+    ball.camera = Camera { eye: Vec3::new(0.3, 0.2, 6.0), look: Vec3::ZERO, up: Vec3::Y, fovy: 30.0, aperture: 0.0, focal_dist: 6.0 };
+    ball.validate().unwrap();
+    // Pixels well inside the sphere's disc (radius ≈ 15 pixels around the centre); a 3×3
+    // grid 4 pixels apart on the planes.
+    let ball_px = vec![(32, 32), (28, 30), (36, 34), (30, 36), (34, 27)];
+    let grid: Vec<(u32, u32)> = (0..9).map(|k| (28 + 4 * (k % 3), 28 + 4 * (k / 3))).collect();
+    let cases = [
+        ("sphere", ball, ball_px),
+        ("plane (1,1,1) head-on", tilted_plane_scene(Vec3::ONE.normalize(), 0.0), grid.clone()),
+        ("plane 30° seen at 60°", tilted_plane_scene(glam::Quat::from_rotation_x(30f32.to_radians()) * Vec3::Y, 60f32.to_radians()), grid),
+    ];
+    for (name, scene, pixels) in cases {
+        let ms = MultiresScene::build(&scene, &BuildParams::default()).unwrap();
+        let abort = AtomicBool::new(false);
+        let cam = scene.camera.frame(64, 64);
+        let mut sc = Scratch::default();
+        let mut c = Counters::default();
+        let mut sums = vec![];
+        for cone_scale in [3.0f32, 6.0, 12.0] {
+            // The whole footprint's sum: no early termination at alpha 1 inside a fragment.
+            let tp = TraceParams { cone_scale, termination: Termination::Final, ..Default::default() };
+            let tr = Tracer::new(&ms, &tp, 1e-7, &abort, None);
+            for &(i, j) in &pixels {
+                let mut ab = ABuffer::new(16);
+                tr.traverse(&Cone::primary(&cam, i, j, cone_scale, 1.0), &mut ab, Collect::Alpha, &mut sc, &mut c);
+                // The front fragment (the sphere's far side is a second one).
+                assert!(!ab.frags.is_empty() && (ab.frags.len() == 1 || name == "sphere"), "{name}: {} fragments", ab.frags.len());
+                sums.push(ab.frags[0].w);
+            }
         }
+        assert!(c.get(lodtrace::core::stats::Counter::surfel_tests) > 0, "{name}: no point level reached");
+        let min = sums.iter().cloned().fold(f32::INFINITY, f32::min);
+        assert!(min >= 1.0, "{name}: a weight sum of {min} inside the surface ({sums:?})");
     }
-    assert!(c.get(lodtrace::core::stats::Counter::surfel_tests) > 0);
-    let min = sums.iter().cloned().fold(f32::INFINITY, f32::min);
-    let mean = sums.iter().sum::<f32>() / sums.len() as f32;
-    assert!(mean >= 1.0, "mean weight sum {mean} < 1 ({sums:?})");
-    assert!(min >= 0.9, "a weight sum of {min} inside the surface ({sums:?})");
 }
 
 /// Area point weights (the default; a documented deviation): a diagonal plane's interior

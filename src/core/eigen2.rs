@@ -17,8 +17,13 @@
 //! conditioned. It is normalised, unless its length is ≤ 10⁻⁶·λ₁ (isotropic to rounding:
 //! d ≲ 5–7·10⁻⁷ λ₁), in which case the axis is (1, 0). To stay finite over the whole f32 range,
 //! Σ is first scaled by 2⁻⁸⁰ when its largest entry exceeds 2⁶⁰ (by 2⁸⁰ when it is below
-//! 2⁻⁶⁰) and the semi-axes are scaled back by 2⁴⁰ (2⁻⁴⁰): powers of two, so no extra rounding
-//! unless a much smaller entry underflows. (Unscaled, h² + b² overflows for entries ≳ 1.3·10¹⁹.)
+//! 2⁻⁴⁰) and the semi-axes are scaled back by 2⁴⁰ (2⁻⁴⁰): powers of two, so no extra rounding
+//! unless a much smaller entry underflows. (Unscaled, h² + b² overflows for entries ≳ 1.3·10¹⁹;
+//! and h² + b² must stay normal for h, b down to 2⁻²⁴ of the largest entry: until the f64
+//! reference test, Σ was scaled up only below 2⁻⁶⁰, and between 2⁻⁶⁰ and ≈ 2⁻⁵⁰ the squares of
+//! a small anisotropy underflowed: up to 3.6·10⁻⁵·λ₁ eigenvalue error, ≈ 300 ε, and a round
+//! footprint with axis (1, 0) for anisotropies below ≈ 10⁻⁴. Without effect on renders:
+//! their floor, 10⁻⁷, is above such semi-axes, ≤ 3·10⁻⁸.)
 //!
 //! **Clamp and floor (§5.1).** The paper bounds the minimum eigenvalue to a fraction
 //! (1/4–1/16) of the maximum. We apply the fraction `clamp` ∈ (0, 1] to the *semi-axes*
@@ -143,10 +148,11 @@ pub struct Eigen2x4 {
 }
 
 /// Range scaling: entries above `BIG` are scaled by `DOWN` (semi-axes back by `DOWN_S⁻¹`),
-/// below `TINY` by `UP`. After scaling the largest entry t ∈ [2⁻⁶⁹, 2⁶⁰], so every square
-/// below (≤ 10 t²) is finite and mostly normal.
+/// below `TINY` by `UP`. After scaling the largest entry t ∈ [2⁻⁶⁹, 2⁶⁰] (at least 2⁻⁴⁰ for
+/// entries from 2⁻¹²⁰ on), so every square below (≤ 10 t²) is finite, and the squares of
+/// entries down to 2⁻²³·t are normal.
 const BIG: f32 = (1u64 << 60) as f32;
-const TINY: f32 = 1.0 / (1u64 << 60) as f32;
+const TINY: f32 = 1.0 / (1u64 << 40) as f32;
 const DOWN: f32 = 1.0 / (1u128 << 80) as f32;
 const UP: f32 = (1u128 << 80) as f32;
 /// √DOWN⁻¹ and √UP⁻¹: multiply the semi-axes of the scaled Σ by these.
@@ -521,6 +527,124 @@ mod tests {
         if !iso {
             assert!((x.cos * e.cos + x.sin * e.sin).abs() > 1.0 - 1e-4, "{m:?}: axis {x:?} vs {e:?}");
         }
+    }
+
+    /// Independent reference: nalgebra's `SymmetricEigen` in f64 on the same (f32) entries.
+    /// Returns λ₁ ≥ λ₂ and the unit eigenvector of λ₁.
+    fn reference(m: Sym2) -> (f64, f64, [f64; 2]) {
+        let (a, b, c) = (m.a as f64, m.b as f64, m.c as f64);
+        let e = nalgebra::Matrix2::new(a, b, b, c).symmetric_eigen();
+        let (i, j) = if e.eigenvalues[0] >= e.eigenvalues[1] { (0, 1) } else { (1, 0) };
+        let v = e.eigenvectors.column(i);
+        (e.eigenvalues[i], e.eigenvalues[j], [v[0], v[1]])
+    }
+
+    /// Footprints of the hard kinds, entries from 10⁻³⁰ to 10³⁰ (both range scalings):
+    /// exactly rank 1 (colinear footprint columns: Σ = s·(cos², cos·sin, sin²)), near-singular
+    /// (λ₂/λ₁ from 10⁻¹ to 10⁻¹⁴), nearly isotropic ((λ₁ − λ₂)/λ₁ from 10⁻¹ to 10⁻⁹), and
+    /// axis-aligned and exactly isotropic ones; Σ is formed in f64 and rounded to f32 (the
+    /// reference decomposes the rounded entries).
+    fn hard_footprints() -> Vec<Sym2> {
+        let mut r = crate::core::rng::Sampler::new(17, 0, 0);
+        let mut out = vec![];
+        let sym = |l1: f64, l2: f64, phi: f64| {
+            let (co, si) = (phi.cos(), phi.sin());
+            Sym2 { a: (l1 * co * co + l2 * si * si) as f32, b: ((l1 - l2) * co * si) as f32, c: (l1 * si * si + l2 * co * co) as f32 }
+        };
+        for i in 0..6000 {
+            let scale = 10f64.powf(r.next() as f64 * 60.0 - 30.0);
+            let phi = r.next() as f64 * std::f64::consts::TAU;
+            let rel = match i % 3 {
+                0 => 0.0,
+                1 => 10f64.powf(-1.0 - 13.0 * r.next() as f64),
+                _ => 1.0 - 10f64.powf(-1.0 - 8.0 * r.next() as f64),
+            };
+            out.push(sym(scale, scale * rel, phi));
+        }
+        for phi in [0.0, std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_4, std::f64::consts::PI] {
+            for (l1, l2) in [(1.0, 0.0), (4.0, 1.0), (1.0, 1.0), (1e20, 1e-20), (1e-20, 0.0)] {
+                out.push(sym(l1, l2, phi));
+            }
+        }
+        // Small footprints, 10⁻⁵ anisotropic, in the range (2⁻⁶⁰ to 2⁻⁴⁰) that was not scaled
+        // until this test: (a − c)² and b² underflowed, and the decomposition came out round.
+        for e in [-59, -55, -50, -45, -41] {
+            let l = 2f64.powi(e);
+            out.push(sym(l, l * (1.0 - 1e-5), 0.3));
+            out.push(sym(l, l * (1.0 - 1e-3), 1.1));
+        }
+        out
+    }
+
+    /// `kernel`'s decomposition `e` of `m` against the reference; `worst`: the largest relative
+    /// errors seen (eigenvalues, axis angle).
+    fn against_reference(kernel: &str, m: Sym2, e: Eigen2, worst: &mut (f64, f64)) {
+        // Tolerances (f32 ε = 1.2·10⁻⁷), relative to the largest eigenvalue λ₁: both λᵢ within
+        // 4ε·λ₁ (mean, h, d, λ = mean ± d, √λ and the reference's s² each round once, by at
+        // most ε/2 of λ₁: measured 1.8ε); the major axis (up to sign) within 4ε rad (measured
+        // 0.7ε), wherever λ₁ − λ₂ > 2·10⁻⁶·λ₁: the axis is formed from (d + |h|, b) without
+        // cancellation (h = (a − c)/2 is exact for close a, c), so it is accurate in absolute
+        // terms however small the gap; at gaps ≤ 1.42·10⁻⁶·λ₁ (the vector's squared norm
+        // ≤ 10⁻¹²·λ₁²) the decomposition treats Σ as isotropic (axis (1, 0), module docs).
+        const TOL: f64 = 4.0 * f32::EPSILON as f64;
+        let (l1, l2, v) = reference(m);
+        let (s1, s2) = (e.s1 as f64, e.s2 as f64);
+        let (d1, d2) = ((s1 * s1 - l1).abs() / l1, (s2 * s2 - l2.max(0.0)).abs() / l1);
+        assert!(d1 <= TOL && d2 <= TOL, "{kernel} {m:?}: s² = ({}, {}) vs λ = ({l1}, {l2}) (relative {d1:e}, {d2:e})", s1 * s1, s2 * s2);
+        worst.0 = worst.0.max(d1).max(d2);
+        if l1 - l2 > 2e-6 * l1 {
+            let sin = (e.cos as f64 * v[1] - e.sin as f64 * v[0]).abs();
+            assert!(
+                sin <= TOL,
+                "{kernel} {m:?}: axis ({}, {}) vs ({}, {}): {sin:e} rad, gap {:e}",
+                e.cos,
+                e.sin,
+                v[0],
+                v[1],
+                (l1 - l2) / l1
+            );
+            worst.1 = worst.1.max(sin);
+        }
+    }
+
+    /// The scalar decomposition and the 4- and 8-wide packets (and the AVX2 kernel where the
+    /// CPU has it) against an independent f64 reference on rank-1, near-singular and nearly
+    /// isotropic footprints (the "eigen-decomposition against a reference").
+    #[test]
+    fn matches_f64_reference_on_hard_footprints() {
+        let ms = hard_footprints();
+        let (clamp, floor) = (1e-9f32, 1e-37f32);
+        let mut worst = [(0.0, 0.0); 4];
+        for chunk in ms.chunks(8) {
+            let mut m8 = [Sym2::default(); 8];
+            m8[..chunk.len()].copy_from_slice(chunk);
+            let (a, b, c) = (m8.map(|m| m.a), m8.map(|m| m.b), m8.map(|m| m.c));
+            let e8 = eigen_x8(f32x8::from(a), f32x8::from(b), f32x8::from(c), clamp, floor);
+            let x8 = unpack(e8.cos.to_array(), e8.sin.to_array(), e8.s1.to_array(), e8.s2.to_array());
+            let mut x4 = vec![];
+            for h in 0..2 {
+                let q = |v: [f32; 8]| f32x4::from([v[4 * h], v[4 * h + 1], v[4 * h + 2], v[4 * h + 3]]);
+                let e4 = eigen_x4(q(a), q(b), q(c), clamp, floor);
+                x4.extend(unpack(e4.cos.to_array(), e4.sin.to_array(), e4.s1.to_array(), e4.s2.to_array()));
+            }
+            #[cfg(target_arch = "x86_64")]
+            let avx = avx2_fma_available().then(|| {
+                // SAFETY: AVX2 and FMA were just detected.
+                let e = unsafe { eigen_x8_avx2(f32x8::from(a), f32x8::from(b), f32x8::from(c), clamp, floor) };
+                unpack(e.cos.to_array(), e.sin.to_array(), e.s1.to_array(), e.s2.to_array())
+            });
+            #[cfg(not(target_arch = "x86_64"))]
+            let avx: Option<Vec<Eigen2>> = None;
+            for (l, &m) in chunk.iter().enumerate() {
+                against_reference("eigen_1", m, eigen_1(m, clamp, floor), &mut worst[0]);
+                against_reference("eigen_x4", m, x4[l], &mut worst[1]);
+                against_reference("eigen_x8", m, x8[l], &mut worst[2]);
+                if let Some(x) = &avx {
+                    against_reference("eigen_x8_avx2", m, x[l], &mut worst[3]);
+                }
+            }
+        }
+        eprintln!("worst relative errors (eigenvalues, axis) scalar/x4/x8/avx2: {worst:?}");
     }
 
     #[test]

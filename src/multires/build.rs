@@ -430,7 +430,7 @@ impl PointTree {
     pub fn point_pos(&self, node: usize, i: usize) -> Vec3 {
         let st = self.code_step(self.nodes.depth[node]);
         let p = &self.points;
-        self.nodes.grid_lo[node] + (Vec3::new(p.qx[i] as f32, p.qy[i] as f32, p.qz[i] as f32) + 0.5) * st
+        quant::decode_pos([p.qx[i], p.qy[i], p.qz[i]], self.nodes.grid_lo[node], st)
     }
     pub fn memory_bytes(&self) -> usize {
         self.nodes.bytes() + self.points.bytes() + self.tri_index.len() * 4
@@ -725,15 +725,13 @@ fn build_node(ctx: &Ctx, tris: Vec<u32>, cube_lo: Vec3, side: f32, depth: u32) -
         let mut nbr: Vec<(u32, f32)> = Vec::new();
         for &cell in &reps {
             let (cx, cy, cz) = ((cell as i32) % g, (cell as i32 / g) % g, cell as i32 / (g * g));
-            let cell_lo = grid_lo + Vec3::new(cx as f32, cy as f32, cz as f32) * h;
             // The representative sits at the mean of its voxel's samples, in the 8-bit
             // position codes (module docs: a deviation from the voxel centre), and its
             // Gaussian is centred there.
             let own = &order[counts[cell as usize] as usize..counts[cell as usize + 1] as usize];
             let mean = own.iter().fold(Vec3::ZERO, |a, &si| a + samples[si as usize].p) / own.len() as f32;
-            let sub = (((mean - cell_lo) / h) * mv as f32).floor().clamp(Vec3::ZERO, Vec3::splat((mv - 1) as f32));
-            let code = [cx as u32 * mv + sub.x as u32, cy as u32 * mv + sub.y as u32, cz as u32 * mv + sub.z as u32];
-            let centre = grid_lo + (Vec3::new(code[0] as f32, code[1] as f32, code[2] as f32) + 0.5) * (h / mv as f32);
+            let code = quant::encode_pos(mean, grid_lo, [cx as u32, cy as u32, cz as u32], h, mv);
+            let centre = quant::decode_pos(code, grid_lo, h / mv as f32);
             // Gather the samples within 2σ.
             nbr.clear();
             for dz in -2..=2 {
@@ -817,7 +815,7 @@ fn build_node(ctx: &Ctx, tris: Vec<u32>, cube_lo: Vec3, side: f32, depth: u32) -
                 PointWeights::Voxel => 1.0,
             };
             out.push(RawPoint {
-                g: code.map(|c| c as u8),
+                g: code,
                 normal: ncode,
                 cover: quant::encode_cover(area),
                 nlen: quant::encode_unit(nsum.length() / wsum.max(1e-30)),
@@ -834,7 +832,7 @@ fn build_node(ctx: &Ctx, tris: Vec<u32>, cube_lo: Vec3, side: f32, depth: u32) -
         out
     });
     for p in &node.points {
-        let c = grid_lo + (Vec3::new(p.g[0] as f32, p.g[1] as f32, p.g[2] as f32) + 0.5) * (h / mv as f32);
+        let c = quant::decode_pos(p.g, grid_lo, h / mv as f32);
         node.lo = node.lo.min(c);
         node.hi = node.hi.max(c);
     }

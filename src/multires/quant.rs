@@ -2,8 +2,13 @@
 //! properties are quantized to small integer values (8 bit for material properties and
 //! position, 16 bit for differential properties)").
 //!
-//! - Position: the representative sits at the centre of its voxel, so its 8-bit grid index
-//!   per axis *is* the position, exactly (no rounding error at all).
+//! - Position: the representative sits at the mean of its voxel's samples (a deviation from
+//!   the paper's voxel centre, see [`super::build`]), stored as an 8-bit code per axis over
+//!   the node's grid with its margin: 256 codes over the 2k voxels of a row, m = 128/k codes
+//!   per voxel side ([`super::build::codes_per_voxel`]). [`encode_pos`] takes the sub-cell
+//!   of the voxel that holds the mean, [`decode_pos`] returns that sub-cell's centre, so the
+//!   decoded position is within half a code step (h/2m) of the mean per axis; a mean outside
+//!   its voxel (samples clamped into a border cell) is held to the voxel's nearest sub-cell.
 //! - Material properties: 8 bit each, linear over a per-hierarchy range `[lo, hi]`
 //!   ([`Range8`]); colour channels use a square-root curve so dark colours keep precision.
 //! - Differential properties: the normal as a 2×16-bit octahedral code ([`oct_encode`]),
@@ -13,6 +18,23 @@
 
 use glam::{Vec2, Vec3};
 use half::f16;
+
+/// 8-bit position code (per axis) of a point at `p` in voxel `cell` of the grid with lower
+/// corner `grid_lo`, voxel side `h` and `m` codes per voxel side (the module notes): the
+/// sub-cell of the voxel that holds `p`, clamped to the voxel (NaN to its first sub-cell).
+/// The grid has at most 256/m voxels per axis (2k for `m` = 128/k), so the code fits 8 bits.
+#[inline]
+pub fn encode_pos(p: Vec3, grid_lo: Vec3, cell: [u32; 3], h: f32, m: u32) -> [u8; 3] {
+    let cell_lo = grid_lo + Vec3::new(cell[0] as f32, cell[1] as f32, cell[2] as f32) * h;
+    let sub = (((p - cell_lo) / h) * m as f32).floor().clamp(Vec3::ZERO, Vec3::splat((m - 1) as f32));
+    [(cell[0] * m + sub.x as u32) as u8, (cell[1] * m + sub.y as u32) as u8, (cell[2] * m + sub.z as u32) as u8]
+}
+/// The position of code `q` ([`encode_pos`]): the centre of its sub-cell, `grid_lo + (q + ½)·step`
+/// with `step` = h/m.
+#[inline]
+pub fn decode_pos(q: [u8; 3], grid_lo: Vec3, step: f32) -> Vec3 {
+    grid_lo + (Vec3::new(q[0] as f32, q[1] as f32, q[2] as f32) + 0.5) * step
+}
 
 /// Linear 8-bit code over `[lo, hi]`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -161,6 +183,121 @@ mod tests {
                 prop_assert!((x - y).abs() <= y.abs() * 1.0 / 1024.0 + 1e-7);
             }
         }
+    }
+
+    /// Values on a fine grid over [lo, hi], random ones, and the edge values of a linear
+    /// 8-bit code over [lo, hi] (the ends, the code boundaries (c + ½)·step, the smallest
+    /// positive floats, the float just below the top).
+    fn linear_values(lo: f32, hi: f32, seed: u32) -> Vec<f32> {
+        let step = (hi - lo) / 255.0;
+        let mut s = crate::core::rng::Sampler::new(seed, 0, 0);
+        let mut v: Vec<f32> = (0..=100_000).map(|i| lo + (hi - lo) * (i as f32 / 100_000.0)).collect();
+        v.extend((0..100_000).map(|_| lo + (hi - lo) * s.next()));
+        v.extend([lo, -0.0, 1e-45, f32::MIN_POSITIVE, hi, hi - hi * f32::EPSILON, hi * (1.0 - 1e-7)]);
+        for c in 0..255 {
+            let b = lo + (c as f32 + 0.5) * step;
+            v.extend([b, f32::from_bits(b.to_bits() - 1), f32::from_bits(b.to_bits() + 1)]);
+        }
+        v
+    }
+
+    /// The unit code ([`encode_unit`], rounding): within half a step (1/510) on [0, 1] (slack
+    /// 10⁻⁴ step for the f32 rounding of v·255 and c/255, at most 255·2⁻²⁴ codes); outside
+    /// the range the nearest end; non-finite input code 0; every code re-encodes to itself.
+    #[test]
+    fn unit_round_trip() {
+        let step = 1.0 / 255.0;
+        for v in linear_values(0.0, 1.0, 1) {
+            let d = decode_unit(encode_unit(v));
+            assert!((d - v).abs() <= 0.5 * step + 1e-4 * step, "{v} -> {} -> {d}", encode_unit(v));
+        }
+        for (v, want) in [(-1e-7f32, 0.0f32), (-1.0, 0.0), (f32::MIN, 0.0), (1.0 + f32::EPSILON, 1.0), (2.0, 1.0), (f32::MAX, 1.0)] {
+            assert_eq!(decode_unit(encode_unit(v)), want, "{v}");
+        }
+        for v in [f32::NAN, -f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            assert_eq!(encode_unit(v), 0, "{v}");
+        }
+        for c in 0..=255u8 {
+            assert_eq!(encode_unit(decode_unit(c)), c);
+        }
+        assert_eq!((decode_unit(0), decode_unit(255)), (0.0, 1.0));
+    }
+
+    /// The cover code ([`encode_cover`], rounding, step `COVER_MAX`/255 = 1/63.75 h²):
+    /// within half a step on [0, `COVER_MAX`]; beyond it (foliage folds more area into a
+    /// voxel) `COVER_MAX`, below 0 zero; non-finite input code 0.
+    #[test]
+    fn cover_round_trip() {
+        let step = COVER_MAX / 255.0;
+        for v in linear_values(0.0, COVER_MAX, 2) {
+            let d = decode_cover(encode_cover(v));
+            assert!((d - v).abs() <= 0.5 * step + 1e-4 * step, "{v} -> {} -> {d}", encode_cover(v));
+        }
+        for (v, want) in [(-1e-7f32, 0u8), (-3.0, 0), (f32::MIN, 0), (COVER_MAX * (1.0 + f32::EPSILON), 255), (9.0, 255), (f32::MAX, 255)] {
+            assert_eq!(encode_cover(v), want, "{v}");
+        }
+        assert!((decode_cover(255) - COVER_MAX).abs() <= 1e-6 && decode_cover(0) == 0.0);
+        for v in [f32::NAN, -f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            assert_eq!(encode_cover(v), 0, "{v}");
+        }
+        for c in 0..=255u8 {
+            assert_eq!(encode_cover(decode_cover(c)), c);
+        }
+    }
+
+    /// The 8-bit position code ([`encode_pos`] / [`decode_pos`], as the build stores a
+    /// representative at its samples' mean): for every k of the build (2..=64, m = 128/k codes
+    /// per voxel side), random grids (voxel sides 10⁻³..10³, origins up to ±100 voxels or 50
+    /// units off) and points in a random voxel — random, on the voxel's faces and corners,
+    /// on the sub-cell boundaries and centres — the code stays in the voxel and decodes within
+    /// half a code step h/2m per axis (the sub-cell centre). Slack: 8 ulp of the coordinates'
+    /// magnitude (the f32 sums cell_lo = grid_lo + cell·h, p − cell_lo and the decode). A point
+    /// just outside its voxel (samples clamped into a border cell) decodes to the voxel's
+    /// nearest sub-cell; NaN to a sub-cell of the voxel.
+    #[test]
+    fn position_round_trip() {
+        let mut s = crate::core::rng::Sampler::new(3, 0, 0);
+        let mut worst = 0.0f32;
+        for k in 2..=64u32 {
+            let m = super::super::build::codes_per_voxel(k);
+            let g = 2 * k;
+            assert!(g * m <= 256, "k {k}: {g} voxels × {m} codes do not fit 8 bits");
+            for _ in 0..60 {
+                let h = 10f32.powf(s.next() * 6.0 - 3.0);
+                let off = if s.next() < 0.5 { 100.0 * h } else { 50.0 };
+                let grid_lo = Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * 2.0 * off;
+                let cell = [0, 1, 2].map(|_| ((s.next() * g as f32) as u32).min(g - 1));
+                let cell_lo = grid_lo + Vec3::new(cell[0] as f32, cell[1] as f32, cell[2] as f32) * h;
+                let step = h / m as f32;
+                let slack = 8.0 * f32::EPSILON * (grid_lo.abs().max_element() + g as f32 * h);
+                let mut pts = vec![cell_lo, cell_lo + Vec3::splat(h), cell_lo + Vec3::new(h, 0.0, 0.5 * h)];
+                for _ in 0..20 {
+                    pts.push(cell_lo + Vec3::new(s.next(), s.next(), s.next()) * h);
+                }
+                for j in 0..m {
+                    pts.push(cell_lo + Vec3::splat(j as f32 * step));
+                    pts.push(cell_lo + Vec3::splat((j as f32 + 0.5) * step));
+                }
+                // Just outside the voxel, and far outside: held to its nearest sub-cell.
+                let out = [cell_lo - Vec3::splat(0.01 * step), cell_lo + Vec3::splat(h + 0.01 * step), cell_lo - Vec3::splat(5.0 * h)];
+                for (i, &p) in pts.iter().chain(&out).enumerate() {
+                    let q = encode_pos(p, grid_lo, cell, h, m);
+                    for a in 0..3 {
+                        assert_eq!(q[a] as u32 / m, cell[a], "k {k}: {p} in voxel {cell:?} coded {q:?}");
+                    }
+                    let d = decode_pos(q, grid_lo, step);
+                    // Outside points: the distance to the voxel's nearest point.
+                    let want = if i < pts.len() { p } else { p.clamp(cell_lo, cell_lo + Vec3::splat(h)) };
+                    let err = (d - want).abs().max_element();
+                    assert!(err <= 0.5 * step + slack, "k {k}, h {h}: {p} -> {q:?} -> {d}: error {err} > half step {}", 0.5 * step);
+                    worst = worst.max((err - slack) / step);
+                }
+                let q = encode_pos(Vec3::NAN, grid_lo, cell, h, m);
+                assert!((0..3).all(|a| q[a] as u32 / m == cell[a]) && decode_pos(q, grid_lo, step).is_finite(), "NaN -> {q:?}");
+            }
+        }
+        // The bound is reached (not loose by a factor): the faces are half a step off.
+        assert!(worst > 0.45, "largest error {worst} steps");
     }
 
     #[test]
