@@ -271,7 +271,7 @@ fn modes_render_identically() {
 /// The nearest-ellipse rule (`TraceParams::nearest_ellipse`, the default: iterate MLS only
 /// from an ellipse hit in front of the best one so far) against iterating every ellipse hit
 /// and keeping the nearest MLS hit: the same pixels hit, the same surface point to 5% of a
-/// surfel's radius at ≥ 98% of them (the rest are grazing rays, where the iteration from the
+/// surfel's radius at ≥ 98% of them (96 % on the goblin of `bend`; the rest are grazing rays, where the iteration from the
 /// nearest ellipse may settle on the sheet's far crossing: up to 0.7 radii here), the
 /// nearest ellipse hit every time, and fewer MLS iterations started (0.45× at this detail;
 /// 0.2× at full detail, where 4–5 splats overlap per visible point). Clipped collections
@@ -279,7 +279,12 @@ fn modes_render_identically() {
 #[test]
 fn nearest_ellipse_finds_the_surface_of_every_splat() {
     for name in ["bend", "heads", "elastic-balls"] {
-        let opts = SequenceOptions { detail: 0.1, ..Default::default() };
+        // The goblin's nose, ears and fingers curve within a few surfel spacings: sampled at
+        // 0.3 (30k surfels), where 2.6 % of its hits move, by up to 0.16 radii: the iterates
+        // from neighbouring splats settle on slightly different points of a tight bend (at
+        // 0.1, 5.2 % by up to 0.29 radii). The capsule it replaced (stop 76) moved < 2 %.
+        let (detail, far_share) = if name == "bend" { (0.3, 25) } else { (0.1, 50) };
+        let opts = SequenceOptions { detail, ..Default::default() };
         let mut seq = Sequence::builtin(name, &opts).unwrap();
         let rec = seq.record(9).unwrap();
         let every = TraceParams { nearest_ellipse: false, ..TraceParams::default() };
@@ -327,7 +332,7 @@ fn nearest_ellipse_finds_the_surface_of_every_splat() {
         eprintln!("{name}: {hits} hits, {status} differ in hit/miss, {far} move > 5% of a surfel radius (worst {:.3} radii); MLS runs {runs_a} against {runs_b}", worst / radius);
         assert!(hits > 150, "{name}: only {hits} hits");
         assert!(status * 1000 <= hits, "{name}: {status} of {hits} pixels change hit/miss");
-        assert!(far * 50 <= hits, "{name}: {far} of {hits} hits move by more than 5% of a surfel radius");
+        assert!(far * far_share <= hits, "{name}: {far} of {hits} hits move by more than 5% of a surfel radius");
         if name == "heads" {
             // Every surface of the heads is clipped, and clipped collections keep the paper's
             // rule: the same hits and work.
@@ -683,7 +688,7 @@ fn simulation_energy_bounded() {
         assert!(e <= e0 * 1.05 + 1e-3, "energy grew: {e} vs {e0}");
     }
     // Every built-in sequence over its suggested length: the cap never acts (`bend` is
-    // driven by kinematic nodes, so the cap does not even run there).
+    // driven by a skeleton, so the cap does not even run there).
     for name in Sequence::BUILTIN {
         let mut seq = Sequence::builtin(name, &SequenceOptions { detail: 0.02, ..Default::default() }).unwrap();
         for _ in 0..seq.frames {
@@ -703,6 +708,58 @@ fn simulation_energy_bounded() {
     let a = Sequence::builtin("elastic-balls", &SequenceOptions { detail: 0.02, ..Default::default() }).unwrap().record(10).unwrap();
     let b = Sequence::builtin("elastic-balls", &SequenceOptions { detail: 0.02, ..Default::default() }).unwrap().record(10).unwrap();
     assert_eq!(a, b);
+}
+
+/// `bend`'s goblin follows its skeleton through the swing as a soft body: the hands stay on
+/// the rails exactly, every other node stays within 8 cm of its skinned position (the flesh
+/// lags, it does not tear or drift; the giant-swing capsule it replaced stretched like taffy
+/// under a kinematic bar), yet it is simulated, not copied (the nodes lag by millimetres on
+/// average at the fastest part of the swing); the legs really bend (the feet pass in front
+/// of and behind the shoulders), and no node sinks into a rail.
+#[test]
+fn bend_goblin_follows_its_skeleton_softly() {
+    let mut seq = Sequence::builtin("bend", &SequenceOptions { detail: 0.05, ..Default::default() }).unwrap();
+    let dt = seq.world.dt;
+    let (mut worst, mut lag_sum, mut lag_n, mut zmin, mut zmax) = (0f32, 0f64, 0usize, 0f32, 0f32);
+    let rails: Vec<(Vec3, Vec3)> = seq
+        .world
+        .colliders
+        .iter()
+        .filter_map(|c| match *c {
+            lodtrace::deform::sim::Collider::Box { lo, hi } => Some((lo, hi)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(rails.len(), 6, "two rails on four posts");
+    for f in 1..seq.frames {
+        seq.step();
+        let b = &seq.world.bodies[0];
+        let target = b.skin().expect("bend is driven by a skeleton").targets(f as f32 * dt);
+        for (j, (x, t)) in b.x.iter().zip(&target).enumerate() {
+            assert!(x.is_finite());
+            let d = (*x - *t).length();
+            if b.is_pinned(j) {
+                assert!(d < 1e-5, "frame {f}: a hand node left its grip by {d}");
+                continue;
+            }
+            worst = worst.max(d);
+            if (20..40).contains(&f) {
+                lag_sum += d as f64;
+                lag_n += 1;
+            }
+            for (lo, hi) in &rails {
+                let inside = x.cmpgt(*lo + Vec3::splat(0.005)).all() && x.cmplt(*hi - Vec3::splat(0.005)).all();
+                assert!(!inside, "frame {f}: node {j} at {x} inside a rail or post");
+            }
+            zmin = zmin.min(x.z);
+            zmax = zmax.max(x.z);
+        }
+    }
+    let lag = lag_sum / lag_n as f64;
+    eprintln!("bend: worst deviation from the skeleton {worst:.4}, mean lag mid-swing {lag:.5}, z {zmin:.2}..{zmax:.2}");
+    assert!(worst < 0.08, "a node strayed {worst} from its skinned position");
+    assert!(lag > 5e-4 && lag < 0.02, "mean lag {lag}");
+    assert!(zmin < -0.5 && zmax > 0.5, "the legs do not swing through: z {zmin}..{zmax}");
 }
 
 /// Simulation nodes on a 7³ grid inside a ball of radius `r` around `c` (123 nodes).

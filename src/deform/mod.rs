@@ -116,6 +116,7 @@
 // `!(x > 0.0)` is used on purpose: it also rejects NaN. SoA loops index several arrays.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop, clippy::too_many_arguments)]
 
+pub mod character;
 pub mod displace;
 pub mod knn;
 pub mod miniball;

@@ -5,7 +5,7 @@
 //! | name            | paper                         | here                                              |
 //! |-----------------|-------------------------------|---------------------------------------------------|
 //! | `armadillo-ball`| armadillo hit by a cannon ball| `assets/armadillo.off` (or `opts.armadillo`), soft, on a floor; a stiff heavy ball shot at its chest |
-//! | `bend`          | goblin on the parallel bars   | a soft capsule "character" whose top is held by a bar that swings it through a full giant swing (large bend) |
+//! | `bend`          | goblin on the parallel bars   | a goblin built from round cones (`character`), in support on parallel bars, swinging with a 105° pike at the hips; a skeleton drives the soft body through its rest shape |
 //! | `heads`         | three bouncing CSG heads      | three heads, each a sphere cut by two planes = three surfaces with clipping relations, bouncing on a floor and off each other |
 //! | `elastic-balls` | 40 balls into a hollow cube   | 40 soft balls (one shared model, 40 instances) thrown into a hollow cube |
 //! | `from_mesh`     | –                             | any mesh, normalised to height 1, dropped onto a floor, deforming on impact |
@@ -16,7 +16,7 @@
 //! (1.0 ≈ the paper's Table 1: armadillo 170k surfels / ~450 nodes, balls 6k / ~90 nodes).
 
 use super::object::{ObjectParams, SurfelObject};
-use super::sim::{Body, BodyParams, Collider, Kinematic, World};
+use super::sim::{Body, BodyParams, Collider, World};
 use super::surfel::{disc_surfels, sample_mesh, sphere_surfels, surfels_from_mesh_vertices, SurfelModel, SurfelSoa};
 use super::trace::DeformScene;
 use super::DeformError;
@@ -403,74 +403,59 @@ fn armadillo_ball(opts: &SequenceOptions) -> Result<Sequence, DeformError> {
     })
 }
 
-/// Capsule along +y from 0 to `len`, radius `r`, surfels at spacing `s`.
-fn capsule_surfels(len: f32, r: f32, s: f32) -> SurfelSoa {
-    let mut out = SurfelSoa::default();
-    let na = ((std::f32::consts::TAU * r / s).ceil() as usize).max(6);
-    let nh = ((len - 2.0 * r) / s).ceil().max(1.0) as usize;
-    for j in 0..=nh {
-        let y = r + (len - 2.0 * r) * j as f32 / nh as f32;
-        for i in 0..na {
-            let a = std::f32::consts::TAU * (i as f32 + 0.5 * (j % 2) as f32) / na as f32;
-            let n = Vec3::new(a.cos(), 0.0, a.sin());
-            out.push(Vec3::new(0.0, y, 0.0) + n * r, n, 0.85 * s);
-        }
-    }
-    let ncap = ((4.0 * std::f32::consts::PI * r * r) / (s * s)).ceil() as usize;
-    let sph = sphere_surfels(Vec3::ZERO, r, ncap);
-    for i in 0..sph.len() {
-        let n = sph.normal(i);
-        if n.y > 0.02 {
-            out.push(Vec3::new(0.0, len - r, 0.0) + n * r, n, sph.r[i]);
-        } else if n.y < -0.02 {
-            out.push(Vec3::new(0.0, r, 0.0) + n * r, n, sph.r[i]);
-        }
-    }
-    out
-}
-
+/// `bend`: the goblin ([`super::character`]) in support on the parallel bars, swinging
+/// about its shoulders with a pike of up to 105° at the hips in the front swing (the
+/// "large bend"), one swing in 2 s. Paper sizes (Table 1): 100k surfels, 502 nodes.
 fn bend(opts: &SequenceOptions) -> Result<Sequence, DeformError> {
-    let (len, r) = (1.6f32, 0.16f32);
-    let area = std::f32::consts::TAU * r * len;
-    let s = (area / scaled(100_000.0, opts.detail, 400) as f32).sqrt();
-    let surf = capsule_surfels(len, r, s);
-    let inside = |p: Vec3| {
-        let y = p.y.clamp(r, len - r);
-        (p - Vec3::new(0.0, y, 0.0)).length() <= r * 0.9
-    };
-    let (nodes, sp) = lattice_nodes(&inside, Vec3::new(-r, 0.0, -r), Vec3::new(r, len, r), scaled(500.0, opts.detail.sqrt(), 40));
-    let obj = SurfelObject::build(
-        SurfelModel::single("character", surf, [0.45, 0.6, 0.35]),
-        nodes.clone(),
-        vec![1.0; nodes.len()],
-        &opts.object,
-    )?;
-    // Hanging below a bar at height 2.2 (top of the capsule at the bar).
-    let bar = Vec3::new(0.0, 2.2, 0.0);
-    let off = bar - Vec3::new(0.0, len - 0.1, 0.0);
-    let x: Vec<Vec3> = nodes.iter().map(|p| *p + off).collect();
-    let hands: Vec<u32> = (0..x.len() as u32).filter(|&i| x[i as usize].y > bar.y - 0.2).collect();
-    let nn = x.len();
+    use super::character::{swing_skin, Bone, Goblin, HAND_X, HAND_Y};
+    const BAR: f32 = 1.55;
+    let g = Goblin::new();
+    let place = Vec3::new(0.0, BAR - HAND_Y, 0.0);
+    let mut surf = g.surfels(scaled(100_000.0, opts.detail, 400), opts.seed);
+    for i in 0..surf.len() {
+        surf.py[i] += place.y;
+    }
+    let (rest, sp) = g.nodes(scaled(500.0, opts.detail.sqrt(), 60));
+    let nodes: Vec<Vec3> = rest.iter().map(|p| *p + place).collect();
+    let obj =
+        SurfelObject::build(SurfelModel::single("goblin", surf, [0.45, 0.6, 0.35]), nodes.clone(), vec![1.0; nodes.len()], &opts.object)?;
+    let nn = nodes.len();
+    let skin = swing_skin(&g, &rest, place, 2.0, 0.3);
+    // The hands grip the rails: nodes mostly on an arm follow the skeleton exactly.
+    let hands: Vec<u32> = (0..nn as u32)
+        .filter(|&j| {
+            let b = skin.bones[j as usize][0];
+            b == Bone::ArmL as u16 || b == Bone::ArmR as u16
+        })
+        .collect();
     let mut body = Body::new(
-        x,
+        nodes,
         vec![1.0; nn],
         0.5 * sp,
-        BodyParams { stiffness: 0.08, beta: 0.1, cluster_size: 12, damping: 0.004, ..Default::default() },
+        BodyParams { stiffness: 0.5, beta: 0.0, cluster_size: 12, damping: 0.01, ..Default::default() },
     );
+    body.drive(skin);
     body.pin(&hands);
     let mut world = World::new(1.0 / 30.0, 4);
-    world.colliders.push(Collider::Plane { n: Vec3::Y, d: 0.0 });
     world.bodies.push(body);
-    // One giant swing in 3 s around the bar (x axis).
-    world.kinematics.push(Kinematic { body: 0, pivot: bar, axis: Vec3::X, omega: std::f32::consts::TAU / 3.0 });
+    world.colliders.push(Collider::Plane { n: Vec3::Y, d: 0.0 });
+    // The parallel bars: two rails under the hands on four posts.
+    for s in [-1.0f32, 1.0] {
+        let x = HAND_X * s;
+        world.colliders.push(Collider::Box { lo: Vec3::new(x - 0.025, BAR - 0.05, -1.1), hi: Vec3::new(x + 0.025, BAR, 1.1) });
+        for z in [-0.9f32, 0.9] {
+            world.colliders.push(Collider::Box { lo: Vec3::new(x - 0.02, 0.0, z - 0.02), hi: Vec3::new(x + 0.02, BAR - 0.05, z + 0.02) });
+        }
+    }
+    let (eye, look) = (Vec3::new(2.5, 2.0, 1.1), Vec3::new(0.0, 1.45, 0.0));
     Ok(Sequence {
         name: "bend".into(),
         scene: DeformScene { objects: vec![obj], instances: vec![0] },
         world,
         frame: 0,
         frames: 90,
-        camera: cam(Vec3::new(4.5, 2.0, 0.0), Vec3::new(0.0, 1.6, 0.0), 50.0),
-        light: shoulder_light(Vec3::new(4.5, 2.0, 0.0), Vec3::new(0.0, 1.6, 0.0)),
+        camera: cam(eye, look, 45.0),
+        light: shoulder_light(eye, look),
     })
 }
 

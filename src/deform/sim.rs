@@ -13,7 +13,8 @@
 //! - collisions: half-space planes (floors, the walls of a hollow box), solid boxes, and
 //!   body–body contacts between nodes (spheres of radius `radius`), resolved by projection
 //!   with restitution and friction;
-//! - kinematic nodes follow a prescribed rotation (e.g. hands on a bar);
+//! - kinematic nodes follow a prescribed rotation, or a body follows an animated rest shape
+//!   from a skinned skeleton ([`Skin`]: `bend`'s gymnast, hands pinned to the rails);
 //! - the energy of a world without kinematic nodes is capped at its starting value
 //!   (`World::cap_energy`; not in Müller et al.: their scheme is stable in free flight, but
 //!   contacts resolved by projection with a restitution near 1 pumped energy in).
@@ -65,6 +66,44 @@ pub struct Body {
     clusters: Vec<Cluster>,
     /// Per node: Some(initial position) if kinematic.
     pinned: Vec<Option<Vec3>>,
+    /// An animated rest shape (a skinned skeleton), if the body is driven by one.
+    skin: Option<Skin>,
+}
+
+/// Bone transforms (rest → world) of a skeleton at a time, one per bone.
+pub type PoseFn = dyn Fn(f32) -> Vec<glam::Affine3A> + Send + Sync;
+
+/// A skeleton that drives a body (`bend`'s gymnast): the body's rest shape at time t is its
+/// rest node positions skinned by the bones' transforms (linear blend skinning,
+/// `Σ_b w_jb M_b(t) x_j`). Shape matching then matches each cluster to *that* shape instead
+/// of the fixed one, an animated rest shape: the flesh follows the joints but keeps its
+/// inertia, gravity and collisions, and lags and swings like the soft body it is. A share
+/// `anchor` of each node's goal is the skinned position itself, so the body as a whole keeps
+/// to the animation (a gymnast's muscles, which shape matching alone has no notion of: it
+/// only restores shape, never position). Pinned nodes (hands on a bar) follow the skinned
+/// position exactly. Not in Adams et al., whose goblin's motion the paper does not describe;
+/// see `sequences::bend`.
+pub struct Skin {
+    /// Per node: two bones and their weights (summing to 1).
+    pub bones: Vec<[u16; 2]>,
+    pub weights: Vec<[f32; 2]>,
+    /// Node positions in the rest pose (the skeleton's rest frame).
+    pub rest: Vec<Vec3>,
+    pub pose: std::sync::Arc<PoseFn>,
+    /// Share of the skinned position in a node's goal, in [0, 1].
+    pub anchor: f32,
+}
+
+impl Skin {
+    /// The skinned rest shape at time `t`.
+    pub fn targets(&self, t: f32) -> Vec<Vec3> {
+        let m = (self.pose)(t);
+        self.rest
+            .iter()
+            .zip(self.bones.iter().zip(&self.weights))
+            .map(|(x, (b, w))| m[b[0] as usize].transform_point3(*x) * w[0] + m[b[1] as usize].transform_point3(*x) * w[1])
+            .collect()
+    }
 }
 
 impl Body {
@@ -101,7 +140,7 @@ impl Body {
                 Cluster { members, q, aqq_inv }
             })
             .collect();
-        Body { v: vec![Vec3::ZERO; n], pinned: vec![None; n], x, m, radius, params, clusters }
+        Body { v: vec![Vec3::ZERO; n], pinned: vec![None; n], x, m, radius, params, clusters, skin: None }
     }
 
     pub fn len(&self) -> usize {
@@ -110,11 +149,31 @@ impl Body {
     pub fn is_empty(&self) -> bool {
         self.x.is_empty()
     }
-    /// Makes nodes kinematic (they follow the world's kinematic motion of this body).
+    /// Makes nodes kinematic: they follow the world's kinematic motion of this body, or, on a
+    /// driven body, their skinned position exactly.
     pub fn pin(&mut self, nodes: &[u32]) {
         for &j in nodes {
             self.pinned[j as usize] = Some(self.x[j as usize]);
         }
+    }
+    /// Drives the body by a skinned skeleton ([`Skin`]); its nodes move to the skinned
+    /// shape at time 0.
+    pub fn drive(&mut self, skin: Skin) {
+        assert_eq!(skin.rest.len(), self.x.len(), "one skinned rest position per node");
+        self.x = skin.targets(0.0);
+        self.skin = Some(skin);
+    }
+    /// Whether a skeleton drives the body.
+    pub fn is_driven(&self) -> bool {
+        self.skin.is_some()
+    }
+    /// The skeleton that drives the body, if any.
+    pub fn skin(&self) -> Option<&Skin> {
+        self.skin.as_ref()
+    }
+    /// Whether node `j` is kinematic.
+    pub fn is_pinned(&self, j: usize) -> bool {
+        self.pinned[j].is_some()
     }
     pub fn set_velocity(&mut self, v: Vec3) {
         self.v.iter_mut().for_each(|x| *x = v);
@@ -125,25 +184,40 @@ impl Body {
         (c, r + self.radius)
     }
 
-    fn goals(&self) -> Vec<Vec3> {
+    /// Shape-matching goals; `rest` = an animated rest shape (skinned targets), else the
+    /// body's own rest shape.
+    fn goals(&self, rest: Option<&[Vec3]>) -> Vec<Vec3> {
         let n = self.x.len();
         let mut g = vec![Vec3::ZERO; n];
         let mut cnt = vec![0u32; n];
         let beta = self.params.beta;
+        let mut q_now: Vec<Vec3> = Vec::new();
         for c in &self.clusters {
             let msum: f32 = c.members.iter().map(|&i| self.m[i as usize]).sum();
             let com = c.members.iter().map(|&i| self.x[i as usize] * self.m[i as usize]).sum::<Vec3>() / msum;
+            // Rest offsets: the cluster's fixed ones, or those of the animated rest shape now.
+            let (q, aqq_inv): (&[Vec3], Mat3) = match rest {
+                None => (&c.q, c.aqq_inv),
+                Some(r) => {
+                    let rc = c.members.iter().map(|&i| r[i as usize] * self.m[i as usize]).sum::<Vec3>() / msum;
+                    q_now.clear();
+                    q_now.extend(c.members.iter().map(|&i| r[i as usize] - rc));
+                    // The linear mode needs A_qq⁻¹ of the current rest shape; an animated
+                    // body uses the rotation alone (β is ignored).
+                    (&q_now, Mat3::ZERO)
+                }
+            };
             let mut apq = Mat3::ZERO;
             for (k, &i) in c.members.iter().enumerate() {
-                apq += outer((self.x[i as usize] - com) * self.m[i as usize], c.q[k]);
+                apq += outer((self.x[i as usize] - com) * self.m[i as usize], q[k]);
             }
             let at = apq.transpose();
             let na = nalgebra::Matrix3::<f64>::from_fn(|r, cc| at.col(cc)[r] as f64);
             let rr = rotation_from_svd(na);
             let rot = Mat3::from_cols_array(&std::array::from_fn(|i| rr[(i % 3, i / 3)] as f32));
             let mut mat = rot;
-            if beta > 0.0 && c.aqq_inv != Mat3::ZERO {
-                let a = apq * c.aqq_inv;
+            if beta > 0.0 && aqq_inv != Mat3::ZERO {
+                let a = apq * aqq_inv;
                 let det = a.determinant();
                 if det > 1e-6 {
                     let a = a * det.cbrt().recip();
@@ -151,7 +225,7 @@ impl Body {
                 }
             }
             for (k, &i) in c.members.iter().enumerate() {
-                g[i as usize] += mat * c.q[k] + com;
+                g[i as usize] += mat * q[k] + com;
                 cnt[i as usize] += 1;
             }
         }
@@ -298,10 +372,22 @@ impl World {
         // substep (`collide_static`).
         let v0: Vec<Vec<Vec3>> = self.bodies.iter().map(|b| b.v.clone()).collect();
         for (bi, b) in self.bodies.iter_mut().enumerate() {
-            let goals = b.goals();
+            let target = b.skin.as_ref().map(|s| s.targets(t));
+            let mut goals = b.goals(target.as_deref());
+            if let (Some(tg), Some(s)) = (&target, &b.skin) {
+                let k = s.anchor.clamp(0.0, 1.0);
+                for (g, p) in goals.iter_mut().zip(tg) {
+                    *g += (*p - *g) * k;
+                }
+            }
             let alpha = b.params.stiffness.clamp(0.0, 1.0);
             let kin = self.kinematics.iter().find(|k| k.body == bi);
             for j in 0..b.x.len() {
+                if let (Some(_), Some(tg)) = (b.pinned[j], &target) {
+                    b.v[j] = (tg[j] - b.x[j]) / h;
+                    b.x[j] = tg[j];
+                    continue;
+                }
                 if let (Some(x0), Some(k)) = (b.pinned[j], kin) {
                     let q = glam::Quat::from_axis_angle(k.axis.normalize(), k.omega * t);
                     let nx = k.pivot + q * (x0 - k.pivot);
@@ -335,10 +421,10 @@ impl World {
     /// `elastic-balls` at detail 0.02, 0.1 and 1 over 600 frames, and meshes dropped by
     /// `Sequence::from_mesh` (bunny, cow) over 300, never reach the cap (0 substeps capped,
     /// nothing removed; their energy peaks at 0.990–0.999 of the start's); `bend` is driven
-    /// by kinematic nodes, so the cap is off there. Test
+    /// by a skeleton ([`Skin`]) and pinned hands, so the cap is off there. Test
     /// `simulation_energy_bounded` keeps that so.
     fn cap_energy(&mut self) {
-        if !self.limit_energy || !self.kinematics.is_empty() {
+        if !self.limit_energy || !self.kinematics.is_empty() || self.bodies.iter().any(Body::is_driven) {
             return;
         }
         let Some(cap) = self.energy_cap else { return };

@@ -337,13 +337,26 @@ pub fn sample_mesh(mesh: &Mesh, n: usize, seed: u32) -> Result<SurfelSoa, Deform
             }
         }
     }
-    // Thinning: one candidate per cell; cell size adjusted until ~n cells are occupied.
+    let s = thin_to_surfels(&cand, n, area as f32);
+    if s.len() < 4 {
+        return Err(DeformError::TooSmall(format!("mesh '{}' gives {} samples", mesh.name, s.len())));
+    }
+    Ok(s)
+}
+
+/// Surfels from candidate samples (position, unit normal) spread over a surface of the given
+/// area: one candidate per cell of a voxel grid sized for about `n` occupied cells (the one
+/// nearest the cell centre; ties to the lower index), radius 1.2× the distance to the 4th
+/// nearest kept sample so the discs cover the surface. Shared by [`sample_mesh`] and the
+/// implicit character of `sequences` (`character::Goblin::surfels`).
+pub(crate) fn thin_to_surfels(cand: &[(Vec3, Vec3)], n: usize, area: f32) -> SurfelSoa {
     let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-    for (p, _) in &cand {
+    for (p, _) in cand {
         lo = lo.min(*p);
         hi = hi.max(*p);
     }
-    let mut cell = (area as f32 / n as f32).sqrt();
+    // Cell size adjusted until ~n cells are occupied.
+    let mut cell = (area / n.max(1) as f32).sqrt();
     let mut chosen: Vec<(Vec3, Vec3)> = Vec::new();
     for _ in 0..8 {
         let mut best: std::collections::HashMap<(i32, i32, i32), (f32, u32)> = Default::default();
@@ -377,10 +390,7 @@ pub fn sample_mesh(mesh: &Mesh, n: usize, seed: u32) -> Result<SurfelSoa, Deform
             s.push(*p, *nn, r);
         }
     }
-    if s.len() < 4 {
-        return Err(DeformError::TooSmall(format!("mesh '{}' gives {} samples", mesh.name, s.len())));
-    }
-    Ok(s)
+    s
 }
 
 /// `n` surfels on a sphere (Fibonacci lattice), outward normals, radius covering the spacing.
