@@ -712,10 +712,10 @@ fn simulation_energy_bounded() {
 
 /// `bend`'s goblin follows its skeleton through the swing as a soft body: the hands stay on
 /// the rails exactly, every other node stays within 8 cm of its skinned position (the flesh
-/// lags, it does not tear or drift; the giant-swing capsule it replaced stretched like taffy
-/// under a kinematic bar), yet it is simulated, not copied (the nodes lag by millimetres on
-/// average at the fastest part of the swing); the legs really bend (the feet pass in front
-/// of and behind the shoulders), and no node sinks into a rail.
+/// lags, it does not tear or drift; stop 75's capsule character, hung from a kinematic bar
+/// with no skeleton, stretched like taffy), yet it is simulated, not copied (the nodes lag by
+/// 0.5–20 mm on average over frames 20–39; 6 mm measured at detail 0.05); the legs really
+/// bend (the feet pass in front of and behind the shoulders), and no node sinks into a rail.
 #[test]
 fn bend_goblin_follows_its_skeleton_softly() {
     let mut seq = Sequence::builtin("bend", &SequenceOptions { detail: 0.05, ..Default::default() }).unwrap();
