@@ -1,4 +1,4 @@
-//! Point files (PLY, via `ply-rs`) as surfel models (Adams et al. §3: surfel models read from
+//! Point files (PLY, via `ply-rs-bw`, the maintained fork of `ply-rs`) as surfel models (Adams et al. §3: surfel models read from
 //! point files). The `vertex` element must have `x y z nx ny nz`; a `radius` (or `r`)
 //! property is optional. Without it each surfel's radius is the distance to its 8th nearest
 //! neighbour (so the discs overlap). NaN/inf coordinates, zero normals and duplicate points
@@ -8,8 +8,8 @@ use super::knn::KdTree;
 use super::surfel::{SurfelModel, SurfelSoa};
 use super::DeformError;
 use glam::Vec3;
-use ply_rs::parser::Parser;
-use ply_rs::ply::{DefaultElement, Property};
+use ply_rs_bw::parser::Parser;
+use ply_rs_bw::ply::{DefaultElement, Property};
 use std::path::Path;
 
 fn scalar(p: &Property) -> Option<f32> {
@@ -26,28 +26,29 @@ fn scalar(p: &Property) -> Option<f32> {
     })
 }
 
-/// `ply-rs`'s multi-line parse message (line, offending text, nested `Custom { .. }`
-/// error, or a short body's io::Error) as one line: whitespace collapsed, the nested debug
-/// dumps dropped (not [`crate::error::one_line`], which only escapes control characters).
+/// `ply-rs-bw`'s parse message as one plain line: its chain of nested errors (" Error: …")
+/// cut to the first, plus the innermost when it is short and says something new ("Expected
+/// element of type 'Scalar(Float)', but found nothing."), never the parser's list of expected
+/// tokens; whitespace collapsed (not [`crate::error::one_line`], which only escapes control
+/// characters). A body cut short says so in words, whichever layer noticed.
 fn plain_ply_message(msg: &str) -> String {
-    let head = msg.split("Error: Custom").next().unwrap_or(msg);
-    let head = head.split("Error: ParseError").next().unwrap_or(head);
-    // A short binary body: ply-rs appends the io::Error's Debug form.
-    let (head, eof) = match head.split_once("Error: Error {") {
-        Some((h, tail)) => (h, tail.contains("UnexpectedEof")),
-        None => (head, false),
-    };
-    // ply-rs spells it so.
-    let msg = head.replace("Couln't", "Could not").split_whitespace().collect::<Vec<_>>().join(" ");
-    if eof {
-        format!("{} (the file ends early)", msg.trim_end_matches('.'))
+    let parts: Vec<&str> = msg.split("Error: ").map(str::trim).filter(|p| !p.is_empty()).collect();
+    let Some(first) = parts.first() else { return String::new() };
+    let mut out = first.to_string();
+    if let Some(last) = parts.last().filter(|l| parts.len() > 1 && l.len() < 100 && !l.contains("expected one of") && !l.contains('{')) {
+        out = format!("{} — {last}", out.trim_end_matches('.'));
+    }
+    let out = out.split_whitespace().collect::<Vec<_>>().join(" ");
+    let eof = parts.iter().any(|p| p.contains("failed to fill whole buffer") || p.contains("UnexpectedEof"));
+    if eof && !out.contains("end of file") {
+        format!("{} (the file ends early)", out.trim_end_matches('.'))
     } else {
-        msg
+        out
     }
 }
 
-/// A PLY body must hold exactly what its header declares: ply-rs reads the declared counts
-/// and silently drops what follows (a wrong count, or two files run together). ASCII rows
+/// A PLY body must hold exactly what its header declares: ply-rs-bw reads the declared
+/// counts and silently drops what follows (a wrong count, or two files run together). ASCII rows
 /// are counted; a binary body whose properties are all fixed-size scalars must be exactly
 /// as long as the counts say (with lists its length is not known before parsing). Counts
 /// that are not whole numbers (`-1`, 10^20) are named as such.
@@ -292,8 +293,9 @@ mod tests {
         }
     }
 
-    /// A binary body that ends inside a list: one plain line, not ply-rs's Debug dump of the
-    /// io::Error ("Error { kind: UnexpectedEof, ... }").
+    /// A binary body that ends inside a list: one plain line that says the file ends early,
+    /// no Debug dump of an io::Error ("Error { kind: UnexpectedEof, ... }", as ply-rs 0.1
+    /// gave) and no chain of nested errors.
     #[test]
     fn a_short_binary_list_says_the_file_ends_early() {
         let mut b = b"ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nelement face 1\nproperty list uint int vertex_indices\nend_header\n".to_vec();
@@ -305,7 +307,9 @@ mod tests {
         b.extend_from_slice(&3u32.to_le_bytes());
         b.extend_from_slice(&0i32.to_le_bytes());
         match read_ply(&mut b.as_slice(), Path::new("t.ply")) {
-            Err(DeformError::Ply { msg, .. }) => assert!(msg.contains("ends early") && !msg.contains('{'), "{msg}"),
+            Err(DeformError::Ply { msg, .. }) => {
+                assert!(msg.contains("end of file") && !msg.contains('{') && !msg.contains("Error:"), "{msg}")
+            }
             e => panic!("{:?}", e.map(|m| m.len())),
         }
     }
