@@ -622,6 +622,15 @@ fn animate_writes_frames_and_per_frame_stats() {
     for f in 0..3 {
         assert!(d.join(format!("frame_{f:04}.png")).is_file());
     }
+    // The contact sheet: the three frames side by side, 2 px apart, each tile the frame's
+    // own pixels.
+    let sheet = image::open(d.join("contact_sheet.png")).unwrap().to_rgb8();
+    assert_eq!(sheet.dimensions(), (3 * 48 + 2 * 2, 36));
+    for f in 0..3u32 {
+        let fr = image::open(d.join(format!("frame_{f:04}.png"))).unwrap().to_rgb8();
+        let tile = image::imageops::crop_imm(&sheet, f * 50, 0, 48, 36).to_image();
+        assert!(tile == fr, "tile {f} is not frame {f}");
+    }
     assert_eq!(v["frames"], 3);
     assert_eq!(v["per_frame"].as_array().unwrap().len(), 3);
     let total: f64 = v["per_frame"].as_array().unwrap().iter().map(|r| r["seconds"].as_f64().unwrap()).sum();

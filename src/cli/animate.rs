@@ -60,7 +60,8 @@ pub struct AnimateArgs {
     pub width: u32,
     #[arg(long, default_value_t = 384, value_parser = clap::value_parser!(u32).range(1..=16384))]
     pub height: u32,
-    /// Folder for the frames (frame_0000.png, ...); none = no images.
+    /// Folder for the frames (frame_0000.png, ...) and a contact sheet of up to eight of them
+    /// evenly spaced over the run (contact_sheet.png); none = no images.
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Statistics as JSON: per-frame times and work counts, radius ratios per level, totals.
@@ -494,6 +495,8 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     let mut render_seconds = 0.0;
     let mut last_frame = Film::new(a.width, a.height);
     let mut last_cost = Vec::new();
+    let sheet_frames = contact_frames(frames);
+    let mut sheet: Vec<image::RgbImage> = Vec::new();
     for (f, nodes) in rec.frames.iter().enumerate() {
         let t = Instant::now();
         tracer.begin_frame(nodes).map_err(derr)?;
@@ -532,6 +535,9 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         });
         if let Some(d) = &a.out {
             io::write_png(&d.join(format!("frame_{f:04}.png")), &film)?;
+            if sheet_frames.contains(&(f as u32)) {
+                sheet.push(thumbnail(&io::to_rgb8(&film)));
+            }
             if a.cost {
                 let img = crate::film::metrics::cost_map(&cost, a.width, a.height)?;
                 io::write_rgb8_png(&d.join(format!("cost_{f:04}.png")), &img)?;
@@ -542,6 +548,9 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         bar.inc(1);
     }
     bar.finish_and_clear();
+    if let Some(d) = &a.out {
+        io::write_rgb8_png(&d.join("contact_sheet.png"), &contact_sheet(&sheet))?;
+    }
     let stats = AnimateStats {
         scene: seq.name.clone(),
         method: "surfel".into(),
@@ -573,6 +582,37 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         io::write_atomic(p, |tmp| std::fs::write(tmp, json.as_bytes()).map_err(|e| Error::io(p, e)))?;
     }
     Ok(stats)
+}
+
+/// The frames a contact sheet shows: up to eight, evenly spaced from the first to the last.
+fn contact_frames(frames: u32) -> Vec<u32> {
+    let n = frames.min(8);
+    (0..n).map(|i| if n > 1 { (i as u64 * (frames as u64 - 1) / (n as u64 - 1)) as u32 } else { 0 }).collect()
+}
+
+/// A frame scaled down to at most 320 pixels wide for the contact sheet (kept as it is when
+/// smaller).
+fn thumbnail(img: &image::RgbImage) -> image::RgbImage {
+    const W: u32 = 320;
+    if img.width() <= W {
+        return img.clone();
+    }
+    let h = ((img.height() as u64 * W as u64) / img.width() as u64).max(1) as u32;
+    image::imageops::resize(img, W, h, image::imageops::FilterType::Triangle)
+}
+
+/// Thumbnails in rows of four, in frame order, two pixels of white between them.
+fn contact_sheet(th: &[image::RgbImage]) -> image::RgbImage {
+    const GAP: u32 = 2;
+    let (w, h) = th.first().map_or((1, 1), |t| (t.width(), t.height()));
+    let cols = (th.len() as u32).clamp(1, 4);
+    let rows = (th.len() as u32).div_ceil(4).max(1);
+    let mut out = image::RgbImage::from_pixel(cols * w + (cols - 1) * GAP, rows * h + (rows - 1) * GAP, image::Rgb([255, 255, 255]));
+    for (i, t) in th.iter().enumerate() {
+        let (c, r) = (i as u32 % 4, i as u32 / 4);
+        image::imageops::replace(&mut out, t, (c * (w + GAP)) as i64, (r * (h + GAP)) as i64);
+    }
+    out
 }
 
 /// One frame's primary and shadow rays into a new film (the tracer's frame must be begun).
@@ -822,6 +862,23 @@ fn frames_bar(quiet: bool, frames: u32, prefix: String) -> ProgressBar {
 }
 #[cfg(test)]
 mod tests {
+    /// The contact sheet's frames: the first and the last always, evenly spaced, at most
+    /// eight; a sheet of more than four frames wraps into a second row.
+    #[test]
+    fn contact_sheet_frames_and_layout() {
+        assert_eq!(super::contact_frames(1), vec![0]);
+        assert_eq!(super::contact_frames(3), vec![0, 1, 2]);
+        assert_eq!(super::contact_frames(90), vec![0, 12, 25, 38, 50, 63, 76, 89]);
+        let th: Vec<image::RgbImage> = (0..6).map(|i| image::RgbImage::from_pixel(10, 8, image::Rgb([i * 40, 0, 0]))).collect();
+        let s = super::contact_sheet(&th);
+        assert_eq!(s.dimensions(), (4 * 10 + 3 * 2, 2 * 8 + 2));
+        assert_eq!(s.get_pixel(12 + 5, 4)[0], 40);
+        assert_eq!(s.get_pixel(12 + 5, 10 + 4)[0], 200);
+        assert_eq!(*s.get_pixel(45, 17), image::Rgb([255, 255, 255]), "the empty last cells stay white");
+        let big = image::RgbImage::new(640, 480);
+        assert_eq!(super::thumbnail(&big).dimensions(), (320, 240));
+    }
+
     /// Every `lodtrace animate` command in the README passes animate's option checks (as
     /// `bench::tests::the_readmes_bench_commands_pass_the_checks` does for bench).
     #[test]

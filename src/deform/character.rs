@@ -35,6 +35,7 @@ pub struct Prim {
 
 impl Prim {
     fn new(bone: Bone, a: [f32; 3], ra: f32, b: [f32; 3], rb: f32) -> Self {
+        debug_assert!(ra > 0.0 && rb > 0.0);
         Prim { bone: bone as u16, a: Vec3::from(a), b: Vec3::from(b), ra, rb }
     }
 
@@ -47,6 +48,10 @@ impl Prim {
         }
         let rr = self.ra - self.rb;
         let a2 = l2 - rr * rr;
+        if a2 <= 0.0 {
+            // One end sphere holds the other: the hull is the larger sphere.
+            return if self.ra >= self.rb { (p - self.a).length() - self.ra } else { (p - self.b).length() - self.rb };
+        }
         let il2 = 1.0 / l2;
         let pa = p - self.a;
         let y = pa.dot(ba);
@@ -89,7 +94,8 @@ impl Prim {
         for _ in 0..n {
             let s = next() * total;
             if s < lat {
-                // t with density ∝ ra + (rb − ra) t: rejection against the larger radius.
+                // t with density ∝ ra + (rb − ra) t: rejection against the larger radius
+                // (the radii are positive, so every t is accepted with probability ≥ min/max).
                 let rmax = self.ra.max(self.rb);
                 let t = loop {
                     let t = next();
@@ -192,15 +198,19 @@ impl Goblin {
         self.prims.iter().fold(f32::INFINITY, |d, q| if d.is_infinite() { q.sdf(p) } else { smin(d, q.sdf(p), self.k) })
     }
 
-    /// Unit outward normal (central differences of [`Goblin::sdf`]).
-    pub fn normal(&self, p: Vec3) -> Vec3 {
+    /// Gradient of [`Goblin::sdf`] (central differences).
+    pub fn gradient(&self, p: Vec3) -> Vec3 {
         let e = 1e-4;
-        let g = Vec3::new(
+        Vec3::new(
             self.sdf(p + Vec3::X * e) - self.sdf(p - Vec3::X * e),
             self.sdf(p + Vec3::Y * e) - self.sdf(p - Vec3::Y * e),
             self.sdf(p + Vec3::Z * e) - self.sdf(p - Vec3::Z * e),
-        );
-        g.normalize_or_zero()
+        ) / (2.0 * e)
+    }
+
+    /// Unit outward normal.
+    pub fn normal(&self, p: Vec3) -> Vec3 {
+        self.gradient(p).normalize_or_zero()
     }
 
     /// Rest-pose bounds.
@@ -229,13 +239,22 @@ impl Goblin {
                     if self.sdf(p) < -0.5 * self.k {
                         return None;
                     }
-                    for _ in 0..4 {
+                    // Newton steps on f along its raw gradient (f / |∇f|² · ∇f): in the
+                    // smooth union's creases |∇f| < 1, where a unit step stops short.
+                    for _ in 0..12 {
                         let d = self.sdf(p);
-                        let g = self.normal(p);
-                        p -= g * d;
+                        if d.abs() < 1e-6 {
+                            break;
+                        }
+                        let g = self.gradient(p);
+                        let g2 = g.length_squared();
+                        if !(g2 > 1e-8) {
+                            return None;
+                        }
+                        p -= g * (d / g2);
                     }
                     let nn = self.normal(p);
-                    (self.sdf(p).abs() < 1e-4 && nn != Vec3::ZERO).then_some((p, nn))
+                    (self.sdf(p).abs() < 1e-5 && nn != Vec3::ZERO).then_some((p, nn))
                 })
             })
             .collect();
@@ -254,7 +273,8 @@ impl Goblin {
 
     /// Simulation nodes in the rest pose: a lattice of spacing about `s` inside the body
     /// (at least 0.3 s deep), plus points at spacing s along each limb's axis that lie farther
-    /// than 0.6 s from every other node. Returns the nodes.
+    /// than 0.6 s from every other node, `s` adjusted until the count is within 3 % of
+    /// `target` (else the closest of eight tries). Returns the nodes and `s`.
     pub fn nodes(&self, target: usize) -> (Vec<Vec3>, f32) {
         let (lo, hi) = self.bounds();
         // Body volume by a coarse grid count, for the lattice spacing.
@@ -297,8 +317,11 @@ impl Goblin {
                 }
             }
             let ratio = pts.len() as f32 / target as f32;
-            best = (pts, s);
-            if (0.9..1.12).contains(&ratio) {
+            let off = |n: usize| (n as f32 / target as f32 - 1.0).abs();
+            if best.0.is_empty() || off(pts.len()) < off(best.0.len()) {
+                best = (pts, s);
+            }
+            if (0.97..1.03).contains(&ratio) {
                 break;
             }
             s *= ratio.cbrt();
@@ -306,20 +329,38 @@ impl Goblin {
         best
     }
 
-    /// Skinning weights of a rest-pose point: the two bones whose primitives lie nearest,
-    /// weights ∝ exp(−distance / 0.025) (distances signed: inside a limb beats near it).
+    /// Skinning weights of a rest-pose point: the bone whose primitives lie nearest, and of
+    /// the bones joined to it in the skeleton the nearest one, weights ∝ exp(−distance /
+    /// 0.025) (distances signed: inside a limb beats near it), the smaller less 2 %. Only joined bones blend: in
+    /// the rest pose the hands hang 1.5 cm from the thighs, and a hand that took a share of
+    /// a thigh's motion would slide along the rail as the legs swing.
     pub fn weights(&self, p: Vec3) -> ([u16; 2], [f32; 2]) {
         let mut d = [f32::INFINITY; BONES];
         for q in &self.prims {
             let b = q.bone as usize;
             d[b] = d[b].min(q.sdf(p));
         }
-        let mut order: Vec<usize> = (0..BONES).collect();
-        order.sort_by(|a, b| d[*a].total_cmp(&d[*b]));
-        let (a, b) = (order[0], order[1]);
-        let wb = (-(d[b] - d[a]) / 0.025).exp();
-        ([a as u16, b as u16], [1.0 / (1.0 + wb), wb / (1.0 + wb)])
+        let a = (0..BONES).min_by(|x, y| d[*x].total_cmp(&d[*y])).unwrap_or(0);
+        let b = (0..BONES).filter(|&o| joined(a, o)).min_by(|x, y| d[*x].total_cmp(&d[*y])).unwrap_or(a);
+        // The second bone's share, less 2 % (continuously, so it ends about 10 cm from the
+        // joint instead of reaching the hands and feet as a trace).
+        let e = (-(d[b] - d[a]) / 0.025).exp();
+        let wb = ((e / (1.0 + e) - 0.02) / 0.98).max(0.0);
+        ([a as u16, b as u16], [1.0 - wb, wb])
     }
+}
+
+/// Whether two bones meet at a joint.
+fn joined(a: usize, b: usize) -> bool {
+    use Bone::*;
+    let pair = |x: Bone, y: Bone| (a == x as usize && b == y as usize) || (a == y as usize && b == x as usize);
+    pair(Torso, Head)
+        || pair(Torso, ArmL)
+        || pair(Torso, ArmR)
+        || pair(Torso, ThighL)
+        || pair(Torso, ThighR)
+        || pair(ThighL, ShinL)
+        || pair(ThighR, ShinR)
 }
 
 /// The swing in support on the parallel bars, as joint angles at time `t` (seconds):
@@ -396,6 +437,9 @@ mod tests {
         assert!(k.sdf(on).abs() < 1e-5, "{}", k.sdf(on));
         let out = on + Vec3::new(ca, sa, 0.0) * 0.05;
         assert!((k.sdf(out) - 0.05).abs() < 1e-5, "{}", k.sdf(out));
+        // One end sphere inside the other: the larger sphere, no NaN.
+        let inner = Prim { bone: 0, a: Vec3::ZERO, b: Vec3::new(0.0, 0.1, 0.0), ra: 0.5, rb: 0.2 };
+        assert!((inner.sdf(Vec3::new(0.0, 2.0, 0.0)) - 1.5).abs() < 1e-6);
     }
 
     /// Surfels lie on the surface with outward normals; every bone's region is sampled.
@@ -406,8 +450,10 @@ mod tests {
         assert!((5000..7200).contains(&s.len()), "{}", s.len());
         for i in 0..s.len() {
             let p = s.pos(i);
-            assert!(g.sdf(p).abs() < 1e-3, "off the surface: {}", g.sdf(p));
-            assert!((s.normal(i) - g.normal(p)).length() < 1e-3);
+            assert!(g.sdf(p).abs() < 1e-4, "off the surface: {}", g.sdf(p));
+            // Outward: out of the body along the normal, into it against it.
+            let n = s.normal(i);
+            assert!(g.sdf(p + n * 0.002) > 0.0 && g.sdf(p - n * 0.002) < 0.0, "normal {n} at {p} is not outward");
             assert!(s.r[i] > 0.0 && s.r[i] < 0.05, "radius {}", s.r[i]);
         }
         let mut per_bone = [0usize; BONES];
@@ -423,7 +469,7 @@ mod tests {
     fn goblin_nodes_and_swing() {
         let g = Goblin::new();
         let (nodes, s) = g.nodes(500);
-        assert!((440..570).contains(&nodes.len()), "{}", nodes.len());
+        assert!((485..516).contains(&nodes.len()), "{}", nodes.len());
         assert!(s > 0.01 && s < 0.1);
         let mut per_bone = [0usize; BONES];
         for p in &nodes {
@@ -433,17 +479,13 @@ mod tests {
             per_bone[b[0] as usize] += 1;
         }
         assert!(per_bone.iter().all(|&c| c >= 6), "{per_bone:?}");
-        // Over one swing: hands fixed, the hip angle reaches past 90°, the feet travel.
-        let hand = Vec3::new(HAND_X, HAND_Y, 0.0);
+        // Over one swing at full amplitude: the hip angle reaches past 90°, the feet travel.
         let foot = Vec3::new(HIP_X, 0.05, 0.0);
         let (mut hip_max, mut zmin, mut zmax) = (0f32, 0f32, 0f32);
         for i in 0..=60 {
             let t = i as f32 * 2.0 / 60.0 + 1.0;
             let a = swing_angles(t, 2.0);
             let m = pose(a, Vec3::ZERO);
-            assert!((m[Bone::ArmR as usize].transform_point3(hand) - hand).length() < 1e-6);
-            // The shoulder joint stays where the arms hold it.
-            assert!((m[0].transform_point3(SHOULDER) - SHOULDER).length() < 1e-5);
             hip_max = hip_max.max(a[1]);
             let f = m[Bone::ShinR as usize].transform_point3(foot);
             zmin = zmin.min(f.z);

@@ -1,5 +1,5 @@
-//! Point files (PLY, via `ply-rs-bw`, the maintained fork of `ply-rs`) as surfel models (Adams et al. §3: surfel models read from
-//! point files). The `vertex` element must have `x y z nx ny nz`; a `radius` (or `r`)
+//! Point files (PLY, via `ply-rs-bw`, the maintained fork of `ply-rs`) as surfel models
+//! (Adams et al. §3: surfel models read from point files). The `vertex` element must have `x y z nx ny nz`; a `radius` (or `r`)
 //! property is optional. Without it each surfel's radius is the distance to its 8th nearest
 //! neighbour (so the discs overlap). NaN/inf coordinates, zero normals and duplicate points
 //! are typed errors, never panics.
@@ -291,6 +291,28 @@ mod tests {
             Err(DeformError::BadSurfel { index: 7, msg }) => assert!(msg.contains("wider than the whole model"), "{msg}"),
             e => panic!("{:?}", e.map(|m| m.len())),
         }
+    }
+
+    /// The parser's chain of nested errors becomes one plain line: the first, the innermost
+    /// when short, never a token list or a Debug dump; a body cut short says so in words
+    /// when only the innermost io::Error knew it.
+    #[test]
+    fn ply_messages_are_one_plain_line() {
+        assert_eq!(
+            plain_ply_message(
+                "Line 12: Couldn't read element line. String: '1 0 0 ' Error: Expected element of type 'Scalar(Float)', but found nothing."
+            ),
+            "Line 12: Couldn't read element line. String: '1 0 0 ' — Expected element of type 'Scalar(Float)', but found nothing."
+        );
+        assert_eq!(
+            plain_ply_message("Line 2: Couldn't parse line. String: 'format foo 1.0 ' Error: ParseError { location: LineCol { line: 1 } }"),
+            "Line 2: Couldn't parse line. String: 'format foo 1.0 '"
+        );
+        assert_eq!(
+            plain_ply_message("Line 17: Couldn't read list element. Error: failed to fill whole buffer"),
+            "Line 17: Couldn't read list element — failed to fill whole buffer (the file ends early)"
+        );
+        assert_eq!(plain_ply_message("Line 1:\n  Unexpected   end of file."), "Line 1: Unexpected end of file.");
     }
 
     /// A binary body that ends inside a list: one plain line that says the file ends early,

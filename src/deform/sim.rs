@@ -272,7 +272,8 @@ impl Collider {
     }
 }
 
-/// A prescribed rotation of the pinned nodes of one body around an axis.
+/// A prescribed rotation of the pinned nodes of one body around an axis (the capsule `bend`
+/// of stops ≤ 75 hung from such a bar; no built-in sequence uses it since, see [`Skin`]).
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Kinematic {
     pub body: usize,
