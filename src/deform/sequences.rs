@@ -421,8 +421,9 @@ fn bend(opts: &SequenceOptions) -> Result<Sequence, DeformError> {
         SurfelObject::build(SurfelModel::single("goblin", surf, [0.45, 0.6, 0.35]), nodes.clone(), vec![1.0; nodes.len()], &opts.object)?;
     let nn = nodes.len();
     let skin = swing_skin(&g, &rest, place, 2.0, 0.3);
-    // The hands grip the rails: nodes mostly on an arm follow the skeleton exactly.
-    let hands: Vec<u32> = (0..nn as u32)
+    // The arms hold the body up on the rails: nodes mostly on an arm, shoulder to hand, follow
+    // the skeleton exactly (the hands do not move; near the shoulder the torso blends in).
+    let arms: Vec<u32> = (0..nn as u32)
         .filter(|&j| {
             let b = skin.bones[j as usize][0];
             b == Bone::ArmL as u16 || b == Bone::ArmR as u16
@@ -435,7 +436,7 @@ fn bend(opts: &SequenceOptions) -> Result<Sequence, DeformError> {
         BodyParams { stiffness: 0.5, beta: 0.0, cluster_size: 12, damping: 0.01, ..Default::default() },
     );
     body.drive(skin);
-    body.pin(&hands);
+    body.pin(&arms);
     let mut world = World::new(1.0 / 30.0, 4);
     world.bodies.push(body);
     world.colliders.push(Collider::Plane { n: Vec3::Y, d: 0.0 });
