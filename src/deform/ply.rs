@@ -1,6 +1,6 @@
 //! Point files (PLY, via `ply-rs-bw`, the maintained fork of `ply-rs`) as surfel models
-//! (Adams et al. §3: surfel models read from point files). The `vertex` element must have `x y z nx ny nz`; a `radius` (or `r`)
-//! property is optional. Without it each surfel's radius is the distance to its 8th nearest
+//! (Adams et al. §3: surfel models read from point files). The `vertex` element must have
+//! `x y z nx ny nz`; a `radius` (or `r`) property is optional. Without it each surfel's radius is the distance to its 8th nearest
 //! neighbour (so the discs overlap). NaN/inf coordinates, zero normals and duplicate points
 //! are typed errors, never panics.
 

@@ -86,8 +86,8 @@ pub type PoseFn = dyn Fn(f32) -> Vec<glam::Affine3A> + Send + Sync;
 /// skinned pose is a fixed point: matched to the fixed rest shape, the clusters across a bent
 /// joint would pull it straight against the anchor (test
 /// `driven_body_matches_its_animated_rest_shape`: 1.8 cm of residual on a rod). Pinned nodes
-/// (hands on a bar) follow the skinned position exactly. Not in Adams et al., whose goblin's motion the paper does not describe;
-/// see `sequences::bend`.
+/// (arms on a bar) follow the skinned position exactly. Not in Adams et al., who do not
+/// describe how their goblin moves; see `sequences::bend`.
 pub struct Skin {
     /// Per node: two bones and their weights (summing to 1).
     pub bones: Vec<[u16; 2]>,
