@@ -230,8 +230,9 @@ pub fn mls_intersect_x8(
             let (px, py, pz) = (load(&nb.p[0], c), load(&nb.p[1], c), load(&nb.p[2], c));
             let (dx, dy, dz) = (xx - px, xy - py, xz - pz);
             let r = (dx * dx + dy * dy + dz * dz).sqrt() * inv_h;
-            let r2 = r * r;
-            let poly = one - f32x8::splat(6.0) * r2 + f32x8::splat(8.0) * r2 * r - f32x8::splat(3.0) * r2 * r2;
+            // Eq. 2 as `spline_weight` evaluates it, (1 − r)³(1 + 3r).
+            let s = one - r;
+            let poly = s * s * s * (one + f32x8::splat(3.0) * r);
             let w = r.simd_lt(one).bitselect(poly, zero);
             sw += w;
             sax += px * w;

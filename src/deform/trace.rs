@@ -1650,7 +1650,11 @@ impl DeformTracer {
         // |f(x)| with eps_rel·h, which absolute coordinates cannot resolve far from the
         // origin (at 300 units their rounding is 3e-5, ε for h = 0.05 is 5e-6: every
         // iteration ran out and the surface got holes; review finding, stop 49, test
-        // `objects_far_from_the_origin_are_hit_as_near_it`).
+        // `objects_far_from_the_origin_are_hit_as_near_it`). The ray, too, starts at the
+        // ellipse hit x0 (its parameter counted from t0): from the camera's origin each step's
+        // x = o + d·t carried the rounding of |o − sc|, the camera's distance, and 3,000 units
+        // from a ball with h = 0.15 a third of the rays that hit missed (review finding, stop
+        // 77, test `a_far_camera_sees_the_surface_as_a_near_one`).
         let mut nb = MlsNbr::default();
         let nk = obj.nk.min(MAX_NBR);
         let nbr = &obj.nbr[s * obj.nk..s * obj.nk + nk];
@@ -1665,14 +1669,15 @@ impl DeformTracer {
         }
         let h = obj.h[s] * ds.stretch.clamp(1.0, self.params.max_support_stretch);
         dc.mls_runs += 1;
-        match mls_intersect_x8(ray.org - sc, ray.dir, t0, x0 - sc, &nb, h, Vec3::ZERO, sr, ray.tnear, ray.tfar, &self.params.mls) {
+        let xr = x0 - sc;
+        match mls_intersect_x8(xr, ray.dir, 0.0, xr, &nb, h, Vec3::ZERO, sr, ray.tnear - t0, ray.tfar - t0, &self.params.mls) {
             MlsOutcome::Rejected { iters } => {
                 dc.mls_iterations += iters as u64;
                 dc.mls_rejected += 1;
                 None
             }
             MlsOutcome::Hit { t, p, n: nrm, iters } => {
-                let p = p + sc;
+                let (t, p) = (t0 + t, p + sc);
                 dc.mls_iterations += iters as u64;
                 dc.mls_hits += 1;
                 let c = obj.coll[s];
