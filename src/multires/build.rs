@@ -499,7 +499,9 @@ pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<Po
     let area: Vec<f32> = (0..mesh.tri_count())
         .map(|t| {
             let [a, b, c] = mesh.tri_verts(t);
-            let ar = 0.5 * (b - a).cross(c - a).length();
+            // In f64 (`Mesh::tri_cross`): the f32 cross product overflows for edges past
+            // ~4e9, and such a triangle was dropped as non-finite (review finding, stop 77).
+            let ar = (0.5 * mesh.tri_cross(t).length()) as f32;
             if ar.is_finite() && a.is_finite() && b.is_finite() && c.is_finite() {
                 ar
             } else {
@@ -825,7 +827,8 @@ fn build_node(ctx: &Ctx, tris: Vec<u32>, cube_lo: Vec3, side: f32, depth: u32) -
                     quant::encode_color(col.z * inv, ctx.ranges.color_hi),
                 ],
                 mat: std::array::from_fn(|i| ctx.ranges.props[i].encode(props[i] * inv)),
-                grad: quant::encode_grad(gu, gv),
+                // ∇n in units of the root side (`encode_grad`): side·2^depth.
+                grad: quant::encode_grad(gu, gv, side * (1u64 << depth) as f32),
             });
         }
         sc.cell_start = counts;
@@ -990,7 +993,7 @@ mod tests {
                     assert!(n.dot(p.normalize()) > 0.8, "normal {n} at {p}");
                 }
                 if h < 0.1 {
-                    let (gu, gv) = quant::decode_grad(t.points.grad[j as usize]);
+                    let (gu, gv) = quant::decode_grad(t.points.grad[j as usize], t.root_side);
                     curv.push((gu.x, gv.y, gu.y, gv.x));
                 }
                 checked += 1;
@@ -1010,7 +1013,7 @@ mod tests {
         let t = s.tree();
         let mut grey = 0;
         for j in 0..t.points.len() {
-            let (gu, gv) = quant::decode_grad(t.points.grad[j]);
+            let (gu, gv) = quant::decode_grad(t.points.grad[j], t.root_side);
             assert!(gu.length() < 1e-3 && gv.length() < 1e-3, "flat plane has zero ∇n");
             let m = t.ranges.decode(t.points.rgb[j], t.points.mat[j]);
             // Black and white squares: coarse points are grey.
@@ -1036,6 +1039,52 @@ mod tests {
             let mats: Vec<&Material> = self.mesh.mat.iter().map(|&m| &self.mats[m as usize]).collect();
             build(&self.mesh, &mats, &BuildParams::default()).unwrap()
         }
+    }
+
+    /// ∇n keeps a sphere's curvature whatever the model's units (its code holds ∇n times the
+    /// root side, `quant::encode_grad`): κ·R ≈ 1 at radius 1e-5 and 1e7 as at 1. Stored per
+    /// unit length, it came back as 0.65 and 1.19 there (review finding, stop 77).
+    #[test]
+    fn curvature_survives_any_model_scale() {
+        for r in [1e-5f32, 1.0, 1e7] {
+            let mut mesh = builtin::uv_sphere(48, 96, 0);
+            for i in 0..mesh.vertex_count() {
+                mesh.px[i] *= r;
+                mesh.py[i] *= r;
+                mesh.pz[i] *= r;
+            }
+            mesh.compute_normals();
+            let t = tree_of(&mesh, &BuildParams::default());
+            let mut k = Vec::new();
+            for node in 0..t.nodes.len() {
+                if t.spacing(t.nodes.depth[node]) >= 0.1 * r {
+                    continue;
+                }
+                for j in t.nodes.pt_start[node]..t.nodes.pt_start[node] + t.nodes.pt_count[node] {
+                    let (gu, gv) = quant::decode_grad(t.points.grad[j as usize], t.root_side);
+                    k.push(0.5 * (gu.x + gv.y) * r);
+                }
+            }
+            assert!(k.len() > 100, "radius {r}: {} points below 0.1 R", k.len());
+            let mean = k.iter().sum::<f32>() / k.len() as f32;
+            assert!((mean - 1.0).abs() < 0.1, "radius {r}: mean κR {mean}");
+        }
+    }
+
+    /// A mesh of huge extent is built, not dropped: its areas are taken in f64 (the f32
+    /// cross product of 5e9-unit edges overflowed, and both triangles were dropped as
+    /// non-finite; review finding, stop 77).
+    #[test]
+    fn huge_meshes_are_kept() {
+        let mut mesh = Mesh::new("huge");
+        let s = 5e9f32;
+        let v = [Vec3::ZERO, Vec3::X * s, Vec3::new(s, 0.0, s), Vec3::Z * s].map(|p| mesh.push_vertex(p));
+        mesh.push_tri(v[0], v[2], v[1], 0);
+        mesh.push_tri(v[0], v[3], v[2], 0);
+        mesh.compute_normals();
+        let t = tree_of(&mesh, &BuildParams::default());
+        assert_eq!(t.stats.triangles_dropped, 0);
+        assert_eq!(t.stats.triangles_stored, 2);
     }
 
     #[test]

@@ -32,7 +32,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Version of the cached layout *and* of the builder's output: bump on any change to either.
-pub const FORMAT_VERSION: u32 = 5;
+pub const FORMAT_VERSION: u32 = 6;
 const MAGIC: [u8; 8] = *b"LTPTREE\0";
 /// The source files whose code decides a tree's content, hashed into the key.
 const BUILDER_SOURCE: [&str; 3] = [include_str!("build.rs"), include_str!("quant.rs"), include_str!("cache.rs")];

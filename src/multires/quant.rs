@@ -12,7 +12,9 @@
 //! - Material properties: 8 bit each, linear over a per-hierarchy range `[lo, hi]`
 //!   ([`Range8`]); colour channels use a square-root curve so dark colours keep precision.
 //! - Differential properties: the normal as a 2×16-bit octahedral code ([`oct_encode`]),
-//!   the normal derivatives ∇n as four IEEE half floats (16 bit each).
+//!   the normal derivatives ∇n as four IEEE half floats (16 bit each), in units of the
+//!   hierarchy's root side ([`encode_grad`]), so that the code's range does not depend on the
+//!   model's units.
 //!
 //! Every encoder has a round-trip test: the decoded value is within one quantisation step.
 
@@ -115,8 +117,10 @@ pub fn decode_unit(c: u8) -> f32 {
 }
 
 /// Largest surface area a point can stand for, in voxel faces h² (foliage folds several
-/// leaves into one voxel; a plane cuts at most √2·h²).
-pub const COVER_MAX: f32 = 4.0;
+/// leaves into one voxel; a plane cuts at most √2·h²): 255/64, so the step is 1/64 and a
+/// cover of 1 (every point under `--point-weights voxel`, the paper's) codes exactly. (Until
+/// stop 77 it was 4: step 4/255, and 1 came back as 1.0039; review finding.)
+pub const COVER_MAX: f32 = 255.0 / 64.0;
 
 /// Surface area per point in units of h², 8 bit linear over [0, `COVER_MAX`] (step 1/64).
 #[inline]
@@ -131,15 +135,25 @@ pub fn decode_cover(c: u8) -> f32 {
     c as f32 * (COVER_MAX / 255.0)
 }
 
-/// ∇n = (∂n/∂u, ∂n/∂v), each a 2-vector in the point's tangent frame, as four halves.
+/// ∇n = (∂n/∂u, ∂n/∂v), each a 2-vector in the point's tangent frame (per unit length), as
+/// four halves of ∇n·`len`, `len` being the hierarchy's root side: a curvature relative to
+/// the model's size, about 1 for a sphere that fills it whatever its units. (Until stop 77 the
+/// halves held ∇n per unit length, so a sphere of radius 1e-5 came back with 0.65 of its
+/// curvature, clamped at ±65,000, and one of radius 1e7 with 1.19, in the halves'
+/// subnormals; review finding.)
 #[inline]
-pub fn encode_grad(gu: Vec2, gv: Vec2) -> [u16; 4] {
-    let h = |x: f32| f16::from_f32(if x.is_finite() { x.clamp(-65000.0, 65000.0) } else { 0.0 }).to_bits();
+pub fn encode_grad(gu: Vec2, gv: Vec2, len: f32) -> [u16; 4] {
+    let h = |x: f32| {
+        let x = x * len;
+        f16::from_f32(if x.is_finite() { x.clamp(-65000.0, 65000.0) } else { 0.0 }).to_bits()
+    };
     [h(gu.x), h(gu.y), h(gv.x), h(gv.y)]
 }
+/// ∇n per unit length from [`encode_grad`]'s code with the same `len`.
 #[inline]
-pub fn decode_grad(g: [u16; 4]) -> (Vec2, Vec2) {
-    let f = |b: u16| f16::from_bits(b).to_f32();
+pub fn decode_grad(g: [u16; 4], len: f32) -> (Vec2, Vec2) {
+    let inv = 1.0 / len;
+    let f = |b: u16| f16::from_bits(b).to_f32() * inv;
     (Vec2::new(f(g[0]), f(g[1])), Vec2::new(f(g[2]), f(g[3])))
 }
 
@@ -176,11 +190,16 @@ mod tests {
             prop_assert!(d.cross(n).length() < 1e-4, "{n} -> {d}");
         }
         #[test]
-        fn grad_round_trip(a in -100.0f32..100.0, b in -100.0f32..100.0, c in -1.0f32..1.0, d in -1.0f32..1.0) {
-            let (gu, gv) = decode_grad(encode_grad(Vec2::new(a, b), Vec2::new(c, d)));
+        fn grad_round_trip(a in -100.0f32..100.0, b in -100.0f32..100.0, c in -1.0f32..1.0, d in -1.0f32..1.0, e in -7i32..8) {
+            // Curvatures of models of any size: a value κ at root side L has κ·L in the
+            // code's normal range as long as κ·L is (here 1e-3..100 of the root's scale).
+            let len = 10f32.powi(e);
+            let (a, b, c, d) = (a / len, b / len, c / len, d / len);
+            let (gu, gv) = decode_grad(encode_grad(Vec2::new(a, b), Vec2::new(c, d), len), len);
             for (x, y) in [(gu.x, a), (gu.y, b), (gv.x, c), (gv.y, d)] {
-                // Half floats keep 11 significant bits: one step is 2^-10 relative (plus subnormals).
-                prop_assert!((x - y).abs() <= y.abs() * 1.0 / 1024.0 + 1e-7);
+                // Half floats keep 11 significant bits: one step is 2^-10 relative (plus
+                // subnormals, below 6e-5 of the root's scale).
+                prop_assert!((x - y).abs() <= y.abs() * 1.0 / 1024.0 + 1e-7 / len, "{y} at root side {len}: {x}");
             }
         }
     }
@@ -223,7 +242,7 @@ mod tests {
         assert_eq!((decode_unit(0), decode_unit(255)), (0.0, 1.0));
     }
 
-    /// The cover code ([`encode_cover`], rounding, step `COVER_MAX`/255 = 1/63.75 h²):
+    /// The cover code ([`encode_cover`], rounding, step `COVER_MAX`/255 = 1/64 h²):
     /// within half a step on [0, `COVER_MAX`]; beyond it (foliage folds more area into a
     /// voxel) `COVER_MAX`, below 0 zero; non-finite input code 0.
     #[test]
@@ -243,6 +262,8 @@ mod tests {
         for c in 0..=255u8 {
             assert_eq!(encode_cover(decode_cover(c)), c);
         }
+        // The paper's weight of a point (`--point-weights voxel`) comes back exactly.
+        assert_eq!(decode_cover(encode_cover(1.0)), 1.0);
     }
 
     /// The 8-bit position code ([`encode_pos`] / [`decode_pos`], as the build stores a
@@ -307,7 +328,7 @@ mod tests {
         let r = Range8::new(1.0, 1.0);
         assert_eq!(r.decode(r.encode(1.0)), 1.0);
         assert_eq!(Range8::new(0.0, 1.0).encode(f32::NAN), 0);
-        let (gu, _) = decode_grad(encode_grad(Vec2::new(f32::NAN, 1e9), Vec2::ZERO));
+        let (gu, _) = decode_grad(encode_grad(Vec2::new(f32::NAN, 1e9), Vec2::ZERO, 1.0), 1.0);
         assert!(gu.is_finite());
     }
 }

@@ -2203,7 +2203,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 let tree = &self.ms.trees[self.ms.leaves[leaf as usize].tree as usize];
                 let n = quant::oct_decode(tree.points.normal[idx as usize]);
                 let (tu, tv) = onb(n);
-                let (gu, gv) = quant::decode_grad(tree.points.grad[idx as usize]);
+                let (gu, gv) = quant::decode_grad(tree.points.grad[idx as usize], tree.root_side);
                 let du = tu * gu.x + tv * gu.y;
                 let dv = tu * gv.x + tv * gv.y;
                 // W·δ = du·(tu·δ) + dv·(tv·δ)
