@@ -1087,6 +1087,44 @@ mod tests {
         assert_eq!(t.stats.triangles_stored, 2);
     }
 
+    /// Valid triangles with broken vertex normals (NaN, zero, infinite) beside slivers 1e-7
+    /// wide reach the node build (`degenerate_meshes_do_not_panic` drops all its triangles
+    /// before it): every triangle is stored, and no point property decodes to a non-finite
+    /// value.
+    #[test]
+    fn broken_normals_and_slivers_build_finite_points() {
+        let mut mesh = builtin::uv_sphere(12, 24, 0);
+        mesh.compute_normals();
+        for (i, n) in [Vec3::NAN, Vec3::ZERO, Vec3::INFINITY].into_iter().enumerate() {
+            let v = 7 * i + 3;
+            (mesh.nx[v], mesh.ny[v], mesh.nz[v]) = (n.x, n.y, n.z);
+        }
+        for i in 0..50 {
+            let x = 0.02 * i as f32;
+            let a = mesh.push_vertex(Vec3::new(x, 1.5, 0.0));
+            let b = mesh.push_vertex(Vec3::new(x + 0.3, 1.5, 0.0));
+            let c = mesh.push_vertex(Vec3::new(x + 0.15, 1.5 + 1e-7, 0.0));
+            for _ in 0..3 {
+                mesh.nx.push(0.0);
+                mesh.ny.push(1.0);
+                mesh.nz.push(0.0);
+            }
+            mesh.push_tri(a, b, c, 0);
+        }
+        let t = tree_of(&mesh, &BuildParams::default());
+        assert_eq!(t.stats.triangles_stored + t.stats.triangles_dropped, mesh.tri_count());
+        assert_eq!(t.stats.triangles_dropped, 0, "slivers of positive area are kept");
+        assert!(t.stats.points > 0);
+        for node in 0..t.nodes.len() {
+            for j in t.nodes.pt_start[node] as usize..(t.nodes.pt_start[node] + t.nodes.pt_count[node]) as usize {
+                let (gu, gv) = quant::decode_grad(t.points.grad[j], t.root_side);
+                let n = quant::oct_decode(t.points.normal[j]);
+                assert!(t.point_pos(node, j).is_finite() && n.is_finite() && gu.is_finite() && gv.is_finite(), "point {j}");
+                assert!(quant::decode_cover(t.points.cover[j]).is_finite());
+            }
+        }
+    }
+
     #[test]
     fn degenerate_meshes_do_not_panic() {
         let mut mesh = Mesh::new("bad");
