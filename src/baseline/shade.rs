@@ -30,6 +30,9 @@ pub struct TraceCtx<'a> {
 /// ray, whether the ray came from the front (outside), and the material.
 pub struct Surface<'a> {
     pub p: Vec3,
+    /// Offset of secondary-ray origins from `p` ([`SURFACE_EPS_REL`] of the hit triangle's
+    /// world-space coordinates' magnitude): above `p`'s rounding, at any scale.
+    pub eps: f32,
     pub ng: Vec3,
     pub ns: Vec3,
     pub front: bool,
@@ -51,7 +54,16 @@ impl<'a> TraceCtx<'a> {
         if ns == Vec3::ZERO {
             ns = ng;
         }
-        let p = ray.org + ray.dir * hit.t;
+        // The hit point from the barycentrics on the triangle, not ray.org + t·dir: that one
+        // carries the rounding of the camera's distance, and 1,700 × (1 + |p|) away the
+        // shadow and reflected rays hit their own surface (speckles; precision review, stop
+        // 77). The offset follows the magnitude of the triangle's coordinates, which bounds
+        // this p's rounding, instead of 1e-4·(1 + |p|), whose absolute 1e-4 swallowed scenes
+        // scaled by 1e-4 and whose relative 1e-4 swallowed scenes moved 1e4 from the origin.
+        let world = [p0, p1, p2].map(|q| leaf.xform.transform_point3(q));
+        let p = world[0] * w + world[1] * hit.u + world[2] * hit.v;
+        let mag = world.iter().fold(p.abs(), |m, q| m.max(q.abs())).max_element();
+        let eps = (SURFACE_EPS_REL * mag).max(f32::MIN_POSITIVE);
         let front = ng.dot(ray.dir) < 0.0;
         if !front {
             ng = -ng;
@@ -60,7 +72,7 @@ impl<'a> TraceCtx<'a> {
             ns = -ns;
         }
         let mat_id = leaf.material.unwrap_or(mesh.mat[hit.prim as usize]);
-        Surface { p, ng, ns, front, mat: &self.scene.materials[mat_id as usize] }
+        Surface { p, eps, ng, ns, front, mat: &self.scene.materials[mat_id as usize] }
     }
 
     /// Radiance arriving along `ray` (unit direction). `depth` counts bounces so far.
@@ -75,7 +87,7 @@ impl<'a> TraceCtx<'a> {
     pub fn shade(&self, ray: &Ray, hit: &Hit, depth: u32, mut smp: Option<&mut Sampler>, c: &mut Counters) -> Vec3 {
         let s = self.surface(ray, hit);
         let v = -ray.dir;
-        let eps = surface_eps(s.p);
+        let eps = s.eps;
         let p_out = s.p + s.ng * eps;
         let mut l = self.direct(&s, v, p_out, smp.as_deref_mut(), c, |r, c| self.accel.occluded1(r, c));
         if depth >= self.max_depth {
@@ -156,11 +168,10 @@ impl<'a> TraceCtx<'a> {
     }
 }
 
-/// Offset of secondary-ray origins from a hit point at `p` (relative to its magnitude).
-#[inline]
-pub fn surface_eps(p: Vec3) -> f32 {
-    1e-4 * (1.0 + p.abs().max_element())
-}
+/// Offset of secondary-ray origins from a hit point ([`Surface::eps`]), relative to the
+/// magnitude of the hit triangle's world coordinates: 4e-6, about 67 f32 steps of that
+/// magnitude, where the point's rounding is a few (stop 77; it was 1e-4·(1 + |p|)).
+pub const SURFACE_EPS_REL: f32 = 4e-6;
 
 /// The secondary rays of a hit (Whitted): the refracted direction, weighted by
 /// `color · transmit` (`None` without transparency or on total internal reflection, whose

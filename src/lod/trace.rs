@@ -47,7 +47,7 @@
 use super::chain::{level_of, LodScenes};
 use crate::baseline::accel::{Accel, Hit, InstFilter, Ray};
 use crate::baseline::render::{primary_row, Progress, RenderOpts, RenderOutput};
-use crate::baseline::shade::{secondary, surface_eps, TraceCtx};
+use crate::baseline::shade::{secondary, TraceCtx};
 use crate::core::luminance;
 use crate::core::rng::Sampler;
 use crate::core::stats::{Counter, Counters};
@@ -303,7 +303,7 @@ impl<'a> LodTracer<'a> {
         let shadow = &self.ctxs[lv as usize];
         let s = ctx.surface(ray, hit);
         let v = -ray.dir;
-        let eps = surface_eps(s.p);
+        let eps = s.eps;
         let p_out = s.p + s.ng * eps;
         let mut l = ctx.direct(&s, v, p_out, None, c, |r, c| shadow.accel.occluded1(r, c));
         if depth >= self.max_depth {
@@ -356,7 +356,7 @@ impl<'a> LodTracer<'a> {
         let ctx = &self.ctxs[lv as usize];
         let s = ctx.surface(&ray, &h);
         let v = -ray.dir;
-        let p_out = s.p + s.ng * surface_eps(s.p);
+        let p_out = s.p + s.ng * s.eps;
         cell.l0 = ctx.direct(&s, v, p_out, None, c, |r, c| ctx.accel.occluded1(r, c));
         if self.max_depth == 0 {
             return cell;
@@ -420,7 +420,7 @@ impl<'a> LodTracer<'a> {
         let ctx = &self.ctxs[lv as usize];
         let s = ctx.surface(&cell.ray, &h);
         let v = -cell.ray.dir;
-        let eps = surface_eps(s.p);
+        let eps = s.eps;
         let sec = secondary(&s, v);
         let mut l = cell.l0;
         let lod1 = |d: f32| match self.p.force {

@@ -2134,7 +2134,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let cos = ng.dot(lc.dir).abs().max(0.05);
         let tan = (1.0 - cos * cos).max(0.0).sqrt() / cos;
         let plane = R_CUT * size * tan.min(8.0);
-        let eps = 1e-5 * (1.0 + t.abs());
+        // Relative to t (it was 1e-5·(1 + |t|): in a mesh of coordinates near 1e-5 every
+        // triangle's interval spanned the mesh, and its fragments merged; stop 77).
+        let eps = 1e-5 * t.abs() + f32::MIN_POSITIVE;
         let (mut z0, mut z1) = (t - plane.max(eps), t + plane.max(eps));
         if self.p.tight_depth {
             let tv = pw.map(|p| (p - lc.org).dot(lc.dir));
@@ -2555,7 +2557,11 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let g1 = cone::project_on_plane(f1, cone.dir, n);
         let gmax = g0.length().max(g1.length());
         let half_depth = 0.5 * (f.z1 - f.z0);
-        let eps = 1e-4 * (1.0 + p.abs().max_element());
+        // Above the rounding of p (relative to its and the cone origin's magnitude) and of
+        // the scene's extent (100 footprint floors, 1e-5 of it). Until stop 77 it was
+        // 1e-4·(1 + |p|): the absolute 1e-4 swallowed scenes scaled by 1e-4 (shadows gone)
+        // and the relative 1e-4 scenes moved 1e4 from the origin (precision review).
+        let eps = 4e-6 * (p.abs().max_element() + cone.org.abs().max_element()) + 100.0 * self.floor;
         // Minimum distance of outgoing cones: clear of the surface's own footprint.
         let t_self = |d: Vec3| -> f32 {
             let sin_el = d.dot(n).abs().max(0.05);

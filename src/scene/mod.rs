@@ -324,8 +324,8 @@ impl Scene {
         Ok((lo, hi))
     }
 
-    /// Errors when an instance is smaller than the relative part of the hit-point offset at
-    /// its position (1e-4 × |p| of `surface_eps`' 1e-4 × (1 + |p|)): such an instance has lost its shape to
+    /// Errors when an instance is smaller than 1e-4 × |p| at its position (the relative part
+    /// of the hit-point offset until stop 77, 25× `SURFACE_EPS_REL` now): such an instance has lost its shape to
     /// f32 rounding (a unit cube translated to 1e8 collapses to a point, f32's spacing there
     /// is 8) or shadows itself wrongly; before stop 57 it rendered as nothing with exit 0.
     /// The bare-mesh loader applies a stricter bound of its own (ten offsets).
