@@ -178,6 +178,38 @@ fn rigid_motions_far_away_keep_surfels_inside() {
     }
 }
 
+/// The converse of `rigid_motions_far_away_keep_surfels_inside`: a ball whose reference pose
+/// lies 1.3e4 from the origin, turned about its centre and moved next to the origin. Eq. 1
+/// rounds at the reference coordinates' magnitude there, 1e4 times the deformed centre's, and
+/// Eq. 9's f32 pad has to cover that too: with a pad relative to the deformed centre alone,
+/// surfels escaped their spheres by up to 0.9 % of a node's radius (review finding, stop 77).
+#[test]
+fn a_far_reference_moved_near_keeps_surfels_inside() {
+    let c = Vec3::new(1e4, 5e3, -7e3);
+    let s = sphere_surfels(c, 1.0, 1500);
+    let (nd, _) = nodes_inside(&|p: Vec3| (p - c).length() <= 0.9, c - Vec3::ONE, c + Vec3::ONE, 60);
+    let m = vec![1.0; nd.len()];
+    let obj = SurfelObject::build(SurfelModel::single("far ball", s, [1.0; 3]), nd, m, &ObjectParams::default()).unwrap();
+    for (case, factor_rigid) in [(0u32, true), (1, false)] {
+        let params = TraceParams { exact_below: 0, factor_rigid, ..TraceParams::default() };
+        let mut tr = DeformTracer::new(&scene1(&obj), UpdateMode::Lazy, params).unwrap();
+        let mut ctr = Counters::default();
+        for k in 0..4u32 {
+            let mut smp = Sampler::new(case, k, 9);
+            let q = Quat::from_axis_angle(Vec3::new(smp.next() - 0.5, smp.next() - 0.5, smp.next() + 0.1).normalize(), 6.0 * smp.next());
+            let t = Vec3::new(smp.next() - 0.5, smp.next() - 0.5, smp.next() - 0.5);
+            tr.begin_frame(&[obj.nodes.rest.iter().map(|x| q * (*x - c) + t).collect()]).unwrap();
+            for (i, ray) in random_rays(k, 256, t, 6.0, 2.0).iter().enumerate() {
+                let _ = tr.intersect(ray, Some(i as u32), &mut ctr);
+                let _ = tr.occluded(ray, &mut ctr);
+            }
+            assert_eq!(tr.check_containment(), Ok(()), "case {case}, frame {k}");
+            tr.update_all();
+            assert_eq!(tr.check_containment(), Ok(()), "case {case}, frame {k}, all nodes");
+        }
+    }
+}
+
 fn render(tr: &DeformTracer, cam: &Camera, w: u32, h: u32, dc: &mut DeformCounters) -> Vec<Option<SurfelHit>> {
     let f = cam.frame(w, h);
     let mut ctr = Counters::default();

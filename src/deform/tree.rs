@@ -367,10 +367,14 @@ impl SphereTree {
         // which bound the same convex combinations (module docs).
         let (mut sx_p, mut mx_p, mut sk_p) = (0.0f32, 0.0f32, 0.0f32);
         let (mut sx_c, mut mx_c, mut sk_c, mut mk_c) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+        // Magnitudes that Eq. 1's f32 sum rounds at (for the pad below).
+        let (mut max_u, mut max_kf) = (0.0f32, 0.0f32);
         for i in s..e {
             let j = self.list_node[i] as usize;
             let v = if small { vbuf[i - s] } else { f.u[j] + f.k[j] * (xc - rest[j]) };
             let (a, kf) = (self.list_a[i], f.kf[j]);
+            max_u = max_u.max(f.u[j].abs().max_element());
+            max_kf = max_kf.max(kf);
             let xp = (f.u[j] - uc).length();
             sx_p += a * xp;
             mx_p = mx_p.max(xp);
@@ -387,7 +391,14 @@ impl SphereTree {
         let r_centred = sx_c.min(mx_c) + sk_c.min(r0 * mk_c);
         let r = r0 + if recentred { r_paper.min(r_centred) } else { sx_p + sk_p };
         let c = f.rot * xc + f.trans + uc;
-        (c, r * (1.0 + RADIUS_PAD) + RADIUS_PAD * c.abs().max_element())
+        // The f32 pad: relative to the radius and to the magnitudes Eq. 1 rounds at, the
+        // deformed centre's and, for a model whose reference pose lies far from where it is
+        // drawn, the reference coordinates' (|x| ≤ |x_c| + r₀, times 1 + 2·max‖K_j‖), the
+        // translation's and the displacements'. (Until stop 77 only |c|: a ball referenced
+        // 1.3e4 from the origin and moved next to it escaped by 0.9 % of a node's radius;
+        // review finding, test `a_far_reference_moved_near_keeps_surfels_inside`.)
+        let mag = c.abs().max_element() + (xc.abs().max_element() + r0) * (1.0 + 2.0 * max_kf) + f.trans.abs().max_element() + max_u;
+        (c, r * (1.0 + RADIUS_PAD) + RADIUS_PAD * mag)
     }
 }
 
