@@ -1326,6 +1326,17 @@ fn level_tests_sum_to_the_sphere_tests() {
     }
 }
 
+/// The closest hit of `r` in every tracer of `trs` (several update modes of one frame), each
+/// equal bit for bit to the brute-force search's, which is returned.
+fn hit_all_modes_agree(trs: &[DeformTracer], r: &Ray, ctr: &mut Counters, dc: &mut DeformCounters, what: &str) -> Option<SurfelHit> {
+    let want = trs[0].closest_brute(r);
+    for tr in trs {
+        let got = tr.intersect_ex(r, None, ctr, dc);
+        assert_eq!(got.map(|h| (h.t.to_bits(), h.surfel)), want.map(|h| (h.t.to_bits(), h.surfel)), "{what}, {:?}", tr.mode());
+    }
+    want
+}
+
 /// The same ball and the same rays (relative to it), translated far from the origin: the
 /// rays hit as often as near it, with as few MLS iterations, and every mode agrees with the
 /// brute-force search. Until stop 49 the MLS iteration ran in world coordinates, whose
@@ -1334,11 +1345,8 @@ fn level_tests_sum_to_the_sphere_tests() {
 /// leaf ball at 20,000 units, where the sphere tests culled them.
 #[test]
 fn objects_far_from_the_origin_are_hit_as_near_it() {
-    let s = sphere_surfels(Vec3::ZERO, 1.0, 3000);
-    let (nd, _) = nodes_inside(&|p: Vec3| p.length() <= 0.9, Vec3::splat(-1.0), Vec3::splat(1.0), 60);
-    let obj =
-        SurfelObject::build(SurfelModel::single("ball", s, [1.0; 3]), nd.clone(), vec![1.0; nd.len()], &ObjectParams::default()).unwrap();
-    let scene = scene1(&obj);
+    let obj = ball(1.0, 3000, 60);
+    let (nd, scene) = (obj.nodes.rest.clone(), scene1(&obj));
     let mut near = None;
     for off in [0.0f32, 1000.0, 4000.0, 20000.0] {
         let t = Vec3::new(off, off * 0.5, -off * 0.7);
@@ -1354,16 +1362,7 @@ fn objects_far_from_the_origin_are_hit_as_near_it() {
                 let o = t + Vec3::new(0.0, 0.0, 5.0);
                 let target = t + Vec3::new(-1.05 + 2.1 * i as f32 / 39.0, -1.05 + 2.1 * j as f32 / 39.0, 0.0);
                 let r = Ray::new(o, (target - o).normalize());
-                let want = trs[0].closest_brute(&r);
-                for tr in &trs {
-                    let got = tr.intersect_ex(&r, None, &mut ctr, &mut dc);
-                    assert_eq!(
-                        got.map(|h| (h.t.to_bits(), h.surfel)),
-                        want.map(|h| (h.t.to_bits(), h.surfel)),
-                        "offset {off}, ray ({i}, {j}), {:?}",
-                        tr.mode()
-                    );
-                }
+                let want = hit_all_modes_agree(&trs, &r, &mut ctr, &mut dc, &format!("offset {off}, ray ({i}, {j})"));
                 hits += want.is_some() as u32;
             }
         }
@@ -1382,12 +1381,8 @@ fn objects_far_from_the_origin_are_hit_as_near_it() {
 /// far out: 1,040 of 1,060 rays hit at 1,000 units, 636 at 3,000 (review finding).
 #[test]
 fn a_far_camera_sees_the_surface_as_a_near_one() {
-    let s = sphere_surfels(Vec3::ZERO, 1.0, 3000);
-    let (nd, _) = nodes_inside(&|p: Vec3| p.length() <= 0.9, Vec3::splat(-1.0), Vec3::splat(1.0), 60);
-    let obj =
-        SurfelObject::build(SurfelModel::single("ball", s, [1.0; 3]), nd.clone(), vec![1.0; nd.len()], &ObjectParams::default()).unwrap();
-    let scene = scene1(&obj);
-    let frame = vec![nd.clone()];
+    let obj = ball(1.0, 3000, 60);
+    let (frame, scene) = (vec![obj.nodes.rest.clone()], scene1(&obj));
     let mut trs: Vec<DeformTracer> =
         [UpdateMode::Lazy, UpdateMode::Naive].iter().map(|m| DeformTracer::new(&scene, *m, TraceParams::default()).unwrap()).collect();
     for tr in &mut trs {
@@ -1405,16 +1400,7 @@ fn a_far_camera_sees_the_surface_as_a_near_one() {
                     continue;
                 }
                 let r = Ray::new(o, (target - o).normalize());
-                let want = trs[0].closest_brute(&r);
-                for tr in &trs {
-                    let got = tr.intersect_ex(&r, None, &mut ctr, &mut dc);
-                    assert_eq!(
-                        got.map(|h| (h.t.to_bits(), h.surfel)),
-                        want.map(|h| (h.t.to_bits(), h.surfel)),
-                        "camera at {dist}, ray ({i}, {j}), {:?}",
-                        tr.mode()
-                    );
-                }
+                let want = hit_all_modes_agree(&trs, &r, &mut ctr, &mut dc, &format!("camera at {dist}, ray ({i}, {j})"));
                 if let Some(h) = want {
                     assert!((h.p.length() - 1.0).abs() < 0.01, "camera at {dist}: hit {} off the unit sphere", h.p.length());
                 }
