@@ -773,13 +773,15 @@ pub fn max_reach_x8(x: &[f32], y: &[f32], z: &[f32], r: &[f32], range: std::ops:
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::core::rng::Sampler;
+    use glam::DVec3;
 
     /// `near_rotation` is orthonormal and right-handed (the Eq. 9 re-centred bound assumes
     /// ‖Q·x‖ = ‖x‖) also for nearly parallel first columns, a node flattened to a plane; one
     /// Gram–Schmidt pass gave ‖QᵀQ − I‖ up to 0.45 there (review finding, stop 77).
     #[test]
     fn near_rotation_is_orthonormal_even_for_degenerate_input() {
-        let mut s = crate::core::rng::Sampler::new(7, 0, 0);
+        let mut s = Sampler::new(7, 0, 0);
         let mut rnd = || Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5);
         for i in 0..20_000 {
             let (a, e, c) = (rnd(), rnd(), rnd());
@@ -789,8 +791,6 @@ mod tests {
             assert!(err < 1e-5 && (q.determinant() - 1.0).abs() < 1e-5, "δ = {d}: ‖QᵀQ − I‖ = {err}, det {}", q.determinant());
         }
     }
-    use crate::core::rng::Sampler;
-    use glam::DVec3;
 
     #[test]
     fn x8_kernels_match_scalar() {
