@@ -244,7 +244,12 @@ impl MatRanges {
                 hi[i] = hi[i].max(v);
             }
         }
-        let props = std::array::from_fn(|i| if lo[i] <= hi[i] { Range8::new(lo[i], hi[i]) } else { Range8::new(0.0, 0.0) });
+        // Shininess (index 2) spans decades: a logarithmic code.
+        let props = std::array::from_fn(|i| match (lo[i] <= hi[i], i) {
+            (true, 2) => Range8::for_exponent(lo[i], hi[i]),
+            (true, _) => Range8::new(lo[i], hi[i]),
+            _ => Range8::new(0.0, 0.0),
+        });
         MatRanges { color_hi: chi.max(1e-6), props }
     }
     pub fn decode(&self, rgb: [u8; 3], mat: [u8; 7]) -> PointMat {

@@ -32,7 +32,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Version of the cached layout *and* of the builder's output: bump on any change to either.
-pub const FORMAT_VERSION: u32 = 6;
+pub const FORMAT_VERSION: u32 = 7;
 const MAGIC: [u8; 8] = *b"LTPTREE\0";
 /// The source files whose code decides a tree's content, hashed into the key.
 const BUILDER_SOURCE: [&str; 3] = [include_str!("build.rs"), include_str!("quant.rs"), include_str!("cache.rs")];
@@ -216,6 +216,7 @@ pub fn encode(t: &PointTree, key: u64) -> Vec<u8> {
     for r in &t.ranges.props {
         w.f32(r.lo);
         w.f32(r.hi);
+        w.u32(r.log as u32);
     }
     w.u64(t.stats.triangles_dropped as u64);
     w.u64(t.stats.samples);
@@ -271,9 +272,9 @@ pub fn decode(b: &[u8], key: u64, n_tris: usize, params: &BuildParams) -> Option
     let root_side = r.f32()?;
     let k = r.u32()?;
     let color_hi = r.f32()?;
-    let mut props = [Range8 { lo: 0.0, hi: 0.0 }; 7];
+    let mut props = [Range8::default(); 7];
     for p in &mut props {
-        *p = Range8 { lo: r.f32()?, hi: r.f32()? };
+        *p = Range8 { lo: r.f32()?, hi: r.f32()?, log: r.u32()? != 0 };
     }
     let triangles_dropped = r.u64()? as usize;
     let samples = r.u64()?;
@@ -333,7 +334,7 @@ pub fn decode(b: &[u8], key: u64, n_tris: usize, params: &BuildParams) -> Option
     let radius = |r: f32| (r.is_finite() && r >= 0.0) || r == f32::NEG_INFINITY;
     if !(fin(&nodes.cx) && fin(&nodes.cy) && fin(&nodes.cz) && nodes.r.iter().all(|&r| radius(r)))
         || !nodes.grid_lo.iter().all(|p| p.is_finite())
-        || !(color_hi.is_finite() && props.iter().all(|p| p.lo.is_finite() && p.hi.is_finite() && p.lo <= p.hi))
+        || !(color_hi.is_finite() && props.iter().all(|p| p.lo.is_finite() && p.hi.is_finite() && p.lo <= p.hi && (!p.log || p.lo > 0.0)))
     {
         return None;
     }

@@ -38,16 +38,25 @@ pub fn decode_pos(q: [u8; 3], grid_lo: Vec3, step: f32) -> Vec3 {
     grid_lo + (Vec3::new(q[0] as f32, q[1] as f32, q[2] as f32) + 0.5) * step
 }
 
-/// Linear 8-bit code over `[lo, hi]`.
+/// 8-bit code over `[lo, hi]`: linear, or with `log` linear in ln v (for a positive range
+/// spanning decades, [`Range8::for_exponent`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Range8 {
     pub lo: f32,
     pub hi: f32,
+    pub log: bool,
 }
 
 impl Range8 {
     pub fn new(lo: f32, hi: f32) -> Self {
-        Range8 { lo, hi: if hi > lo { hi } else { lo } }
+        Range8 { lo, hi: if hi > lo { hi } else { lo }, log: false }
+    }
+    /// A Phong exponent's range: logarithmic when it is positive and spans more than a factor
+    /// 16, so small exponents keep their steps (linear over 1–1000, 2 decoded as 1; review
+    /// finding, stop 77); [`Range8::new`] otherwise.
+    pub fn for_exponent(lo: f32, hi: f32) -> Self {
+        let r = Self::new(lo, hi);
+        Range8 { log: lo > 0.0 && r.hi > 16.0 * lo && r.hi.is_finite(), ..r }
     }
     /// One quantisation step.
     pub fn step(&self) -> f32 {
@@ -58,11 +67,21 @@ impl Range8 {
         if self.hi <= self.lo || !v.is_finite() {
             return 0;
         }
-        (((v - self.lo) / (self.hi - self.lo)).clamp(0.0, 1.0) * 255.0).round() as u8
+        let x = if self.log {
+            (v.max(self.lo).ln() - self.lo.ln()) / (self.hi.ln() - self.lo.ln())
+        } else {
+            (v - self.lo) / (self.hi - self.lo)
+        };
+        (x.clamp(0.0, 1.0) * 255.0).round() as u8
     }
     #[inline]
     pub fn decode(&self, q: u8) -> f32 {
-        self.lo + (self.hi - self.lo) * (q as f32 / 255.0)
+        let x = q as f32 / 255.0;
+        if self.log {
+            (self.lo.ln() + (self.hi.ln() - self.lo.ln()) * x).exp().clamp(self.lo, self.hi)
+        } else {
+            self.lo + (self.hi - self.lo) * x
+        }
     }
 }
 
@@ -325,6 +344,15 @@ mod tests {
     fn degenerate_inputs() {
         assert_eq!(oct_decode(oct_encode(Vec3::ZERO)), Vec3::Z);
         assert!(oct_decode(oct_encode(Vec3::NAN)).is_finite());
+        // A Phong exponent over 1–1000: logarithmic, each code within 1.4 % (half a step of
+        // 1000^(1/255)) and 2 no longer decoded as 1.
+        let e = Range8::for_exponent(1.0, 1000.0);
+        assert!(e.log && !Range8::for_exponent(0.0, 1000.0).log && !Range8::for_exponent(10.0, 100.0).log);
+        for v in [1.0f32, 2.0, 3.5, 10.0, 60.0, 120.0, 999.0, 1000.0] {
+            let d = e.decode(e.encode(v));
+            assert!((d / v - 1.0).abs() < 0.014, "{v} -> {d}");
+        }
+        assert_eq!((e.decode(0), e.decode(255)), (1.0, 1000.0));
         let r = Range8::new(1.0, 1.0);
         assert_eq!(r.decode(r.encode(1.0)), 1.0);
         assert_eq!(Range8::new(0.0, 1.0).encode(f32::NAN), 0);
