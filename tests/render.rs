@@ -261,13 +261,11 @@ intensity = {int}
         for (name, s, t, tol) in [("small", 1e-4f32, [0.0f32; 3], 0.002), ("moved", 1.0, [1e3, 5e2, -7e2], 0.005)] {
             let img = render(name, toml(s, t, 1.0), m);
             let (flip, _) = lodtrace::film::metrics::flip_mean(&unit, &img, 80, 60).unwrap();
-            eprintln!("{m:?} {name} {flip}");
             assert!(flip < tol, "{m:?}, {name}: mean FLIP {flip} against unit scale");
         }
         // A far camera: 1,000 against 10,000 times as far (both nearly orthographic).
         let (a, b) = (render("far3", toml(1.0, [0.0; 3], 1e3), m), render("far4", toml(1.0, [0.0; 3], 1e4), m));
         let (flip, _) = lodtrace::film::metrics::flip_mean(&a, &b, 80, 60).unwrap();
-        eprintln!("{m:?} far {flip}");
         assert!(flip < 0.02, "{m:?}: mean FLIP {flip} between cameras 1e3 and 1e4 times as far");
     }
     std::fs::remove_dir_all(&dir).ok();

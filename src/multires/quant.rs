@@ -58,7 +58,8 @@ impl Range8 {
         let r = Self::new(lo, hi);
         Range8 { log: lo > 0.0 && r.hi > 16.0 * lo && r.hi.is_finite(), ..r }
     }
-    /// One quantisation step.
+    /// One quantisation step of a linear range (a `log` range's steps are relative:
+    /// (hi/lo)^(1/255) each).
     pub fn step(&self) -> f32 {
         (self.hi - self.lo) / 255.0
     }
