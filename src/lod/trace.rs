@@ -461,6 +461,16 @@ pub fn disparity(d: Vec3, h: Option<Vec3>, v: Option<Vec3>) -> f32 {
     ((ang(h) + ang(v)) / std::f32::consts::TAU).clamp(0.0, 1.0)
 }
 
+/// `--lod-net-disparity`: on each image axis the outgoing angle minus the incident rays'
+/// angle, never below zero, summed over the two axes (/ 2π). Subtracting the sums instead let
+/// an axis on which the surface converges the rays cancel the other's divergence: a saddle
+/// whose rays spread by 0.1 rad horizontally and run parallel vertically, seen by rays 0.05
+/// rad apart, measured 0 instead of 0.05/2π.
+pub fn net_disparity(d: Vec3, h: Option<Vec3>, v: Option<Vec3>, inc: Vec3, inc_h: Option<Vec3>, inc_v: Option<Vec3>) -> f32 {
+    let axis = |o: Option<Vec3>, i: Option<Vec3>| (disparity(d, o, None) - disparity(inc, i, None)).max(0.0);
+    (axis(h, inc_h) + axis(v, inc_v)).clamp(0.0, 1.0)
+}
+
 pub struct LodRender {
     pub out: RenderOutput,
     pub maps: LodMaps,
@@ -578,13 +588,12 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
                 }
                 let hn = at(i + 1, j, r).or_else(|| at(i - 1, j, r));
                 let vn = at(i, j + 1, r).or_else(|| at(i, j - 1, r));
-                let out = disparity(dir(cell), hn.map(|n| dir(&buf[n])), vn.map(|n| dir(&buf[n])));
+                let (oh, ov) = (hn.map(|n| dir(&buf[n])), vn.map(|n| dir(&buf[n])));
                 if net {
-                    // Minus the divergence the incident rays already had.
-                    let inc = disparity(cell.ray.dir, hn.map(|n| buf[n].ray.dir), vn.map(|n| buf[n].ray.dir));
-                    (out - inc).max(0.0)
+                    // Minus the divergence the incident rays already had, per axis.
+                    net_disparity(dir(cell), oh, ov, cell.ray.dir, hn.map(|n| buf[n].ray.dir), vn.map(|n| buf[n].ray.dir))
                 } else {
-                    out
+                    disparity(dir(cell), oh, ov)
                 }
             };
             (one(true), one(false))
@@ -691,6 +700,25 @@ mod tests {
         }
         // The levels are different models, so the test means something.
         assert!(differ > 400, "{differ}");
+    }
+
+    /// The net disparity subtracts the incident angle per axis, as the module header says: a
+    /// converging axis does not cancel a diverging one.
+    #[test]
+    fn net_disparity_is_taken_per_axis() {
+        let z = Vec3::Z;
+        let rot = |a: f32, axis: Vec3| glam::Quat::from_axis_angle(axis, a) * z;
+        // Incident neighbours 0.05 rad apart on both axes; outgoing 0.1 rad apart
+        // horizontally, parallel vertically (a saddle-like surface).
+        let (ih, iv) = (rot(0.05, Vec3::Y), rot(0.05, Vec3::X));
+        let (oh, ov) = (rot(0.1, Vec3::Y), z);
+        let got = net_disparity(z, Some(oh), Some(ov), z, Some(ih), Some(iv));
+        let want = 0.05 / std::f32::consts::TAU;
+        assert!((got - want).abs() < 2e-4, "net disparity {got}, want {want}");
+        // A flat mirror (outgoing angles equal the incident ones) adds nothing.
+        assert!(net_disparity(z, Some(ih), Some(iv), z, Some(ih), Some(iv)) < 1e-6);
+        // No neighbour on an axis: that axis adds nothing.
+        assert!((net_disparity(z, Some(oh), None, z, Some(ih), None) - want).abs() < 2e-4);
     }
 
     #[test]
