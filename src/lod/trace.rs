@@ -461,6 +461,16 @@ pub fn disparity(d: Vec3, h: Option<Vec3>, v: Option<Vec3>) -> f32 {
     ((ang(h) + ang(v)) / std::f32::consts::TAU).clamp(0.0, 1.0)
 }
 
+/// `--lod-net-disparity`: on each image axis the outgoing angle minus the incident rays'
+/// angle, never below zero, summed over the two axes (/ 2π). Subtracting the sums instead let
+/// an axis on which the surface converges the rays cancel the other's divergence: a saddle
+/// whose rays spread by 0.1 rad horizontally and run parallel vertically, seen by rays 0.05
+/// rad apart, measured 0 instead of 0.05/2π.
+pub fn net_disparity(d: Vec3, h: Option<Vec3>, v: Option<Vec3>, inc: Vec3, inc_h: Option<Vec3>, inc_v: Option<Vec3>) -> f32 {
+    let axis = |o: Option<Vec3>, i: Option<Vec3>| (disparity(d, o, None) - disparity(inc, i, None)).max(0.0);
+    (axis(h, inc_h) + axis(v, inc_v)).clamp(0.0, 1.0)
+}
+
 pub struct LodRender {
     pub out: RenderOutput,
     pub maps: LodMaps,
@@ -489,138 +499,139 @@ pub fn render(tr: &mut LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> Resul
 /// Both passes run over image rows in parallel (rayon's work stealing balances them), each
 /// row writing its own slice of the distortion buffer and of the film: no scatter step.
 /// (Tiles with a per-tile result list and a scatter cost 22 % over Whitted on `reflector`,
-/// 512², 4 spp; rows brought that down to the figure in the README.)
+/// 512², 4 spp; rows brought that down to the figure in the README.) Every sample index has
+/// its own distortion buffer, so the two passes run once per sample index over one buffer of
+/// one cell per pixel: memory stays that of the film at any `--spp` (a buffer of all samples
+/// took 100 bytes per sample, 420 MB at 8×8 and 65536 spp, and aborted where Whitted ran).
 fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Counters, LodMaps, f64) {
-    let t0 = Instant::now();
     let (w, h, spp) = (opts.width, opts.height, opts.spp);
-    let (wu, sppu) = (w as usize, spp as usize);
+    let wu = w as usize;
     let npix = (w * h) as usize;
-    let prog = Progress::new(2 * h as u64, &opts.label, opts.quiet);
+    let prog = Progress::new(2 * h as u64 * spp as u64, &opts.label, opts.quiet);
     let ctx0 = &tr.ctxs[tr.level(&tr.root_state()) as usize];
     let merge = |mut a: Counters, b: Counters| {
         a.merge(&b);
         a
     };
-
-    // Pass 1: level-0 rays (packets of K at one sample per pixel, as the Whitted tracer).
     let empty = Cell { ray: Ray::new(Vec3::ZERO, Vec3::Z), hit: None, l0: Vec3::ZERO, r: Vec3::ZERO, t: Vec3::ZERO, cone: (0.0, 0.0) };
-    let mut buf = vec![empty; npix * sppu];
+    let mut buf = vec![empty; npix];
     let mut film = Film::new(w, h);
-    let mut counters = buf
-        .par_chunks_mut(wu * sppu)
-        .zip(film.depth.par_chunks_mut(wu))
-        .zip(film.normal.par_chunks_mut(wu))
-        .enumerate()
-        .map(|(j, ((cells, depth), normal))| {
-            let j = j as u32;
-            let mut c = Counters::default();
-            if spp == 1 {
-                primary_row(ctx0.accel, cam, j, 0, w, opts.packet, &mut c, |i, ray, hit, c| {
-                    let i = i as usize;
-                    cells[i] = tr.pass1_cell(*ray, hit.copied(), c);
-                    if opts.aov {
-                        (depth[i], normal[i]) = match hit {
-                            Some(hh) => (hh.t, ctx0.surface(ray, hh).ns),
-                            None => (f32::INFINITY, Vec3::ZERO),
-                        };
-                    }
-                });
-            } else {
-                for i in 0..w {
-                    let pix = j * w + i;
-                    for s in 0..spp {
-                        let mut smp = Sampler::new(opts.seed, pix, s);
+    // Sums over the samples (averaged at the end, in sample order as before).
+    let mut maps =
+        LodMaps { width: w, height: h, d_r: vec![0.0; npix], d_t: vec![0.0; npix], lod_r: vec![0.0; npix], lod_t: vec![0.0; npix] };
+    let mut counters = Counters::default();
+    let mut pass1_seconds = 0.0;
+    for s in 0..spp {
+        // Pass 1: level-0 rays (packets of K at one sample per pixel, as the Whitted tracer).
+        let t0 = Instant::now();
+        let c1 = buf
+            .par_chunks_mut(wu)
+            .zip(film.depth.par_chunks_mut(wu))
+            .zip(film.normal.par_chunks_mut(wu))
+            .enumerate()
+            .map(|(j, ((cells, depth), normal))| {
+                let j = j as u32;
+                let mut c = Counters::default();
+                if spp == 1 {
+                    primary_row(ctx0.accel, cam, j, 0, w, opts.packet, &mut c, |i, ray, hit, c| {
+                        let i = i as usize;
+                        cells[i] = tr.pass1_cell(*ray, hit.copied(), c);
+                        if opts.aov {
+                            (depth[i], normal[i]) = match hit {
+                                Some(hh) => (hh.t, ctx0.surface(ray, hh).ns),
+                                None => (f32::INFINITY, Vec3::ZERO),
+                            };
+                        }
+                    });
+                } else {
+                    for i in 0..w {
+                        let mut smp = Sampler::new(opts.seed, j * w + i, s);
                         let (u, v) = smp.next2();
                         let ray = Ray::new(cam.eye, cam.dir_at(i as f32 + u, j as f32 + v));
                         c.inc(Counter::rays_primary);
                         c.inc(Counter::samples);
                         let hit = ctx0.accel.intersect1(&ray, &mut c);
-                        cells[i as usize * sppu + s as usize] = tr.pass1_cell(ray, hit, &mut c);
+                        cells[i as usize] = tr.pass1_cell(ray, hit, &mut c);
                     }
                     // Depth and normal AOVs: `aov_probes`, after the timed render.
                 }
-            }
-            prog.tick();
-            c
-        })
-        .reduce(Counters::default, merge);
-    let pass1_seconds = t0.elapsed().as_secs_f64();
+                prog.tick();
+                c
+            })
+            .reduce(Counters::default, merge);
+        counters.merge(&c1);
+        pass1_seconds += t0.elapsed().as_secs_f64();
 
-    // Pass 2: disparities from the horizontal and vertical neighbours (same sample index),
-    // then the level-1 sub-trees.
-    let buf = &buf;
-    let at = |i: i64, j: i64, s: usize, r: bool| -> Option<usize> {
-        if i < 0 || j < 0 || i >= w as i64 || j >= h as i64 {
-            return None;
-        }
-        let k = (j as usize * wu + i as usize) * sppu + s;
-        let d = if r { buf[k].r } else { buf[k].t };
-        (d != Vec3::ZERO).then_some(k)
-    };
-    let net = tr.p.net_disparity;
-    let cone = tr.p.selector == Selector::Cone;
-    let disparity_at = |k: usize| -> (f32, f32) {
-        if cone {
-            return buf[k].cone;
-        }
-        let s = k % sppu;
-        let pix = k / sppu;
-        let (i, j) = ((pix % wu) as i64, (pix / wu) as i64);
-        let cell = &buf[k];
-        let one = |r: bool| {
-            let dir = |c: &Cell| if r { c.r } else { c.t };
-            if dir(cell) == Vec3::ZERO {
-                return 0.0;
+        // Pass 2: disparities from the horizontal and vertical neighbours (same sample index),
+        // then the level-1 sub-trees.
+        let buf = &buf;
+        let at = |i: i64, j: i64, r: bool| -> Option<usize> {
+            if i < 0 || j < 0 || i >= w as i64 || j >= h as i64 {
+                return None;
             }
-            let hn = at(i + 1, j, s, r).or_else(|| at(i - 1, j, s, r));
-            let vn = at(i, j + 1, s, r).or_else(|| at(i, j - 1, s, r));
-            let out = disparity(dir(cell), hn.map(|n| dir(&buf[n])), vn.map(|n| dir(&buf[n])));
-            if net {
-                // Minus the divergence the incident rays already had.
-                let inc = disparity(cell.ray.dir, hn.map(|n| buf[n].ray.dir), vn.map(|n| buf[n].ray.dir));
-                (out - inc).max(0.0)
-            } else {
-                out
-            }
+            let k = j as usize * wu + i as usize;
+            let d = if r { buf[k].r } else { buf[k].t };
+            (d != Vec3::ZERO).then_some(k)
         };
-        (one(true), one(false))
-    };
-    let mut maps =
-        LodMaps { width: w, height: h, d_r: vec![0.0; npix], d_t: vec![0.0; npix], lod_r: vec![1.0; npix], lod_t: vec![1.0; npix] };
-    let c2 = film
-        .color
-        .par_chunks_mut(wu)
-        .zip(maps.d_r.par_chunks_mut(wu))
-        .zip(maps.d_t.par_chunks_mut(wu))
-        .zip(maps.lod_r.par_chunks_mut(wu))
-        .zip(maps.lod_t.par_chunks_mut(wu))
-        .enumerate()
-        .map(|(j, ((((color, dr_row), dt_row), lr_row), lt_row))| {
-            let mut c = Counters::default();
-            for i in 0..wu {
-                let pix = j * wu + i;
-                let mut sum = Vec3::ZERO;
-                let mut m = [0.0f32; 4];
-                for s in 0..sppu {
-                    let k = pix * sppu + s;
+        let net = tr.p.net_disparity;
+        let cone = tr.p.selector == Selector::Cone;
+        let disparity_at = |k: usize| -> (f32, f32) {
+            if cone {
+                return buf[k].cone;
+            }
+            let (i, j) = ((k % wu) as i64, (k / wu) as i64);
+            let cell = &buf[k];
+            let one = |r: bool| {
+                let dir = |c: &Cell| if r { c.r } else { c.t };
+                if dir(cell) == Vec3::ZERO {
+                    return 0.0;
+                }
+                let hn = at(i + 1, j, r).or_else(|| at(i - 1, j, r));
+                let vn = at(i, j + 1, r).or_else(|| at(i, j - 1, r));
+                let (oh, ov) = (hn.map(|n| dir(&buf[n])), vn.map(|n| dir(&buf[n])));
+                if net {
+                    // Minus the divergence the incident rays already had, per axis.
+                    net_disparity(dir(cell), oh, ov, cell.ray.dir, hn.map(|n| buf[n].ray.dir), vn.map(|n| buf[n].ray.dir))
+                } else {
+                    disparity(dir(cell), oh, ov)
+                }
+            };
+            (one(true), one(false))
+        };
+        let c2 = film
+            .color
+            .par_chunks_mut(wu)
+            .zip(maps.d_r.par_chunks_mut(wu))
+            .zip(maps.d_t.par_chunks_mut(wu))
+            .zip(maps.lod_r.par_chunks_mut(wu))
+            .zip(maps.lod_t.par_chunks_mut(wu))
+            .enumerate()
+            .map(|(j, ((((color, dr_row), dt_row), lr_row), lt_row))| {
+                let mut c = Counters::default();
+                for i in 0..wu {
+                    let k = j * wu + i;
                     let (dr, dt) = disparity_at(k);
                     let (col, lr, lt) = tr.pass2_cell(&buf[k], dr, dt, &mut c);
-                    sum += col;
-                    m[0] += dr;
-                    m[1] += dt;
-                    m[2] += lr;
-                    m[3] += lt;
+                    color[i] += col;
+                    dr_row[i] += dr;
+                    dt_row[i] += dt;
+                    lr_row[i] += lr;
+                    lt_row[i] += lt;
                 }
-                color[i] = if spp == 1 { sum } else { sum / spp as f32 };
-                let inv = 1.0 / spp as f32;
-                (dr_row[i], dt_row[i], lr_row[i], lt_row[i]) = (m[0] * inv, m[1] * inv, m[2] * inv, m[3] * inv);
-            }
-            prog.tick();
-            c
-        })
-        .reduce(Counters::default, merge);
+                prog.tick();
+                c
+            })
+            .reduce(Counters::default, merge);
+        counters.merge(&c2);
+    }
     prog.finish();
-    counters.merge(&c2);
+    if spp > 1 {
+        film.color.iter_mut().for_each(|c| *c /= spp as f32);
+    }
+    let inv = 1.0 / spp as f32;
+    for m in [&mut maps.d_r, &mut maps.d_t, &mut maps.lod_r, &mut maps.lod_t] {
+        m.iter_mut().for_each(|x| *x *= inv);
+    }
     (film, counters, maps, pass1_seconds)
 }
 
@@ -689,6 +700,25 @@ mod tests {
         }
         // The levels are different models, so the test means something.
         assert!(differ > 400, "{differ}");
+    }
+
+    /// The net disparity subtracts the incident angle per axis, as the module header says: a
+    /// converging axis does not cancel a diverging one.
+    #[test]
+    fn net_disparity_is_taken_per_axis() {
+        let z = Vec3::Z;
+        let rot = |a: f32, axis: Vec3| glam::Quat::from_axis_angle(axis, a) * z;
+        // Incident neighbours 0.05 rad apart on both axes; outgoing 0.1 rad apart
+        // horizontally, parallel vertically (a saddle-like surface).
+        let (ih, iv) = (rot(0.05, Vec3::Y), rot(0.05, Vec3::X));
+        let (oh, ov) = (rot(0.1, Vec3::Y), z);
+        let got = net_disparity(z, Some(oh), Some(ov), z, Some(ih), Some(iv));
+        let want = 0.05 / std::f32::consts::TAU;
+        assert!((got - want).abs() < 2e-4, "net disparity {got}, want {want}");
+        // A flat mirror (outgoing angles equal the incident ones) adds nothing.
+        assert!(net_disparity(z, Some(ih), Some(iv), z, Some(ih), Some(iv)) < 1e-6);
+        // No neighbour on an axis: that axis adds nothing.
+        assert!((net_disparity(z, Some(oh), None, z, Some(ih), None) - want).abs() < 2e-4);
     }
 
     #[test]

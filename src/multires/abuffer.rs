@@ -74,9 +74,11 @@ pub struct Frag {
     pub best: Elem,
     /// Sub-rays of the cone the fragment's pieces cover (`--coverage-masks`,
     /// [`super::mask`]); 0: unknown (points, tiny triangles), composited as in the paper.
+    /// With two meshes (`other`), those of the first mesh's pieces; `other.mask` the rest.
     pub mask: u64,
     /// Of `w`, the weight of pieces that fell on sub-rays already covered by earlier pieces
-    /// of the fragment (overlap, not coverage; [`Frag::alpha`]). 0 without masks.
+    /// of the fragment (overlap, not coverage; [`Frag::alpha`]). 0 without masks. With two
+    /// meshes, of the first mesh's pieces, overlapping its own; `other.hidden` the rest.
     pub hidden: f32,
     /// Of `w`, the weight of pieces whose normal faces away from the cone's origin (n·d > 0;
     /// `TraceParams::facing`, a deviation; 0 when off). See [`Frag::alpha`].
@@ -119,6 +121,9 @@ pub struct Group {
     pub nb: Vec3,
     pub wn: f32,
     pub wtn: f32,
+    /// The group's own [`Frag::mask`] and [`Frag::hidden`] (not sums: set by the merges).
+    pub mask: u64,
+    pub hidden: f32,
 }
 
 /// What [`ABuffer::insert`] takes: one point's or triangle's contribution, its sums as a
@@ -191,6 +196,8 @@ impl Frag {
             nb: self.nb,
             wn: self.wn,
             wtn: self.wtn,
+            mask: self.mask,
+            hidden: self.hidden,
         }
     }
     /// Sets the fragment's sums, key and best element from `g`.
@@ -214,31 +221,43 @@ impl Frag {
         // Nearly every merge of two fragments is of a single group (`other` all zeros: it
         // only ever takes groups of positive weight).
         if piece_in_place && !(s.other.w > 0.0) {
-            self.absorb_group(&s.sums());
+            let first = self.absorb_group(&s.sums());
+            self.absorb_mask(first, s.w, s.mask, s.hidden);
         } else {
             self.absorb_groups(s);
         }
-        self.absorb_extent(s.z0, s.z1, s.w, s.mask, s.hidden);
+        self.absorb_extent(s.z0, s.z1);
     }
     /// Merges one piece: [`Frag::absorb`] of `p.frag()`, bit for bit, without building it.
     #[inline]
     fn absorb_piece(&mut self, p: &Piece) {
-        self.absorb_group(&p.g);
-        self.absorb_extent(p.g.z0, p.z1, p.g.w, p.mask, p.hidden);
+        let first = self.absorb_group(&p.g);
+        self.absorb_mask(first, p.g.w, p.mask, p.hidden);
+        self.absorb_extent(p.g.z0, p.z1);
     }
-    /// The depth interval and coverage of a merge of pieces [z0, z1] of weight `w`.
+    /// The depth interval of a merge of pieces [z0, z1].
     #[inline]
-    fn absorb_extent(&mut self, z0: f32, z1: f32, w: f32, mask: u64, hidden: f32) {
+    fn absorb_extent(&mut self, z0: f32, z1: f32) {
         self.z0 = self.z0.min(z0);
         self.z1 = self.z1.max(z1);
-        // Overlap within the fragment (`--coverage-masks`): the share of the new piece's
-        // coverage that falls on sub-rays already covered here is not coverage.
-        self.hidden += hidden;
-        if mask & self.mask != 0 {
-            let over = (mask & self.mask).count_ones() as f32 / mask.count_ones() as f32;
-            self.hidden += (w - hidden).max(0.0) * over;
+    }
+    /// The coverage of pieces of weight `w` that joined the first group (`first`) or
+    /// `other`. Overlap within the group (`--coverage-masks`): the share of the new pieces'
+    /// coverage that falls on sub-rays the group already covers is not coverage. Overlap
+    /// with the other group is occlusion between the two parts, which [`Over`] composites
+    /// by depth (§4.4). (Until the ray-cone review one mask served both groups: a floor
+    /// behind an object's base, covering the object's sub-rays, was charged to the object's
+    /// part as hidden weight, giving it a negative alpha; test
+    /// `overlap_with_another_mesh_is_not_hidden_in_the_first`.)
+    #[inline]
+    fn absorb_mask(&mut self, first: bool, w: f32, mask: u64, hidden: f32) {
+        let (m, h) = if first { (&mut self.mask, &mut self.hidden) } else { (&mut self.other.mask, &mut self.other.hidden) };
+        *h += hidden;
+        if mask & *m != 0 {
+            let over = (mask & *m).count_ones() as f32 / mask.count_ones() as f32;
+            *h += (w - hidden).max(0.0) * over;
         }
-        self.mask |= mask;
+        *m |= mask;
     }
 
     /// [`Frag::absorb`]'s sums for one group `s` (a piece, or a fragment of one mesh;
@@ -246,8 +265,9 @@ impl Frag {
     /// (its group of `s` is `s`'s sums less an empty `other`, added with factor 1), without
     /// its copies of the groups (stop 64: `absorb` was 7 % of a `complex` frame, mostly
     /// moving groups through the stack).
+    /// Returns whether `s` counts with the first group (also when it has no weight).
     #[inline]
-    fn absorb_group(&mut self, s: &Group) {
+    fn absorb_group(&mut self, s: &Group) -> bool {
         let joins = s.w > 0.0;
         let mut to_first = false;
         if joins {
@@ -291,6 +311,7 @@ impl Frag {
         if bw > self.best_w {
             (self.best_w, self.best) = (bw, b);
         }
+        to_first || !joins
     }
 
     /// [`Frag::absorb`]'s sums and best element, the general path: `s` may hold two meshes.
@@ -307,6 +328,7 @@ impl Frag {
         let mut mine = if self.other.w > 0.0 || s.other.w > 0.0 { self.first() } else { Group::default() };
         for (g, gz0) in [(s.first(), s.z0_key), (s.other, s.other.z0)] {
             if !(g.w > 0.0) {
+                self.absorb_mask(true, g.w, g.mask, g.hidden);
                 continue;
             }
             let joins_first = if g.key == self.key || g.key == ANY_MESH || self.key == ANY_MESH {
@@ -321,6 +343,7 @@ impl Frag {
             } else {
                 false
             };
+            self.absorb_mask(joins_first, g.w, g.mask, g.hidden);
             if joins_first {
                 to_first.add(&g);
                 mine.add(&g);
@@ -379,7 +402,8 @@ impl Frag {
             f.set_sums(&g);
             f
         };
-        let (a, b) = (part(self.first(), self.z0_key, self.mask, self.hidden), part(self.other, self.other.z0, 0, 0.0));
+        let (a, b) =
+            (part(self.first(), self.z0_key, self.mask, self.hidden), part(self.other, self.other.z0, self.other.mask, self.other.hidden));
         if a.t() <= b.t() {
             ([a, b], 2)
         } else {
@@ -843,6 +867,34 @@ mod tests {
         ab.insert(&pc(smp(1.0, 0.1, 0.5, Vec3::ONE)));
         ab.insert(&pc(smp(5.0, 0.1, 0.5, Vec3::ONE)));
         assert!((ab.alpha() - 0.75).abs() < 1e-6);
+    }
+
+    /// `--coverage-masks` with split meshes: an object's piece on the left half of the
+    /// footprint and the floor behind it, covering every sub-ray, merged into one fragment.
+    /// The floor's overlap with the object is occlusion between the two parts (composited
+    /// front to back), not overlap within the object: the object's part keeps its alpha 0.3
+    /// and the floor fills the rest. (The whole fragment's hidden weight, 0.5 of the floor's,
+    /// was charged to the object's part: alpha −0.2, a negative share of the pixel and 1.2
+    /// for the floor.)
+    #[test]
+    fn overlap_with_another_mesh_is_not_hidden_in_the_first() {
+        let masked = |t: f32, w: f32, mask: u64, key: u32| Frag { mask, key, ..smp(t, 0.4, w, Vec3::ONE) };
+        let left = 0x0000_0000_ffff_ffffu64;
+        let mut ab = ABuffer::new(16);
+        ab.insert(&pc(masked(6.6, 0.3, left, 1)));
+        ab.insert(&pc(masked(6.73, 1.0, u64::MAX, 0)));
+        assert_eq!(ab.frags.len(), 1, "merged by depth");
+        let (parts, n) = ab.frags[0].parts();
+        assert_eq!(n, 2);
+        let mut o = Over::default();
+        let k: Vec<f32> = parts[..n].iter().map(|p| o.add(p)).collect();
+        assert!((k[0] - 0.3).abs() < 1e-6 && (k[1] - 0.7).abs() < 1e-6, "shares {k:?}");
+        assert!((ab.alpha() - 1.0).abs() < 1e-6, "{}", ab.alpha());
+        // Overlap within one mesh is still hidden.
+        let mut ab = ABuffer::new(16);
+        ab.insert(&pc(masked(6.6, 0.3, left, 1)));
+        ab.insert(&pc(masked(6.65, 0.3, left, 1)));
+        assert!((ab.alpha() - 0.3).abs() < 1e-6, "{}", ab.alpha());
     }
 
     #[test]
