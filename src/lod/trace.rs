@@ -41,7 +41,7 @@
 //!   paper's absolute angles include the pixel's own angular size (about 0.0015 rad at 512²
 //!   and 45°), which a flat mirror passes on unchanged; at that size it never lowers the
 //!   level (LOD⁽¹⁾ > 0.99 maps to level 0), so both modes keep a flat mirror at full LOD.
-//! - Parallelism: tiles in a rayon pool; rayon's work stealing is the dynamic load
+//! - Parallelism: image rows in a rayon pool; rayon's work stealing is the dynamic load
 //!   balancing of §4 (an idle worker takes half of a busy worker's remaining range).
 
 use super::chain::{level_of, LodScenes};
