@@ -548,6 +548,17 @@ fn lod_bench_writes_diff_and_distortion_maps() {
     assert!(p.is_file());
 }
 
+/// A `lod` row is compared with the full-detail Whitted row traced the same way: same
+/// packet width too (a `packet=1` Whitted row listed first was taken as the partner, so
+/// "time saved" credited the LOD with the packets' speed-up).
+#[test]
+fn lod_bench_partner_has_the_same_packet_width() {
+    let (code, out, err, _d, json) = small_bench("lodpacket", &["cabinet", "--methods", "whitted:bvh:packet=1,whitted:bvh,lod:bvh"]);
+    assert_eq!(code, 0, "{out}{err}");
+    let v = json.unwrap();
+    assert_eq!(v["rows"][2]["lod_vs_full"]["against"], "whitted:bvh", "{}", v["rows"][2]["lod_vs_full"]);
+}
+
 #[test]
 fn bad_lod_options_are_one_line_exit_2() {
     let d = tmp("lodbad");

@@ -14,7 +14,7 @@
 //! `warm=1`, `cache_up`, `climb=1`, `gate`, `ordered=0`, `top=0` (`--no-instance-tree`), `nearest=mls`.
 //!
 //! A `lod` row is also compared with the full-detail row of the same scene (the first
-//! `whitted` row with the same accel, spp, threads and depth): triangle tests and time saved, the maximum
+//! `whitted` row with the same accel, spp, threads, packet and depth): triangle tests and time saved, the maximum
 //! and mean pixel difference (8-bit display values, as the paper's percentages), a
 //! magnified difference image like the paper's Fig. 4e, and the two distortion maps. Beside
 //! them stands the *floor* of those difference figures ([`DiffFloor`]): the same full-detail
@@ -1001,8 +1001,14 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             }
             let mut lod_vs_full = None;
             if spec.method == Method::Lod {
+                // Traced alike but for the LOD: the packet width too (a `packet=1` row taken as
+                // the partner credited the LOD with the packets' speed-up).
                 if let Some((fs, ff, fst)) = full.iter().find(|(f, _, _)| {
-                    f.accel == spec.accel && f.spp == spec.spp && f.max_depth == spec.max_depth && f.threads == spec.threads
+                    f.accel == spec.accel
+                        && f.spp == spec.spp
+                        && f.max_depth == spec.max_depth
+                        && f.threads == spec.threads
+                        && f.packet == spec.packet
                 }) {
                     let d = pixel_diff(&film, ff);
                     let tests = |s: &run::Stats| s.counters.get("triangle_tests").copied().unwrap_or(0) as f64;
