@@ -250,6 +250,38 @@ fn bench_sweep_gives_equal_time_rows() {
     }
 }
 
+/// Equal time means equal resources: a row run on fewer threads than the sweep is not met
+/// with the sweep's wall-clock times (a one-thread Whitted row against a two-thread sweep
+/// overstated the sweep's advantage about twofold), and does not extend the sweep either.
+#[test]
+fn bench_sweep_meets_only_rows_on_the_sweeps_threads() {
+    let (code, _, err, _d, json) = small_bench(
+        "sweepthreads",
+        &[
+            "spheres",
+            "--methods",
+            "whitted:bvh,whitted:bvh:threads=1",
+            "--threads",
+            "2",
+            "--reference",
+            "distributed:bvh:spp=8:vt=0",
+            "--sweep",
+            "distributed:bvh:vt=0",
+            "--sweep-max-spp",
+            "4",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    let v = json.unwrap();
+    let rows = v["rows"].as_array().unwrap();
+    assert_eq!(rows[0]["stats"]["threads"], 2);
+    assert_eq!(rows[1]["stats"]["threads"], 1);
+    let sweep: Vec<&serde_json::Value> = rows.iter().filter(|r| r["sweep"].is_string()).collect();
+    assert!(sweep.iter().all(|r| r["stats"]["threads"] == 2));
+    assert_eq!(rows[0]["equal_time"].as_array().map(Vec::len), Some(1), "{}", rows[0]);
+    assert!(rows[1].get("equal_time").is_none(), "one thread against a two-thread sweep: {}", rows[1]["equal_time"]);
+}
+
 #[test]
 fn render_writes_exr_aovs() {
     let d = tmp("aov");
@@ -546,6 +578,17 @@ fn lod_bench_writes_diff_and_distortion_maps() {
     ]);
     assert_eq!(code, 0, "{err}");
     assert!(p.is_file());
+}
+
+/// A `lod` row is compared with the full-detail Whitted row traced the same way: same
+/// packet width too (a `packet=1` Whitted row listed first was taken as the partner, so
+/// "time saved" credited the LOD with the packets' speed-up).
+#[test]
+fn lod_bench_partner_has_the_same_packet_width() {
+    let (code, out, err, _d, json) = small_bench("lodpacket", &["cabinet", "--methods", "whitted:bvh:packet=1,whitted:bvh,lod:bvh"]);
+    assert_eq!(code, 0, "{out}{err}");
+    let v = json.unwrap();
+    assert_eq!(v["rows"][2]["lod_vs_full"]["against"], "whitted:bvh", "{}", v["rows"][2]["lod_vs_full"]);
 }
 
 #[test]

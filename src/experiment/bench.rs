@@ -14,7 +14,7 @@
 //! `warm=1`, `cache_up`, `climb=1`, `gate`, `ordered=0`, `top=0` (`--no-instance-tree`), `nearest=mls`.
 //!
 //! A `lod` row is also compared with the full-detail row of the same scene (the first
-//! `whitted` row with the same accel, spp, threads and depth): triangle tests and time saved, the maximum
+//! `whitted` row with the same accel, spp, threads, packet and depth): triangle tests and time saved, the maximum
 //! and mean pixel difference (8-bit display values, as the paper's percentages), a
 //! magnified difference image like the paper's Fig. 4e, and the two distortion maps. Beside
 //! them stands the *floor* of those difference figures ([`DiffFloor`]): the same full-detail
@@ -78,7 +78,8 @@ pub struct BenchArgs {
     /// 1, 2, 4, … samples per pixel until it is both slower and better than every other
     /// method (or reaches `--sweep-max-spp`), then report for each method the sweep's error
     /// at the same time and the time the sweep needs to reach the method's error (mean
-    /// FLIP against `--reference`, interpolated in log time). Needs `--reference`.
+    /// FLIP against `--reference`, interpolated in log time). Only methods run on as many
+    /// threads as the sweep are compared (and bound it). Needs `--reference`.
     /// Repeatable: `--sweep distributed:embree --sweep distributed:octree` compares each
     /// method with the fast back-end and with the paper's distributed tracer on the same
     /// code basis (§6) in one run.
@@ -1001,8 +1002,14 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             }
             let mut lod_vs_full = None;
             if spec.method == Method::Lod {
+                // Traced alike but for the LOD: the packet width too (a `packet=1` row taken as
+                // the partner credited the LOD with the packets' speed-up).
                 if let Some((fs, ff, fst)) = full.iter().find(|(f, _, _)| {
-                    f.accel == spec.accel && f.spp == spec.spp && f.max_depth == spec.max_depth && f.threads == spec.threads
+                    f.accel == spec.accel
+                        && f.spp == spec.spp
+                        && f.max_depth == spec.max_depth
+                        && f.threads == spec.threads
+                        && f.packet == spec.packet
                 }) {
                     let d = pixel_diff(&film, ff);
                     let tests = |s: &run::Stats| s.counters.get("triangle_tests").copied().unwrap_or(0) as f64;
@@ -1070,11 +1077,10 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
         let first = rows.len() - specs.len();
         for (sw, rf) in sweeps.iter().filter_map(|sw| ref_film.as_ref().map(|rf| (sw, rf))) {
             let t0 = first_time.unwrap_or(1.0);
-            // The methods' rows only, not an earlier sweep's.
-            let others: Vec<(f64, f64)> =
-                rows[first..first + specs.len()].iter().filter_map(|r| r.flip.map(|f| (r.stats.render_seconds, f))).collect();
-            let t_slowest = others.iter().map(|o| o.0).fold(0.0, f64::max);
-            let f_best = others.iter().map(|o| o.1).fold(f64::INFINITY, f64::min);
+            // The sweep's thread count (of its first render) and the bounds it must pass:
+            // the slowest time and best error of the methods' rows on as many threads.
+            let mut sweep_threads: Option<usize> = None;
+            let (mut t_slowest, mut f_best) = (0.0, f64::INFINITY);
             let mut curve = Vec::new();
             let mut region_curves: Vec<Vec<(f64, f64, f64)>> = Vec::new();
             let mut spp = 1u32;
@@ -1087,6 +1093,17 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                 let mut row = finish_row(scene, &spec, &film, stats, Some((rf, &regions[..])), a.out.as_deref(), a.quiet)?;
                 row.speedup_vs_first = t0 / row.stats.render_seconds.max(1e-12);
                 row.sweep = Some(sw.text.clone());
+                if sweep_threads.is_none() {
+                    let thr = row.stats.threads;
+                    sweep_threads = Some(thr);
+                    // The methods' rows only (not an earlier sweep's), on the sweep's threads.
+                    for r in rows[first..first + specs.len()].iter().filter(|r| r.stats.threads == thr) {
+                        if let Some(f) = r.flip {
+                            t_slowest = f64::max(t_slowest, r.stats.render_seconds);
+                            f_best = f64::min(f_best, f);
+                        }
+                    }
+                }
                 let (t, f) = (row.stats.render_seconds, row.flip.unwrap_or(0.0));
                 // Samples actually taken per pixel (the adaptive tracer takes fewer than its
                 // setting); the setting where a tracer does not count them.
@@ -1104,6 +1121,11 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                 spp *= 2;
             }
             for r in &mut rows[first..first + specs.len()] {
+                // Equal time is equal wall-clock time on equal threads: a one-thread row against
+                // a two-thread sweep made the sweep look about twice as fast as it is.
+                if Some(r.stats.threads) != sweep_threads {
+                    continue;
+                }
                 if let Some(f) = r.flip {
                     let mut e = equal_time(&curve, r.stats.render_seconds, f, &sw.text);
                     for (g, c) in r.regions.iter().zip(&region_curves) {
@@ -1386,7 +1408,7 @@ pub fn table_string(report: &BenchReport) -> String {
     for name in sweeps {
         let eq: Vec<(&BenchRow, &EqualTime)> =
             report.rows.iter().filter_map(|r| r.equal_time.iter().find(|e| e.sweep == name).map(|e| (r, e))).collect();
-        s.push_str(&format!("\nEqual time and equal error against {name} (mean FLIP against the reference):\n\n"));
+        s.push_str(&format!("\nEqual time and equal error against {name} (mean FLIP against the reference; the rows run on as many threads as the sweep):\n\n"));
         s.push_str("| scene | method | render s | FLIP | sweep FLIP at equal time (samples per pixel) | sweep time to match FLIP | time ratio at equal error |\n");
         s.push_str("|---|---|---:|---:|---:|---:|---:|\n");
         for &(r, e) in &eq {

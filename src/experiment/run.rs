@@ -20,6 +20,9 @@ use std::time::Instant;
 pub struct RunResult {
     pub out: RenderOutput,
     pub build_seconds: f64,
+    /// Worker threads the build ran on: the run's `--threads`, as the render's (Embree's
+    /// own build threads excepted).
+    pub build_threads: usize,
     pub accel_bytes: usize,
     /// False when a time budget stopped the render (the image is incomplete).
     pub finished: bool,
@@ -254,14 +257,27 @@ pub fn run(scene: &Scene, method: Method, accel_kind: AccelKind, opts: &RenderOp
     // otherwise); the trace options do not apply to it.
     let (octree, _) = mr.params(false)?;
     let leaves = scene.leaf_instances()?;
+    let pool = crate::core::thread_pool(opts.threads)?;
     let t0 = Instant::now();
-    let acc = accel::build_with(accel_kind, scene, &octree)?;
+    // On the run's threads: the global pool built a `threads=1` row's BVH on every core.
+    let (acc, build_threads) =
+        pool.install(|| Ok::<_, Error>((accel::build_with(accel_kind, scene, &octree)?, rayon::current_num_threads())))?;
     let build_seconds = t0.elapsed().as_secs_f64();
+    drop(pool);
     let ctx = TraceCtx { scene, leaves: &leaves, accel: acc.as_ref(), max_depth: scene.max_depth };
     let cam = scene.camera.frame(opts.width, opts.height);
     let o = RenderOpts { integrator, ..opts.clone() };
     let out = render(&ctx, &cam, &o)?;
-    Ok(RunResult { out, build_seconds, accel_bytes: acc.memory_bytes(), finished: true, hierarchy: None, lod: None, cones: None })
+    Ok(RunResult {
+        out,
+        build_seconds,
+        build_threads,
+        accel_bytes: acc.memory_bytes(),
+        finished: true,
+        hierarchy: None,
+        lod: None,
+        cones: None,
+    })
 }
 
 /// The cone tracers of Wand & Straßer: build the point hierarchies, then trace.
@@ -272,7 +288,9 @@ fn run_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &MultiresArgs)
     if opts.spp != 1 {
         return Err(Error::Usage("the cone tracers shoot one cone per pixel: use --spp 1".into()));
     }
-    let ms = MultiresScene::build(scene, &bp)?;
+    // The point hierarchies on the run's threads, as the render.
+    let (ms, build_threads) =
+        crate::core::thread_pool(opts.threads)?.install(|| MultiresScene::build(scene, &bp).map(|m| (m, rayon::current_num_threads())))?;
     let mut h = HierarchyStats {
         trees: ms.trees.len(),
         seconds: ms.build_seconds,
@@ -296,6 +314,7 @@ fn run_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &MultiresArgs)
     Ok(RunResult {
         out: r.out,
         build_seconds: ms.build_seconds,
+        build_threads,
         accel_bytes: ms.memory_bytes(),
         finished: r.finished,
         hierarchy: Some(h),
@@ -402,11 +421,14 @@ fn run_lod(scene: &Scene, accel_kind: AccelKind, opts: &RenderOpts, la: &LodArgs
     if accel_kind == AccelKind::Octree {
         return Err(Error::Usage("--method lod runs on --accel bvh or embree; the octree serves whitted and distributed".into()));
     }
+    let pool = crate::core::thread_pool(opts.threads)?;
     let t0 = Instant::now();
-    let ls = LodScenes::build(scene, &cp)?;
+    // Chains and structures on the run's threads, as the render.
+    let (ls, build_threads) = pool.install(|| LodScenes::build(scene, &cp).map(|ls| (ls, rayon::current_num_threads())))?;
+    let accels: Vec<_> = pool.install(|| ls.scenes.iter().map(|s| accel::build(accel_kind, s)).collect::<Result<_>>())?;
     let leaves: Vec<_> = ls.scenes.iter().map(|s| s.leaf_instances()).collect::<Result<_>>()?;
-    let accels: Vec<_> = ls.scenes.iter().map(|s| accel::build(accel_kind, s)).collect::<Result<_>>()?;
     let build_seconds = t0.elapsed().as_secs_f64();
+    drop(pool);
     let mut tr = LodTracer::new(&ls, &leaves, &accels, &lp);
     let cam = scene.camera.frame(opts.width, opts.height);
     let r = crate::lod::trace::render(&mut tr, &cam, opts)?;
@@ -426,6 +448,7 @@ fn run_lod(scene: &Scene, accel_kind: AccelKind, opts: &RenderOpts, la: &LodArgs
     Ok(RunResult {
         out: r.out,
         build_seconds,
+        build_threads,
         accel_bytes,
         finished: true,
         hierarchy: None,
@@ -475,4 +498,30 @@ pub fn peak_rss_bytes() -> u64 {
         })
         .map(|kb| kb * 1024)
         .unwrap_or(0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The build runs on the run's threads, as the render: a `--threads 1` (bench
+    /// `threads=1`) row's BVH, point hierarchies and LOD chains were built on the global
+    /// pool, every core, beside "thr 1" in the table.
+    #[test]
+    fn builds_run_on_the_runs_threads() {
+        let scene = crate::scene::builtin::get("ico").unwrap();
+        for threads in [1, 2] {
+            let opts = RenderOpts { width: 8, height: 6, threads, quiet: true, ..Default::default() };
+            let (mr, la) = (MultiresArgs::default(), LodArgs::default());
+            for (m, a) in [
+                (Method::Whitted, AccelKind::Bvh),
+                (Method::Whitted, AccelKind::Octree),
+                (Method::Multires, AccelKind::Bvh),
+                (Method::Lod, AccelKind::Bvh),
+            ] {
+                let r = run(&scene, m, a, &opts, &mr, &la).unwrap();
+                assert_eq!((r.build_threads, r.out.threads), (threads, threads), "{m:?} {a:?}");
+            }
+        }
+    }
 }
