@@ -2087,3 +2087,52 @@ fn animate_paper_bound_keeps_the_frames_and_is_looser() {
         one_error_line(&err);
     }
 }
+
+/// An instance scaled very unevenly (`scale = [1e-11, 1e11, 1]`, determinant 1, every axis
+/// within the 1e-12 floor) maps the camera's rays to origins ~1e22 in its own coordinates,
+/// beyond Embree's ±1.8e18: Embree's assertion aborted the process (exit 134, a C++
+/// message, no error line) in `render`, `--method lod` and `verify`. Now the scene is
+/// refused up front, for every method and back-end alike, and no image is written.
+#[test]
+fn instances_that_would_carry_rays_beyond_embrees_range_are_refused() {
+    let d = tmp("instance-reach");
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let scene = |scale: &str| {
+        format!(
+            "[meshes.s]\ngenerator = \"icosphere\"\nlevel = 1\n[[lights]]\ntype = \"point\"\npos = [5, 10, 5]\n\
+             intensity = 200\n[[instances]]\ntarget = \"s\"\nscale = {scale}\n"
+        )
+    };
+    std::fs::write(p("thin.toml"), scene("[1e-11, 1e11, 1]")).unwrap();
+    std::fs::write(p("ok.toml"), scene("[1e-3, 1e3, 1]")).unwrap();
+    let (code, _, err) = lodtrace(&["render", &p("ok.toml"), "--width", "16", "--height", "12", "--quiet", "--out", &p("ok.png")]);
+    assert_eq!(code, 0, "a merely uneven scale renders: {err}");
+    for args in [
+        vec!["render", &p("thin.toml") as &str, "--width", "16", "--height", "12", "--quiet", "--out", &p("a.png")],
+        vec!["render", &p("thin.toml"), "--method", "lod", "--width", "16", "--height", "12", "--quiet", "--out", &p("a.png")],
+        vec!["render", &p("thin.toml"), "--accel", "bvh", "--width", "16", "--height", "12", "--quiet", "--out", &p("a.png")],
+        vec!["verify", &p("thin.toml"), "--rays", "100"],
+        // The scene's own camera passes; one moved away along x carries the rays out.
+        vec![
+            "render",
+            &p("ok.toml"),
+            "--eye",
+            "1e16,0,0",
+            "--look",
+            "0,0,0",
+            "--width",
+            "16",
+            "--height",
+            "12",
+            "--quiet",
+            "--out",
+            &p("a.png"),
+        ],
+    ] {
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains("own coordinates"), "{err}");
+        assert!(!d.join("a.png").exists(), "{args:?}");
+    }
+}
