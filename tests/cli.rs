@@ -2136,3 +2136,28 @@ fn instances_that_would_carry_rays_beyond_embrees_range_are_refused() {
         assert!(!d.join("a.png").exists(), "{args:?}");
     }
 }
+
+/// A name echoed from the input is cut in the middle of the error line: a TOML instance
+/// naming a material of 1,000,000 characters printed a 1 MB "line" (a scene argument or a
+/// mesh name likewise). The line keeps its start (the file, the instance) and its end (the
+/// materials the file defines) and says how much it left out.
+#[test]
+fn error_lines_echoing_huge_names_are_cut() {
+    let d = tmp("long-line");
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let name = "x".repeat(1_000_000);
+    std::fs::write(
+        p("long.toml"),
+        format!(
+            "[materials.red]\ncolor = [1, 0, 0]\n[meshes.s]\ngenerator = \"cube\"\n[[instances]]\ntarget = \"s\"\nmaterial = \"{name}\"\n"
+        ),
+    )
+    .unwrap();
+    let (code, _, err) = lodtrace(&["render", &p("long.toml"), "--width", "8", "--height", "6", "--quiet", "--out", &p("o.png")]);
+    assert_eq!(code, 2, "{}", &err[..200.min(err.len())]);
+    one_error_line(&err);
+    assert!(err.len() < 5000, "an error line of {} bytes", err.len());
+    assert!(err.contains("long.toml: instance 1: unknown material 'xxx"), "{err}");
+    assert!(err.contains("characters left out") && err.trim_end().ends_with("(materials: red)"), "{err}");
+    assert!(!d.join("o.png").exists());
+}
