@@ -2161,3 +2161,41 @@ fn error_lines_echoing_huge_names_are_cut() {
     assert!(err.contains("characters left out") && err.trim_end().ends_with("(materials: red)"), "{err}");
     assert!(!d.join("o.png").exists());
 }
+
+/// A `--region` name heads a column of the region tables: a newline in it split the table
+/// row on stdout (`compare`) and a '|' added a column to bench.md's Markdown table; both
+/// ran with exit 0. Now such a name is refused, one line and exit 2, before any work.
+#[test]
+fn region_names_that_would_break_the_tables_are_refused() {
+    let d = tmp("region-names");
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let (code, _, err) = lodtrace(&["render", "plane", "--width", "16", "--height", "12", "--quiet", "--out", &p("a.png")]);
+    assert_eq!(code, 0, "{err}");
+    for name in ["a\nb", "a|b", "tab\there"] {
+        let region = format!("{name}=0,0,4,4");
+        let (code, out, err) = lodtrace(&["compare", &p("a.png"), &p("a.png"), "--region", &region]);
+        assert_eq!(code, 2, "{name:?}: {out}{err}");
+        one_error_line(&err);
+        assert!(err.contains("control characters or '|'"), "{err}");
+        let (code, _, err) = lodtrace(&[
+            "bench",
+            "plane",
+            "--methods",
+            "whitted",
+            "--reference",
+            "whitted:spp=2",
+            "--region",
+            &region,
+            "--width",
+            "16",
+            "--height",
+            "12",
+            "--quiet",
+            "--out",
+            &p("b"),
+        ]);
+        assert_eq!(code, 2, "{name:?}: {err}");
+        one_error_line(&err);
+        assert!(!d.join("b").exists());
+    }
+}
