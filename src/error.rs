@@ -151,14 +151,28 @@ fn memory_available() -> Option<u64> {
     }
 }
 
+/// Longest error line [`one_line`] prints, in characters: the messages echo names from the
+/// input (a TOML file's material or mesh names, a scene argument), and a 10 MB name made a
+/// 10 MB "line".
+pub const MAX_LINE_CHARS: usize = 2000;
+
 /// `s` on one line: control characters (a newline in a file name or an option's value,
-/// echoed in the message) are written as escapes (`\n`), so an error stays one line.
+/// echoed in the message) are written as escapes (`\n`), so an error stays one line; a line
+/// longer than [`MAX_LINE_CHARS`] keeps its beginning and end and says how much is left out.
 pub fn one_line(s: &str) -> std::borrow::Cow<'_, str> {
-    if s.chars().any(char::is_control) {
+    let s: std::borrow::Cow<'_, str> = if s.chars().any(char::is_control) {
         s.chars().map(|c| if c.is_control() { c.escape_default().to_string() } else { c.to_string() }).collect::<String>().into()
     } else {
         s.into()
+    };
+    let n = s.chars().count();
+    if n <= MAX_LINE_CHARS {
+        return s;
     }
+    let keep = MAX_LINE_CHARS / 2;
+    let head: String = s.chars().take(keep).collect();
+    let tail: String = s.chars().skip(n - keep).collect();
+    format!("{head} [... {} characters left out ...] {tail}", n - 2 * keep).into()
 }
 
 /// `eprintln!` that cannot panic: a status or error line to standard error, dropped when

@@ -2130,3 +2130,115 @@ fn animate_paper_bound_keeps_the_frames_and_is_looser() {
         one_error_line(&err);
     }
 }
+
+/// An instance scaled very unevenly (`scale = [1e-11, 1e11, 1]`, determinant 1, every axis
+/// within the 1e-12 floor) maps the camera's rays to origins ~1e22 in its own coordinates,
+/// beyond Embree's ±1.8e18: Embree's assertion aborted the process (exit 134, a C++
+/// message, no error line) in `render`, `--method lod` and `verify`. Now the scene is
+/// refused up front, for every method and back-end alike, and no image is written.
+#[test]
+fn instances_that_would_carry_rays_beyond_embrees_range_are_refused() {
+    let d = tmp("instance-reach");
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let scene = |scale: &str| {
+        format!(
+            "[meshes.s]\ngenerator = \"icosphere\"\nlevel = 1\n[[lights]]\ntype = \"point\"\npos = [5, 10, 5]\n\
+             intensity = 200\n[[instances]]\ntarget = \"s\"\nscale = {scale}\n"
+        )
+    };
+    std::fs::write(p("thin.toml"), scene("[1e-11, 1e11, 1]")).unwrap();
+    std::fs::write(p("ok.toml"), scene("[1e-3, 1e3, 1]")).unwrap();
+    let (code, _, err) = lodtrace(&["render", &p("ok.toml"), "--width", "16", "--height", "12", "--quiet", "--out", &p("ok.png")]);
+    assert_eq!(code, 0, "a merely uneven scale renders: {err}");
+    for args in [
+        vec!["render", &p("thin.toml") as &str, "--width", "16", "--height", "12", "--quiet", "--out", &p("a.png")],
+        vec!["render", &p("thin.toml"), "--method", "lod", "--width", "16", "--height", "12", "--quiet", "--out", &p("a.png")],
+        vec!["render", &p("thin.toml"), "--accel", "bvh", "--width", "16", "--height", "12", "--quiet", "--out", &p("a.png")],
+        vec!["verify", &p("thin.toml"), "--rays", "100"],
+        // The scene's own camera passes; one moved away along x carries the rays out.
+        vec![
+            "render",
+            &p("ok.toml"),
+            "--eye",
+            "1e16,0,0",
+            "--look",
+            "0,0,0",
+            "--width",
+            "16",
+            "--height",
+            "12",
+            "--quiet",
+            "--out",
+            &p("a.png"),
+        ],
+    ] {
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains("own coordinates"), "{err}");
+        assert!(!d.join("a.png").exists(), "{args:?}");
+    }
+}
+
+/// A name echoed from the input is cut in the middle of the error line: a TOML instance
+/// naming a material of 1,000,000 characters printed a 1 MB "line" (a scene argument or a
+/// mesh name likewise). The line keeps its start (the file, the instance) and its end (the
+/// materials the file defines) and says how much it left out.
+#[test]
+fn error_lines_echoing_huge_names_are_cut() {
+    let d = tmp("long-line");
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let name = "x".repeat(1_000_000);
+    std::fs::write(
+        p("long.toml"),
+        format!(
+            "[materials.red]\ncolor = [1, 0, 0]\n[meshes.s]\ngenerator = \"cube\"\n[[instances]]\ntarget = \"s\"\nmaterial = \"{name}\"\n"
+        ),
+    )
+    .unwrap();
+    let (code, _, err) = lodtrace(&["render", &p("long.toml"), "--width", "8", "--height", "6", "--quiet", "--out", &p("o.png")]);
+    assert_eq!(code, 2, "{}", &err[..200.min(err.len())]);
+    one_error_line(&err);
+    assert!(err.len() < 5000, "an error line of {} bytes", err.len());
+    assert!(err.contains("long.toml: instance 1: unknown material 'xxx"), "{err}");
+    assert!(err.contains("characters left out") && err.trim_end().ends_with("(materials: red)"), "{err}");
+    assert!(!d.join("o.png").exists());
+}
+
+/// A `--region` name heads a column of the region tables: a newline in it split the table
+/// row on stdout (`compare`) and a '|' added a column to bench.md's Markdown table; both
+/// ran with exit 0. Now such a name is refused, one line and exit 2, before any work.
+#[test]
+fn region_names_that_would_break_the_tables_are_refused() {
+    let d = tmp("region-names");
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let (code, _, err) = lodtrace(&["render", "plane", "--width", "16", "--height", "12", "--quiet", "--out", &p("a.png")]);
+    assert_eq!(code, 0, "{err}");
+    for name in ["a\nb", "a|b", "tab\there"] {
+        let region = format!("{name}=0,0,4,4");
+        let (code, out, err) = lodtrace(&["compare", &p("a.png"), &p("a.png"), "--region", &region]);
+        assert_eq!(code, 2, "{name:?}: {out}{err}");
+        one_error_line(&err);
+        assert!(err.contains("control characters or '|'"), "{err}");
+        let (code, _, err) = lodtrace(&[
+            "bench",
+            "plane",
+            "--methods",
+            "whitted",
+            "--reference",
+            "whitted:spp=2",
+            "--region",
+            &region,
+            "--width",
+            "16",
+            "--height",
+            "12",
+            "--quiet",
+            "--out",
+            &p("b"),
+        ]);
+        assert_eq!(code, 2, "{name:?}: {err}");
+        one_error_line(&err);
+        assert!(!d.join("b").exists());
+    }
+}

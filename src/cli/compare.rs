@@ -74,6 +74,11 @@ pub fn parse_region(s: &str, w: u32, h: u32) -> Result<Region> {
     if name.is_empty() {
         return Err(bad("empty name"));
     }
+    // The name heads a column of the tables (stdout, bench.md): a newline split the row, a
+    // '|' added a column to the Markdown table.
+    if name.chars().any(|c| c.is_control() || c == '|') {
+        return Err(bad("the name may not hold control characters or '|'"));
+    }
     let v: Vec<u32> = rect
         .split(',')
         .map(|t| t.trim().parse::<u32>())

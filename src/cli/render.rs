@@ -21,7 +21,9 @@ pub fn apply_camera(scene: &mut Scene, c: &CameraArgs) -> Result<()> {
     if let Some(v) = c.fovy {
         scene.camera.fovy = v;
     }
-    scene.camera.validate()
+    scene.camera.validate()?;
+    // A moved eye can carry the rays beyond Embree's range in a small instance's space.
+    scene.check_ray_reach()
 }
 
 /// Fails early (before any work) when an output's folder does not exist.

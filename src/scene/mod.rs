@@ -183,6 +183,10 @@ pub const MAX_NESTING: u32 = 64;
 /// no precision left for hit offsets anyway.
 pub const MAX_COORD: f32 = 1e15;
 
+/// Largest coordinate a ray origin may reach in an instance's own space (Embree aborts beyond
+/// ±1.8e18; see [`Scene::check_ray_reach`]).
+pub const MAX_LOCAL_COORD: f32 = 1e18;
+
 /// Upper limit of a material's colour, kd, ks and shininess: with [`MAX_INTENSITY`] the
 /// shaded radiance stays far inside f32 (a colour of 1e38 lit by 1e38 wrote +inf pixels).
 pub const MAX_SHADING_VALUE: f32 = 1e6;
@@ -358,6 +362,40 @@ impl Scene {
         Ok(())
     }
 
+    /// Errors when a ray could reach an instance with an origin beyond ±[`MAX_LOCAL_COORD`] in
+    /// the instance's own coordinates. Rays start at the camera (its eye, ± the lens) or at a
+    /// hit point inside the scene's bounds; Embree moves every ray that enters an instance's
+    /// bounds into the instance's space and aborts the process (an assertion) when the origin
+    /// lies beyond ±1.8e18 there. Each coordinate is bounded by the row sums of the inverse
+    /// transform, so the check is conservative. A very uneven scale (`[1e-11, 1e11, 1]`:
+    /// determinant 1, each axis above the 1e-12 floor) or an eye far from a small instance
+    /// crossed it (the C++ assertion, exit 134, before this check).
+    pub fn check_ray_reach(&self) -> Result<()> {
+        let leaves = self.leaf_instances()?;
+        if leaves.is_empty() {
+            return Ok(());
+        }
+        let (lo, hi) = self.bounds()?;
+        let cam = self.camera.eye.abs().max_element() as f64 + self.camera.aperture.max(0.0) as f64;
+        let reach = (lo.abs().max(hi.abs()).max_element() as f64).max(cam);
+        for l in &leaves {
+            let (m, t) = (l.inv.matrix3, l.inv.translation);
+            let local = (0..3)
+                .map(|i| {
+                    let row = m.row(i);
+                    (row.x.abs() as f64 + row.y.abs() as f64 + row.z.abs() as f64) * reach + (t[i].abs() as f64)
+                })
+                .fold(0.0f64, f64::max);
+            if !(local <= MAX_LOCAL_COORD as f64) {
+                return Err(Error::Scene(format!(
+                    "an instance of mesh '{}' would see rays from up to {reach:.3e} (the camera and the scene's extent) at {local:.3e} in its own coordinates, beyond ±{MAX_LOCAL_COORD:e}: its scale is too small (or too uneven) for that distance; scale it up, or bring the camera nearer",
+                    self.meshes[l.mesh as usize].name
+                )));
+            }
+        }
+        Ok(())
+    }
+
     /// Checks the scene is renderable: has geometry, materials in range, finite values.
     pub fn validate(&mut self) -> Result<()> {
         for m in &self.materials {
@@ -390,6 +428,7 @@ impl Scene {
         }
         self.check_instance_scales()?;
         self.camera.validate()?;
+        self.check_ray_reach()?;
         for (what, c) in [("background", self.background), ("ambient", self.ambient)] {
             if !c.is_finite() || c.abs().max_element() > MAX_INTENSITY {
                 return Err(Error::Scene(format!("{what} {c} is not finite or beyond {MAX_INTENSITY:e}")));
