@@ -909,6 +909,10 @@ fn bad_animate_input_is_one_line_exit_2() {
         let (code, _, err) = lodtrace(&["animate", p, "--frames", "1"]);
         assert_eq!(code, 2, "{p}: {err}");
         one_error_line(&err);
+        // The line names the file, whichever check refused it (a bad or duplicate point
+        // was reported without it until stop 78).
+        let name = std::path::Path::new(p).file_name().unwrap().to_str().unwrap();
+        assert!(err.contains(name), "{p}: the error does not name the file: {err}");
     }
     for args in [
         &["animate", "heads", "--frames", "0"][..],

@@ -435,7 +435,14 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
             )));
         }
         if has_ext(&["ply"]) {
-            Sequence::from_points(crate::deform::ply::load_ply(p).map_err(derr)?, &opts).map_err(derr)?
+            // Every error names the file (the surfel checks' own messages name only the point).
+            let named = |e: DeformError| match e {
+                DeformError::Ply { .. } => e,
+                DeformError::TooSmall(ref m) if m.contains(&*p.to_string_lossy()) => e,
+                e => DeformError::Ply { path: p.to_path_buf(), msg: e.to_string() },
+            };
+            let model = crate::deform::ply::load_ply(p).map_err(|e| derr(named(e)))?;
+            Sequence::from_points(model, &opts).map_err(|e| derr(named(e)))?
         } else {
             if !has_ext(&["off", "obj"]) {
                 return Err(Error::Usage(format!(
