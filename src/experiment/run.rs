@@ -216,7 +216,8 @@ pub struct Stats {
     pub triangles_unique: u64,
     pub accel_bytes: usize,
     pub mesh_bytes: usize,
-    /// Peak resident memory of the process so far (Linux VmHWM), bytes.
+    /// Peak resident memory of the process during this run (Linux VmHWM, reset when the run
+    /// starts, so it counts what was resident then, the scene included), bytes.
     pub peak_rss_bytes: u64,
     /// SIMD level of the binary ([`crate::core::SIMD_LEVEL`]).
     pub simd: &'static str,
@@ -245,6 +246,9 @@ fn unsupported(m: Method) -> Error {
 }
 
 pub fn run(scene: &Scene, method: Method, accel_kind: AccelKind, opts: &RenderOpts, mr: &MultiresArgs, la: &LodArgs) -> Result<RunResult> {
+    // `peak_rss_bytes` is this run's peak: a bench row used to report the peak of every
+    // render before it in the process (the reference's, the other methods').
+    reset_peak_rss();
     let integrator = match method {
         Method::Whitted => Integrator::Whitted,
         Method::Distributed => Integrator::Distributed,
@@ -489,6 +493,12 @@ impl RunResult {
     }
 }
 
+/// Resets the process's peak resident set size (VmHWM) to its current resident size
+/// (`/proc/self/clear_refs`, Linux ≥ 4.0); does nothing where that is not available.
+pub fn reset_peak_rss() {
+    let _ = std::fs::write("/proc/self/clear_refs", "5");
+}
+
 /// Peak resident set size of this process (VmHWM from /proc/self/status), 0 if unknown.
 pub fn peak_rss_bytes() -> u64 {
     std::fs::read_to_string("/proc/self/status")
@@ -503,6 +513,22 @@ pub fn peak_rss_bytes() -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A run's peak memory is its own: 1 GiB touched and freed before it no longer counts
+    /// (the margin leaves room for the other tests of this process running beside it).
+    #[test]
+    fn peak_rss_resets() {
+        let big = vec![1u8; 1 << 30];
+        std::hint::black_box(&big);
+        drop(big);
+        let before = peak_rss_bytes();
+        reset_peak_rss();
+        let after = peak_rss_bytes();
+        if before == 0 {
+            return; // no /proc here
+        }
+        assert!(after + (700 << 20) < before, "peak {before} → {after} after the reset");
+    }
 
     /// The build runs on the run's threads, as the render: a `--threads 1` (bench
     /// `threads=1`) row's BVH, point hierarchies and LOD chains were built on the global
