@@ -87,7 +87,10 @@ fn line_of(bytes: &[u8], at: usize) -> usize {
 /// skipped. Comments (`#`) and blank lines are ignored; a missing header is accepted.
 pub fn load_off(path: &Path, mat: u32) -> Result<Mesh> {
     let text = read_to_string(path)?;
+    // A UTF-8 byte-order mark (some Windows editors write one) is not part of the header.
     let mut lines = text
+        .strip_prefix('\u{feff}')
+        .unwrap_or(&text)
         .lines()
         .enumerate()
         .map(|(i, l)| (i + 1, l.split('#').next().unwrap_or("").split_whitespace().collect::<Vec<_>>()))
@@ -610,6 +613,19 @@ mod tests {
                 assert!((n.length() - 1.0).abs() < 1e-4, "{}: vertex {i}: normal {n}", p.display());
             }
         }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// An OFF file starting with a UTF-8 byte-order mark loads (it was refused as an
+    /// "unsupported OFF header '\u{feff}OFF'", the mark invisible in the message).
+    #[test]
+    fn an_off_file_with_a_byte_order_mark_loads() {
+        let dir = std::env::temp_dir().join(format!("lodtrace-load-bom-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("bom.off");
+        std::fs::write(&p, "\u{feff}OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n").unwrap();
+        let m = load_off(&p, 0).unwrap();
+        assert_eq!(m.vertex_count(), 3);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
