@@ -2246,3 +2246,60 @@ fn region_names_that_would_break_the_tables_are_refused() {
         assert!(!d.join("b").exists());
     }
 }
+
+/// A scene named with a '|' (a legal file name, `p|q.off`) keeps bench.md's tables intact:
+/// every row of every Markdown table has its header's columns (the raw '|' added one; review
+/// finding, stop 78).
+#[test]
+fn a_scene_name_with_a_pipe_keeps_the_bench_tables_intact() {
+    let d = tmp("pipe-name");
+    let mesh = d.join("p|q.off");
+    std::fs::write(&mesh, "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n").unwrap();
+    let out = d.join("b");
+    let (code, _, err) = lodtrace(&[
+        "bench",
+        mesh.to_str().unwrap(),
+        "--methods",
+        "whitted:bvh,whitted:bvh:packet=1",
+        "--reference",
+        "whitted:bvh:spp=2",
+        "--width",
+        "16",
+        "--height",
+        "12",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let md = std::fs::read_to_string(out.join("bench.md")).unwrap();
+    // Cells split at '|' not escaped by a backslash.
+    let cells = |l: &str| {
+        let mut n = 0;
+        let mut prev = ' ';
+        for c in l.chars() {
+            if c == '|' && prev != '\\' {
+                n += 1;
+            }
+            prev = c;
+        }
+        n
+    };
+    let mut header = None;
+    let mut rows = 0;
+    for l in md.lines() {
+        if !l.starts_with('|') {
+            header = None;
+            continue;
+        }
+        match header {
+            None => header = Some(cells(l)),
+            Some(h) => {
+                assert_eq!(cells(l), h, "a row with other columns than its header: {l}");
+                rows += 1;
+            }
+        }
+    }
+    assert!(rows >= 3, "{md}");
+    assert!(md.contains("p\\|q"), "{md}");
+}

@@ -352,7 +352,7 @@ pub fn table(rows: &[DeformRow]) -> String {
         let f = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
         s.push_str(&format!(
             "| {} | {} | {}x{} | {} | {} | {} | {:.1} | {:.2}x | {} | {} | {:.1} | {} | {:.0} | {:.0} | {:.0} | {:.2} | {} | {:.0} | {} | {} | {} |\n",
-            r.scene,
+            super::bench::md_cell(&r.scene),
             r.spec,
             r.width,
             r.height,
