@@ -13,9 +13,9 @@
 //!   gravity) reached 3.6× its starting energy in 300 frames, a solid ball at β 1 4.9×, and
 //!   a shell at β 1 5,900× (stop 78). R and the unscaled A each minimise
 //!   `Σ m |G q − p|²` over their set, so their blend is the gradient of the blended
-//!   energy, which does not grow (it peaks at 0.78, 0.80 and 0.81 of the start there). The volume
-//!   is then kept by the rotation's share (1 − β); the built-ins use β ≤ 0.3. Test
-//!   `linear_mode_does_not_gain_energy`;
+//!   energy, which does not grow (it peaks at 0.78, 0.80 and 0.81 of the start there).
+//!   The volume is then kept by the rotation's share (1 − β); the built-ins use β ≤ 0.3.
+//!   Test `linear_mode_does_not_gain_energy`;
 //! - integration as in Müller 2005 (unconditionally stable for α ≤ 1):
 //!   `v += α (g − x)/h + h·gravity`, `v *= 1 − damping`, `x += h v`;
 //! - collisions: half-space planes (floors, the walls of a hollow box), solid boxes, and
