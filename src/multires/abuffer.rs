@@ -380,9 +380,15 @@ impl Frag {
     #[inline]
     pub fn alpha(&self) -> f32 {
         if self.other.w > 0.0 {
+            // The two parts as `Over` composites them (with coverage masks, the farther
+            // part's share scaled by how much of it the nearer one leaves visible), so that
+            // early termination sees the alpha the pixel gets. Without masks this is
+            // a + (1 − a)·b, bit for bit.
             let ([a, b], _) = self.parts();
-            let aa = a.alpha();
-            return aa + (1.0 - aa) * b.alpha();
+            let mut o = Over::default();
+            o.add(&a);
+            o.add(&b);
+            return o.acc;
         }
         (self.w - self.hidden).min((self.w - self.wb).max(self.wb)).min(1.0)
     }
@@ -895,6 +901,28 @@ mod tests {
         ab.insert(&pc(masked(6.6, 0.3, left, 1)));
         ab.insert(&pc(masked(6.65, 0.3, left, 1)));
         assert!((ab.alpha() - 0.3).abs() < 1e-6, "{}", ab.alpha());
+    }
+
+    /// A two-mesh fragment's alpha is what `Over` composites from its parts, masks included:
+    /// an object on the left half of the footprint (0.3) and a floor piece (0.5) only behind
+    /// it. `Frag::alpha` (early termination) gave 0.3 + 0.7·0.5 = 0.65, the pixel 0.305.
+    #[test]
+    fn a_two_mesh_fragments_alpha_is_its_compositing() {
+        let masked = |t: f32, w: f32, mask: u64, key: u32| Frag { mask, key, ..smp(t, 0.4, w, Vec3::ONE) };
+        let left = 0x0000_0000_ffff_ffffu64;
+        for floor_mask in [left, u64::MAX, 0] {
+            let mut ab = ABuffer::new(16);
+            ab.insert(&pc(masked(6.6, 0.3, left, 1)));
+            ab.insert(&pc(masked(6.73, 0.5, floor_mask, 0)));
+            assert_eq!(ab.frags.len(), 1, "merged by depth");
+            let f = ab.frags[0];
+            let (parts, n) = f.parts();
+            assert_eq!(n, 2);
+            let mut o = Over::default();
+            parts[..n].iter().for_each(|p| _ = o.add(p));
+            assert_eq!(f.alpha(), o.acc, "floor mask {floor_mask:x}");
+            assert_eq!(ab.alpha(), o.acc);
+        }
     }
 
     #[test]
