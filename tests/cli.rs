@@ -2303,3 +2303,20 @@ fn a_scene_name_with_a_pipe_keeps_the_bench_tables_intact() {
     assert!(rows >= 3, "{md}");
     assert!(md.contains("p\\|q"), "{md}");
 }
+
+/// The bench table says when a row's point hierarchies were read from the on-disk cache
+/// instead of built: with `--repeat 2` the second round reads what the first built, and the
+/// best round's build time may be that read (review finding, stop 78).
+#[test]
+fn bench_table_marks_builds_read_from_the_cache() {
+    let (code, _, err, d, json) = small_bench("build-cache", &["spheres", "--methods", "multires", "--repeat", "2"]);
+    assert_eq!(code, 0, "{err}");
+    let json = json.unwrap();
+    let cached = json["rows"][0]["stats"]["hierarchy"]["trees_from_cache"].as_u64().unwrap();
+    let md = std::fs::read_to_string(d.join("bench.md")).unwrap();
+    let row = md.lines().find(|l| l.starts_with("| spheres | multires |")).unwrap();
+    assert_eq!(row.contains("from the cache"), cached > 0, "trees from the cache {cached}: {row}");
+    if cached > 0 {
+        assert!(row.contains(&format!("{cached} of ")), "{row}");
+    }
+}
