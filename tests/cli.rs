@@ -2255,22 +2255,10 @@ fn a_scene_name_with_a_pipe_keeps_the_bench_tables_intact() {
     let d = tmp("pipe-name");
     let mesh = d.join("p|q.off");
     std::fs::write(&mesh, "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n").unwrap();
-    let out = d.join("b");
-    let (code, _, err) = lodtrace(&[
-        "bench",
-        mesh.to_str().unwrap(),
-        "--methods",
-        "whitted:bvh,whitted:bvh:packet=1",
-        "--reference",
-        "whitted:bvh:spp=2",
-        "--width",
-        "16",
-        "--height",
-        "12",
-        "--quiet",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let (code, _, err, out, _) = small_bench(
+        "pipe-name-bench",
+        &[mesh.to_str().unwrap(), "--methods", "whitted:bvh,whitted:bvh:packet=1", "--reference", "whitted:bvh:spp=2"],
+    );
     assert_eq!(code, 0, "{err}");
     let md = std::fs::read_to_string(out.join("bench.md")).unwrap();
     // Cells split at '|' not escaped by a backslash.
