@@ -637,6 +637,38 @@ fn off_variants_load_and_errors_name_the_line() {
     let _ = std::fs::remove_dir_all(&d);
 }
 
+/// `NOFF` normals are read (normalised), not replaced by ones computed from the faces; a
+/// plain `OFF` with more values per vertex than it declares loads with one warning naming
+/// the line, and a `COFF` (colours of varying length) without one.
+#[test]
+fn noff_normals_are_read_and_undeclared_vertex_values_warned() {
+    let d = scratch("noff-normals");
+    let faces = "3 0 1 2\n3 0 1 3\n3 0 2 3\n3 1 2 3\n";
+    let noff = d.join("n.off");
+    // Every vertex says "up, twice as long": the faces would give four different normals.
+    std::fs::write(&noff, format!("NOFF\n4 4 0\n0 0 0 0 0 2\n1 0 0 0 0 2\n0 1 0 0 0 2\n0 0 1 0 0 2\n{faces}")).unwrap();
+    let m = load::load_off(&noff, 0).unwrap();
+    assert!((0..4).all(|i| m.normal(i) == glam::Vec3::Z), "{:?}", (0..4).map(|i| m.normal(i)).collect::<Vec<_>>());
+    let short = d.join("short.off");
+    std::fs::write(&short, format!("NOFF\n4 4 0\n0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 0\n0 0 1 0 0 1\n{faces}")).unwrap();
+    let e = load::load_off(&short, 0).unwrap_err().to_string();
+    assert!(e.contains("line 5:") && e.contains("position and normal"), "{e}");
+    let run = |name: &str, text: String| {
+        let p = d.join(name);
+        std::fs::write(&p, text).unwrap();
+        let out = d.join(format!("{name}.png"));
+        let r =
+            lodtrace(&["render", p.to_str().unwrap(), "--width", "16", "--height", "16", "--quiet", "--out", out.to_str().unwrap()], &[]);
+        assert_eq!(r.code, Some(0), "{}", r.stderr);
+        r.stderr.lines().filter(|l| l.contains("warning")).map(String::from).collect::<Vec<_>>()
+    };
+    let w = run("extra.off", format!("OFF\n4 4 0\n0 0 0\n1 0 0 0.5 0.5 0.5\n0 1 0\n0 0 1 1 1 1\n{faces}"));
+    assert!(w.len() == 1 && w[0].contains("extra.off: line 4:") && w[0].contains("6 values"), "{w:?}");
+    let w = run("col.off", format!("COFF\n4 4 0\n0 0 0 1 0 0\n1 0 0 1 0 0 1\n0 1 0 1 0 0\n0 0 1 1 0 0 1\n{faces}"));
+    assert!(w.is_empty(), "{w:?}");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
 /// OBJ parse errors (tobj reports none) name the first bad line.
 #[test]
 fn obj_errors_name_the_line() {

@@ -82,9 +82,12 @@ fn line_of(bytes: &[u8], at: usize) -> usize {
 
 /// Object File Format: a header `OFF` (or with the prefixes `C`, `N`, `ST`, `4`: colours,
 /// normals, texture coordinates, homogeneous positions), counts `nv nf ne`, one vertex per
-/// line, then one face per line `n i0 i1 ...` (polygons are fan-triangulated). Values after a
-/// vertex's position (normal, colour, texture) and after a face's indices (colour) are
-/// skipped. Comments (`#`) and blank lines are ignored; a missing header is accepted.
+/// line, then one face per line `n i0 i1 ...` (polygons are fan-triangulated). With `N` the
+/// three values after a vertex's position are its normal (normalised; used for shading
+/// like an OBJ file's); colours and texture coordinates after them, and a face's colour
+/// after its indices, are skipped. Values past those the header declares on a vertex line
+/// of a plain `OFF` (or `4OFF`, `NOFF`) are skipped with one warning. Comments (`#`) and
+/// blank lines are ignored; a missing header is accepted.
 pub fn load_off(path: &Path, mat: u32) -> Result<Mesh> {
     let text = read_to_string(path)?;
     // A UTF-8 byte-order mark (some Windows editors write one) is not part of the header.
@@ -97,7 +100,7 @@ pub fn load_off(path: &Path, mat: u32) -> Result<Mesh> {
         .filter(|(_, t)| !t.is_empty());
     let bad = |line: usize, m: String| Error::parse(path, format!("line {line}: {m}"));
     let (mut line, mut toks) = lines.next().ok_or_else(|| Error::parse(path, "empty file"))?;
-    let mut homogeneous = false;
+    let (mut homogeneous, mut normals, mut extras) = (false, false, false);
     if let Some(kw) = toks.first().copied().filter(|t| t.ends_with("OFF")) {
         let prefix = kw.trim_end_matches("OFF");
         let flags = prefix.strip_prefix("ST").unwrap_or(prefix);
@@ -105,6 +108,10 @@ pub fn load_off(path: &Path, mat: u32) -> Result<Mesh> {
             return Err(bad(line, format!("unsupported OFF header '{kw}' (OFF with the prefixes ST, C, N, 4)")));
         }
         homogeneous = flags.contains('4');
+        normals = flags.contains('N');
+        // Colours (3 or 4 values, or a colour-map index) and texture coordinates vary in
+        // length: what follows the position and normal is not checked then.
+        extras = flags.contains('C') || prefix.starts_with("ST");
         toks.remove(0);
         if toks.is_empty() {
             (line, toks) = lines.next().ok_or_else(|| Error::parse(path, "truncated: expected the vertex and face counts"))?;
@@ -120,17 +127,38 @@ pub fn load_off(path: &Path, mat: u32) -> Result<Mesh> {
     }
     let mut mesh = Mesh::new(stem_name(path, ""));
     let dims = if homogeneous { 4 } else { 3 };
+    let want = dims + if normals { 3 } else { 0 };
+    let mut extra_at = None;
     for k in 0..nv {
         let (line, t) = lines.next().ok_or_else(|| Error::parse(path, format!("truncated: {k} of {nv} vertices")))?;
-        if t.len() < dims {
-            return Err(bad(line, format!("vertex {k} has {} values, expected {dims}", t.len())));
+        if t.len() < want {
+            let of = if normals { " (position and normal)" } else { "" };
+            return Err(bad(line, format!("vertex {k} has {} values, expected {want}{of}", t.len())));
         }
-        let mut v = [0f32; 4];
-        for (c, s) in v.iter_mut().zip(&t[..dims]) {
+        if t.len() > want && !extras && extra_at.is_none() {
+            extra_at = Some((line, t.len()));
+        }
+        let mut v = [0f32; 7];
+        for (c, s) in v.iter_mut().zip(&t[..want]) {
             *c = s.parse::<f32>().map_err(|_| bad(line, format!("bad coordinate '{s}'")))?;
         }
         let p = Vec3::new(v[0], v[1], v[2]);
         mesh.push_vertex(if homogeneous { p / v[3] } else { p });
+        if normals {
+            // A zero or non-finite normal is left as read: `finish_mesh` then computes
+            // every normal from the faces, with a warning.
+            let n = Vec3::new(v[dims], v[dims + 1], v[dims + 2]);
+            let n = if n.is_finite() { n.normalize_or_zero() } else { n };
+            mesh.nx.push(n.x);
+            mesh.ny.push(n.y);
+            mesh.nz.push(n.z);
+        }
+    }
+    if let Some((line, got)) = extra_at {
+        crate::error::warn(format!(
+            "{}: line {line}: a vertex has {got} values where the header declares {want}; the rest are ignored (a colour or normal needs the header C or N)",
+            path.display()
+        ));
     }
     for f in 0..nf {
         let (line, t) = lines.next().ok_or_else(|| Error::parse(path, format!("truncated: {f} of {nf} faces")))?;
