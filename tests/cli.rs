@@ -1070,6 +1070,11 @@ fn render_method_surfel() {
     assert_eq!(v["method"], "surfel");
     assert_eq!(v["accel"], "sphere-tree");
     assert!(v["counters"]["node_tests"].as_u64().unwrap() > 0);
+    // The summary line names the stats' set-up and build times as they are (it gave their
+    // sum as "build").
+    let secs = |k: &str| format!("{:.3} s", v[k].as_f64().unwrap());
+    let want = format!("setup {}, build {}, render {}", secs("setup_seconds"), secs("build_seconds"), secs("render_seconds"));
+    assert!(err.contains(&want), "{want:?} not in {err}");
     let (code, _, err) = lodtrace(&["render", "heads", "--method", "surfel", "--spp", "4", "--out", png.to_str().unwrap()]);
     assert_eq!(code, 2, "{err}");
     one_error_line(&err);

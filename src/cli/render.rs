@@ -329,12 +329,14 @@ fn render_surfel(a: &RenderArgs, out: &Path) -> Result<()> {
     let st = super::animate::animate(&args)?;
     io::write_beauty(out, &st.last_frame)?;
     crate::status!(
-        "{}: surfel {}x{}: {} surfels, build {:.3} s, render {:.3} s -> {}",
+        // The stats JSON's two fields by their names (the line gave their sum as "build").
+        "{}: surfel {}x{}: {} surfels, setup {:.3} s, build {:.3} s, render {:.3} s -> {}",
         st.scene,
         st.width,
         st.height,
         st.surfels,
-        st.setup_seconds + st.build_seconds,
+        st.setup_seconds,
+        st.build_seconds,
         st.render_seconds,
         out.display()
     );
