@@ -686,6 +686,24 @@ fn animate_writes_frames_and_per_frame_stats() {
     assert!(v["counters"]["rays_shadow"].as_u64().unwrap() > 0);
 }
 
+/// `--update` also takes the spellings `lazycache` and `cache` for `lazy-cache`; the stats
+/// name the mode itself, not the spelling. `bench` keys its radius-ratio columns on that name,
+/// so a `surfel:update=cache` row had no root and mean ratio ("-", `null`), where the same
+/// run spelt `update=lazy-cache` had them.
+#[test]
+fn animate_update_spellings_name_the_mode() {
+    let (v, _d) = small_bend("animatealias", &["--update", "cache"]);
+    assert_eq!(v["update"], "lazy-cache");
+    let (code, _, err, _d, json) = small_bench(
+        "benchalias",
+        &["bend", "--methods", "surfel:update=naive:detail=0.03:frames=2,surfel:update=cache:detail=0.03:frames=2"],
+    );
+    assert_eq!(code, 0, "{err}");
+    let row = &json.unwrap()["deform"][1];
+    assert_eq!(row["update"], "lazy-cache");
+    assert!(row["root_radius_ratio"].as_f64().is_some(), "{row}");
+}
+
 /// Every built-in sequence is lit: a frame with shadow rays keeps the direct light on most
 /// pixels (with and without shadows, at least half the pixels are the same bytes). Until
 /// stop 46 the light of `heads` and `elastic-balls` stood outside their hollow box, whose
