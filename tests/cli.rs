@@ -1389,6 +1389,20 @@ fn ignored_options_and_meaningless_values_are_refused() {
         (vec!["bench", "spheres", "--methods", "whitted:budget=5"], "budget"),
         (vec!["bench", "spheres", "--methods", "whitted:embree:k=8"], "k is a key"),
         (vec!["bench", "spheres", "--methods", "multires:f=12"], "f is a key"),
+        // Keys that another method ignored without a word until a review found them.
+        (vec!["bench", "spheres", "--methods", "whitted:stri=mass"], "stri is a key"),
+        (vec!["bench", "spheres", "--methods", "whitted:facing=0"], "facing is a key"),
+        (vec!["bench", "spheres", "--methods", "lod:split=0"], "split is a key"),
+        (vec!["bench", "spheres", "--methods", "whitted:paper=1"], "paper is a key"),
+        (vec!["bench", "bend", "--methods", "surfel:paper=1"], "paper is a key"),
+        (vec!["bench", "spheres", "--methods", "whitted:bound=paper"], "bound is a key"),
+        (vec!["bench", "spheres", "--methods", "multires:stretch=2"], "stretch is a key"),
+        // `--paper` overrode an option it sets without a word when that option was given at
+        // its default value (`--point-weights area` rendered with voxel weights).
+        (vec!["render", "spheres", "--method", "multires", "--paper", "--point-weights", "area"], "--paper"),
+        (vec!["render", "spheres", "--method", "multires", "--paper", "--cone-scale", "0.5"], "--paper"),
+        (vec!["bench", "spheres", "--methods", "multires:paper=1:tri=coverage"], "paper=1 sets tri"),
+        (vec!["bench", "spheres", "--methods", "multires:facing=1:paper=1"], "paper=1 sets facing"),
         (vec!["bench", "spheres", "--methods", "cone:octree"], "triangle tracers' choice"),
         (vec!["bench", "spheres", "--methods", "lod:frames=3"], "frames"),
         (vec!["bench", "bend", "--methods", "surfel:spp=4"], "spp"),
