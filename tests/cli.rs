@@ -686,6 +686,24 @@ fn animate_writes_frames_and_per_frame_stats() {
     assert!(v["counters"]["rays_shadow"].as_u64().unwrap() > 0);
 }
 
+/// `--update` also takes the spellings `lazycache` and `cache` for `lazy-cache`; the stats
+/// name the mode itself, not the spelling. `bench` keys its radius-ratio columns on that name,
+/// so a `surfel:update=cache` row had no root and mean ratio ("-", `null`), where the same
+/// run spelt `update=lazy-cache` had them.
+#[test]
+fn animate_update_spellings_name_the_mode() {
+    let (v, _d) = small_bend("animatealias", &["--update", "cache"]);
+    assert_eq!(v["update"], "lazy-cache");
+    let (code, _, err, _d, json) = small_bench(
+        "benchalias",
+        &["bend", "--methods", "surfel:update=naive:detail=0.03:frames=2,surfel:update=cache:detail=0.03:frames=2"],
+    );
+    assert_eq!(code, 0, "{err}");
+    let row = &json.unwrap()["deform"][1];
+    assert_eq!(row["update"], "lazy-cache");
+    assert!(row["root_radius_ratio"].as_f64().is_some(), "{row}");
+}
+
 /// Every built-in sequence is lit: a frame with shadow rays keeps the direct light on most
 /// pixels (with and without shadows, at least half the pixels are the same bytes). Until
 /// stop 46 the light of `heads` and `elastic-balls` stood outside their hollow box, whose
@@ -1376,6 +1394,20 @@ fn ignored_options_and_meaningless_values_are_refused() {
         (vec!["bench", "spheres", "--methods", "whitted:budget=5"], "budget"),
         (vec!["bench", "spheres", "--methods", "whitted:embree:k=8"], "k is a key"),
         (vec!["bench", "spheres", "--methods", "multires:f=12"], "f is a key"),
+        // Keys that another method ignored without a word until a review found them.
+        (vec!["bench", "spheres", "--methods", "whitted:stri=mass"], "stri is a key"),
+        (vec!["bench", "spheres", "--methods", "whitted:facing=0"], "facing is a key"),
+        (vec!["bench", "spheres", "--methods", "lod:split=0"], "split is a key"),
+        (vec!["bench", "spheres", "--methods", "whitted:paper=1"], "paper is a key"),
+        (vec!["bench", "bend", "--methods", "surfel:paper=1"], "paper is a key"),
+        (vec!["bench", "spheres", "--methods", "whitted:bound=paper"], "bound is a key"),
+        (vec!["bench", "spheres", "--methods", "multires:stretch=2"], "stretch is a key"),
+        // `--paper` overrode an option it sets without a word when that option was given at
+        // its default value (`--point-weights area` rendered with voxel weights).
+        (vec!["render", "spheres", "--method", "multires", "--paper", "--point-weights", "area"], "--paper"),
+        (vec!["render", "spheres", "--method", "multires", "--paper", "--cone-scale", "0.5"], "--paper"),
+        (vec!["bench", "spheres", "--methods", "multires:paper=1:tri=coverage"], "paper=1 sets tri"),
+        (vec!["bench", "spheres", "--methods", "multires:facing=1:paper=1"], "paper=1 sets facing"),
         (vec!["bench", "spheres", "--methods", "cone:octree"], "triangle tracers' choice"),
         (vec!["bench", "spheres", "--methods", "lod:frames=3"], "frames"),
         (vec!["bench", "bend", "--methods", "surfel:spp=4"], "spp"),

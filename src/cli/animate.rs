@@ -495,7 +495,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         seq.scene.objects.iter().map(|o| o.model.collections.iter().map(|c| Vec3::from(c.color)).collect()).collect();
     let inst_obj: Vec<usize> = seq.scene.instances.iter().map(|&o| o as usize).collect();
     crate::error::flush_warnings();
-    let bar = frames_bar(a.quiet, frames, format!("animate {} {}", seq.name, a.update));
+    let bar = frames_bar(a.quiet, frames, format!("animate {} {}", seq.name, mode.name()));
     let mut rows = Vec::new();
     let mut total = Counters::default();
     let mut dtotal = DeformCounters::default();
@@ -562,7 +562,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
         scene: seq.name.clone(),
         method: "surfel".into(),
         accel: if mode == UpdateMode::Refit { "bvh2" } else { "sphere-tree" }.into(),
-        update: a.update.clone(),
+        update: mode.name().into(),
         trace_params: tracer.params().clone(),
         width: a.width,
         height: a.height,

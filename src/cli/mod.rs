@@ -86,7 +86,7 @@ pub struct CameraArgs {
     /// Camera up vector, `X,Y,Z` (default: the scene's).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub up: Option<glam::Vec3>,
-    /// Vertical field of view in degrees.
+    /// Vertical field of view in degrees, in (0, 180) (default: the scene's).
     #[arg(long)]
     pub fovy: Option<f32>,
 }

@@ -319,14 +319,14 @@ impl MethodSpec {
             let of = match *key {
                 "k" | "c" | "pw" if !(cone || octree) => "multires and cone, and of the accel octree",
                 "clamp" | "clamp2" | "lod" | "dtol" | "cs" | "lens" | "rough" | "light" | "mip" | "primary" | "budget" | "spread"
-                | "groups" | "agg" | "plane" | "tight" | "mask" | "term" | "tri" | "eigen"
+                | "groups" | "agg" | "plane" | "tight" | "mask" | "term" | "tri" | "eigen" | "stri" | "facing" | "split" | "paper"
                     if !cone =>
                 {
                     "multires and cone"
                 }
                 "f" | "a" | "thres" | "sel" | "selon" | "levels" | "dist" | "force" | "net" | "select" if method != Method::Lod => "lod",
                 "update" | "frames" | "detail" | "shadows" | "exact" | "warm" | "cache_up" | "climb" | "gate" | "ordered" | "top"
-                | "nearest"
+                | "nearest" | "bound" | "stretch"
                     if method != Method::Surfel =>
                 {
                     "surfel"
@@ -344,6 +344,14 @@ impl MethodSpec {
                 _ => continue,
             };
             return Err(bad(format!("{key} is a key of {of}; {} would ignore it", method.name())));
+        }
+        // `paper=1` sets these keys to the paper's choice; one given beside it, even at its
+        // default value, would be overridden without a word (as `render --paper` refuses them).
+        if spec.multires.paper {
+            let paper_keys = ["pw", "tri", "cs", "lens", "rough", "light", "facing", "split", "spread", "groups", "agg", "plane"];
+            if let Some(key) = seen.iter().find(|k| paper_keys.contains(k)) {
+                return Err(bad(format!("paper=1 sets {key} to the paper's choice; give one or the other")));
+            }
         }
         // Refused here, before any method of the list runs, not when its turn comes.
         if method == Method::Lod && spec.accel == AccelKind::Octree {

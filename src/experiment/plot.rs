@@ -106,11 +106,16 @@ fn fmt_value(v: f64) -> String {
     }
 }
 
-/// Axis tick label: no trailing zeros ("64", "0.25", "1.5e-5").
+/// Axis tick label: no trailing zeros ("64", "0.25", "1.5e-5", "1.05e6"). Large and small
+/// values keep up to four significant digits, so neighbouring ticks stay apart (with one
+/// digit, 1,000,000 and 1,050,000 both read "1.0e6").
 pub fn fmt_axis(v: f64) -> String {
     let a = v.abs();
     if a != 0.0 && !(1e-3..1e6).contains(&a) {
-        return format!("{v:.1e}");
+        let s = format!("{v:.3e}");
+        let (m, e) = s.split_once('e').unwrap_or((&s, "0"));
+        let m = if m.contains('.') { m.trim_end_matches('0').trim_end_matches('.') } else { m };
+        return format!("{m}e{e}");
     }
     let s = format!("{v:.4}");
     let s = s.trim_end_matches('0').trim_end_matches('.');
@@ -472,6 +477,21 @@ mod tests {
         let short = ["naive", "lazy", "lazy-cache", "refit", "lazy, unordered", "lazy-cache, unordered, cache 8 up"];
         let (c, r) = legend_grid(&short, 800);
         assert!(c >= 2 && r <= 3, "{c}x{r}");
+    }
+
+    /// Tick labels of large and small values keep the digits that tell neighbouring ticks
+    /// apart: a tests-per-frame axis ticked every 50,000 read "1.0e6" at both 1,000,000 and
+    /// 1,050,000 (`heads-sphere-tests.png` of the demo).
+    #[test]
+    fn axis_labels_tell_large_ticks_apart() {
+        assert_eq!(fmt_axis(1_000_000.0), "1e6");
+        assert_eq!(fmt_axis(1_050_000.0), "1.05e6");
+        assert_eq!(fmt_axis(1_100_000.0), "1.1e6");
+        assert_eq!(fmt_axis(-2_500_000.0), "-2.5e6");
+        assert_eq!(fmt_axis(1.5e-5), "1.5e-5");
+        assert_eq!(fmt_axis(950_000.0), "950000");
+        assert_eq!(fmt_axis(0.25), "0.25");
+        assert_eq!(fmt_axis(0.0), "0");
     }
 
     /// The legend no longer covers the curves: a series running through the top-left and

@@ -47,7 +47,7 @@ pub struct MultiresArgs {
     /// Surface area behind a point's weight: `area` (the samples' area in its voxel; the
     /// default, a deviation that reduces the paper's overestimated opacity of sparse
     /// geometry) or `voxel` (a whole voxel face, as the paper).
-    #[arg(long, value_enum, default_value = "area")]
+    #[arg(long, value_enum, default_value = "area", conflicts_with = "paper")]
     pub point_weights: build::PointWeights,
     /// Anisotropy limit: the minor footprint axis is at least this fraction of the major (paper: 1/4..1/16).
     #[arg(long, default_value_t = 0.125)]
@@ -76,7 +76,7 @@ pub struct MultiresArgs {
     /// integrates the Gaussian over the whole triangle, right for leaf blades thinner than
     /// the footprint too (`complex` 640×480: mean FLIP 0.1062 vs 0.1229, but 2.5× the time,
     /// since see-through foliage no longer stops cones early).
-    #[arg(long, value_enum, default_value = "coverage")]
+    #[arg(long, value_enum, default_value = "coverage", conflicts_with = "paper")]
     pub tri_weight: trace::TriWeight,
     /// Ray–triangle weight of shadow cones (default: `--tri-weight`). `mass` gives a soft
     /// shadow the true coverage of a tessellated occluder, whose triangles are smaller than
@@ -104,22 +104,22 @@ pub struct MultiresArgs {
     pub merge_meshes: bool,
     /// Primary cone footprint in pixels (1 = the pixel's extent, the paper's wording). The
     /// default 0.5 is close to 0.41, where the Gaussian's variance equals a box pixel's.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, conflicts_with = "paper")]
     pub cone_scale: f32,
     /// Depth of field: the cone's footprint at the lens in lens radii (the paper does not say;
     /// 1 = the radius). The default 1/√2 gives the Gaussian the variance of the thin lens's
     /// uniform disk, which distributed ray tracing samples.
-    #[arg(long, default_value_t = std::f32::consts::FRAC_1_SQRT_2)]
+    #[arg(long, default_value_t = std::f32::consts::FRAC_1_SQRT_2, conflicts_with = "paper")]
     pub lens_scale: f32,
     /// Blurry reflection: the cone's added spread in units of tan(roughness) (§6; the paper
     /// does not say, 1 = tan(roughness)). The default 1/√2 gives the Gaussian the variance of
     /// the uniform cone of half-angle `roughness` that distributed ray tracing samples.
-    #[arg(long, default_value_t = std::f32::consts::FRAC_1_SQRT_2)]
+    #[arg(long, default_value_t = std::f32::consts::FRAC_1_SQRT_2, conflicts_with = "paper")]
     pub rough_scale: f32,
     /// Elliptical lights: the shadow cone's light Gaussian in units of the ellipse's axes
     /// (§4.2; 1 = the axes). The default 1/√2 gives it the variance of the uniform ellipse
     /// that distributed ray tracing samples.
-    #[arg(long, default_value_t = std::f32::consts::FRAC_1_SQRT_2)]
+    #[arg(long, default_value_t = std::f32::consts::FRAC_1_SQRT_2, conflicts_with = "paper")]
     pub light_scale: f32,
     /// Disable the mipmap blend one level down.
     #[arg(long)]
