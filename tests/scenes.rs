@@ -490,6 +490,7 @@ fn bad_input_exits_2_with_one_error_line_and_no_output() {
         ("unknown_scene", "no-such-scene", vec![], vec![]),
         ("unknown_method", "plane", vec!["--method", "bogus"], vec![]),
         ("complex_without_assets", "complex", vec![], vec![("LODTRACE_ASSETS", &no_assets)]),
+        ("a_sequence_for_a_triangle_method", "heads", vec![], vec![]),
     ];
     let failures: Vec<String> = cases.iter().filter_map(|(label, scene, extra, env)| check_bad(&d, label, scene, extra, env)).collect();
     // The messages say what is wrong.
@@ -502,7 +503,19 @@ fn bad_input_exits_2_with_one_error_line_and_no_output() {
         &["render", "complex", "--accel", "bvh", "--width", "16", "--height", "16", "--out", d.join("c.png").to_str().unwrap()],
         &[("LODTRACE_ASSETS", &no_assets)],
     );
-    assert!(r.stderr.contains("tools/setup"), "{}", r.stderr);
+    assert!(r.stderr.contains("tools/setup") && r.stderr.contains("LODTRACE_ASSETS"), "{}", r.stderr);
+    // A sequence's missing mesh reads like a scene's (it was an "invalid option").
+    let r = lodtrace(&["animate", "armadillo-ball", "--frames", "1", "--out", "none"], &[("LODTRACE_ASSETS", &no_assets)]);
+    assert!(r.code == Some(2) && r.stderr.contains("invalid scene: sequence 'armadillo-ball' needs the mesh"), "{}", r.stderr);
+    assert!(r.stderr.contains("tools/setup") && r.stderr.contains("LODTRACE_ASSETS"), "{}", r.stderr);
+    // A deforming sequence given to a triangle method says where it is served.
+    let r = lodtrace(&["render", "heads", "--width", "16", "--height", "16", "--out", d.join("h.png").to_str().unwrap()], &[]);
+    assert!(r.stderr.contains("'heads' is a deforming sequence") && r.stderr.contains("--method surfel"), "{}", r.stderr);
+    let r = lodtrace(
+        &["bench", "heads", "--methods", "whitted", "--width", "16", "--height", "16", "--out", d.join("hb").to_str().unwrap()],
+        &[],
+    );
+    assert!(r.code == Some(2) && r.stderr.contains("deforming sequence"), "{}", r.stderr);
     let r = lodtrace(&["render", &normal_ref, "--width", "16", "--height", "16", "--out", d.join("n.png").to_str().unwrap()], &[]);
     assert!(r.stderr.contains("line 7: a face names normal 7, but the file has 1 of them"), "{}", r.stderr);
     for (file, says) in [

@@ -412,10 +412,11 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     let mut seq = if Sequence::BUILTIN.contains(&a.scene.as_str()) {
         Sequence::builtin(&a.scene, &opts).map_err(derr).map_err(|e| match e {
             // A built-in sequence's mesh missing: say how to get it (as the built-in scenes do).
-            Error::Io { path, source } if source.kind() == std::io::ErrorKind::NotFound => Error::Usage(format!(
-                "{}: missing; the {} sequence needs it: run tools/setup (or set LODTRACE_ASSETS to a folder holding it)",
+            Error::Io { path, source } if source.kind() == std::io::ErrorKind::NotFound => Error::Scene(format!(
+                "sequence '{}' needs the mesh {} (not found): {}",
+                a.scene,
                 path.display(),
-                a.scene
+                crate::scene::builtin::MISSING_ASSET_HINT
             )),
             e => e,
         })?

@@ -210,7 +210,8 @@ fn deform_section(a: &DemoArgs, skipped: &mut Vec<String>) -> Result<(String, Ve
             // A sequence whose mesh is missing is skipped; any other failure (a write, a
             // plot) is the demo's.
             Err(e) if is_missing_asset(&e) => {
-                crate::status!("demo: skipping {seq} ({e}: run tools/setup)");
+                let hint = if e.to_string().contains("tools/setup") { String::new() } else { ": run tools/setup".into() };
+                crate::status!("demo: skipping {seq} ({e}{hint})");
                 skipped.push(format!("{seq} ({e})"));
             }
             Err(e) => return Err(e),

@@ -60,6 +60,10 @@ pub fn get(name: &str) -> Result<Scene> {
         "plane" => Ok(plane()),
         "cube" => Ok(single("cube", cube_mesh(0))),
         "ico" => Ok(single("ico", icosphere(4, 0))),
+        // A deforming sequence asked of a triangle renderer: say where it is served.
+        _ if crate::deform::Sequence::BUILTIN.contains(&name) => Err(Error::Scene(format!(
+            "'{name}' is a deforming sequence (Adams et al.), not a triangle scene: render it with --method surfel, bench it with surfel specs (e.g. --methods surfel:update=naive,surfel:update=lazy-cache), or run lodtrace animate {name}"
+        ))),
         _ => Err(Error::UnknownScene(name.to_string())),
     }
 }
@@ -733,11 +737,14 @@ pub fn assets_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("assets")
 }
 
+/// What a missing asset's error says to do (the built-in scenes and sequences alike).
+pub(crate) const MISSING_ASSET_HINT: &str = "run tools/setup (or set LODTRACE_ASSETS to a folder holding it)";
+
 /// Loads an asset mesh normalised by [`normalize_mesh`], or says to run tools/setup.
 pub(crate) fn asset_mesh(scene: &str, file: &str, mat: u32) -> Result<Mesh> {
     let p = assets_dir().join(file);
     if !p.is_file() {
-        return Err(Error::Scene(format!("scene '{scene}' needs the mesh {} (not found): run tools/setup", p.display())));
+        return Err(Error::Scene(format!("scene '{scene}' needs the mesh {} (not found): {MISSING_ASSET_HINT}", p.display())));
     }
     let mut m = super::load::load_off(&p, mat)?;
     normalize_mesh(&mut m);
