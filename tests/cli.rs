@@ -1028,6 +1028,9 @@ fn bench_sizes_sweep_deforming_sequences() {
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("Speed-up over the first method by image size"), "{out}");
     assert!(out.contains("| 16x12 (192 px) | 40x30 (1200 px) |"), "{out}");
+    // One blank line between the header and the table (a deforming-only bench printed two,
+    // where the render table would have been).
+    assert!(out.starts_with("16x12, 40x30, SIMD") && !out.contains("\n\n\n"), "{out}");
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("bench.json")).unwrap()).unwrap();
     let rows = v["deform"].as_array().unwrap();
     let sizes: Vec<(u64, u64)> = rows.iter().map(|r| (r["width"].as_u64().unwrap(), r["height"].as_u64().unwrap())).collect();
@@ -2327,6 +2330,39 @@ fn a_scene_name_with_a_pipe_keeps_the_bench_tables_intact() {
     }
     assert!(rows >= 3, "{md}");
     assert!(md.contains("p\\|q"), "{md}");
+}
+
+/// `render`'s summary line says when the point hierarchies were read from the on-disk cache
+/// (it gave the read time as "build" without a word; review note, stop 79).
+#[test]
+fn render_summary_marks_builds_read_from_the_cache() {
+    let d = tmp("render-cache-note");
+    let cache = d.join("cache");
+    let png = d.join("s.png");
+    let run = || {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_lodtrace"))
+            .args([
+                "render",
+                "spheres",
+                "--method",
+                "multires",
+                "--width",
+                "16",
+                "--height",
+                "16",
+                "--quiet",
+                "--out",
+                png.to_str().unwrap(),
+            ])
+            .env("LODTRACE_CACHE", &cache)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let (first, second) = (run(), run());
+    assert!(!first.contains("from the cache"), "{first}");
+    assert!(second.contains("trees from the cache), render"), "{second}");
 }
 
 /// The bench table says when a row's point hierarchies were read from the on-disk cache

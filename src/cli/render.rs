@@ -293,7 +293,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         crate::status!("lodtrace: warning: the time budget ran out; the image is incomplete");
     }
     crate::status!(
-        "{}: {} {} {}x{} spp {}: build {:.3} s, render {:.3} s, {:.2} Mrays/s -> {}",
+        "{}: {} {} {}x{} spp {}: build {:.3} s{}, render {:.3} s, {:.2} Mrays/s -> {}",
         scene.name,
         stats.method,
         stats.accel,
@@ -301,6 +301,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         stats.height,
         stats.spp,
         stats.build_seconds,
+        crate::experiment::bench::cache_note(&stats),
         stats.render_seconds,
         stats.mrays_per_second,
         out.display()

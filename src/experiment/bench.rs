@@ -1342,11 +1342,15 @@ pub fn md_cell(s: &str) -> std::borrow::Cow<'_, str> {
 /// cache (a later `--repeat` round, or an earlier run) how many, so that a read is not taken
 /// for a build (review finding, stop 78).
 fn build_cell(st: &run::Stats) -> String {
+    format!("{:.3}{}", st.build_seconds, cache_note(st))
+}
+
+/// " (N of M trees from the cache)" when some point hierarchies were read from the on-disk
+/// cache rather than built (their "build" time is then a read), else nothing.
+pub(crate) fn cache_note(st: &run::Stats) -> String {
     match &st.hierarchy {
-        Some(h) if h.trees_from_cache > 0 => {
-            format!("{:.3} ({} of {} trees from the cache)", st.build_seconds, h.trees_from_cache, h.trees)
-        }
-        _ => format!("{:.3}", st.build_seconds),
+        Some(h) if h.trees_from_cache > 0 => format!(" ({} of {} trees from the cache)", h.trees_from_cache, h.trees),
+        _ => String::new(),
     }
 }
 
@@ -1367,7 +1371,8 @@ pub fn table_string(report: &BenchReport) -> String {
         report.reference.as_ref().map(|r| format!(", errors against {r}")).unwrap_or_default()
     ));
     if report.rows.is_empty() && !report.deform.is_empty() {
-        s.push_str(&super::deform_bench::table(&report.deform));
+        // The table opens with the blank line that parts it from a render table above.
+        s.push_str(super::deform_bench::table(&report.deform).trim_start_matches('\n'));
         if report.deform.iter().any(|r| (r.width, r.height) != (report.width, report.height)) {
             s.push_str(&super::deform_bench::size_table(&report.deform));
         }

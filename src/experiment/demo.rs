@@ -205,6 +205,10 @@ fn deform_section(a: &DemoArgs, skipped: &mut Vec<String>) -> Result<(String, Ve
     crate::film::io::create_out_dir(&dir)?;
     let mut rows = Vec::new();
     for seq in crate::deform::Sequence::BUILTIN {
+        if !a.quiet {
+            // As each triangle scene's section is announced.
+            crate::status!("demo: {seq} (deforming sequence) at {w}x{h}, {frames} frames, detail {detail}: {} update modes", specs.len());
+        }
         match super::deform_bench::run(&[seq.to_string()], &specs, w, h, a.threads, 1, Some(&dir), a.quiet) {
             Ok(r) => rows.extend(r),
             // A sequence whose mesh is missing is skipped; any other failure (a write, a
