@@ -106,16 +106,27 @@ fn fmt_value(v: f64) -> String {
     }
 }
 
-/// Axis tick label: no trailing zeros ("64", "0.25", "1.5e-5", "1.05e6"). Large and small
-/// values keep up to four significant digits, so neighbouring ticks stay apart (with one
-/// digit, 1,000,000 and 1,050,000 both read "1.0e6").
+/// Axis tick label: no trailing zeros ("64", "0.25", "1.5e-5"). From 10⁴ up, thousands,
+/// millions and billions carry a suffix ("950k", "1.05M"): a tests-per-frame axis reads
+/// alike on both sides of a million (it mixed "950000" with "1e6"), and neighbouring ticks
+/// keep the digits that tell them apart (up to three decimals of the suffix's unit).
 pub fn fmt_axis(v: f64) -> String {
     let a = v.abs();
-    if a != 0.0 && !(1e-3..1e6).contains(&a) {
+    let trim = |s: String| if s.contains('.') { s.trim_end_matches('0').trim_end_matches('.').to_string() } else { s };
+    if (1e4..1e12).contains(&a) {
+        let (d, u) = if a >= 1e9 {
+            (1e9, "G")
+        } else if a >= 1e6 {
+            (1e6, "M")
+        } else {
+            (1e3, "k")
+        };
+        return format!("{}{u}", trim(format!("{:.3}", v / d)));
+    }
+    if a != 0.0 && !(1e-3..1e12).contains(&a) {
         let s = format!("{v:.3e}");
         let (m, e) = s.split_once('e').unwrap_or((&s, "0"));
-        let m = if m.contains('.') { m.trim_end_matches('0').trim_end_matches('.') } else { m };
-        return format!("{m}e{e}");
+        return format!("{}e{e}", trim(m.to_string()));
     }
     let s = format!("{v:.4}");
     let s = s.trim_end_matches('0').trim_end_matches('.');
@@ -484,12 +495,16 @@ mod tests {
     /// 1,050,000 (`heads-sphere-tests.png` of the demo).
     #[test]
     fn axis_labels_tell_large_ticks_apart() {
-        assert_eq!(fmt_axis(1_000_000.0), "1e6");
-        assert_eq!(fmt_axis(1_050_000.0), "1.05e6");
-        assert_eq!(fmt_axis(1_100_000.0), "1.1e6");
-        assert_eq!(fmt_axis(-2_500_000.0), "-2.5e6");
+        assert_eq!(fmt_axis(1_000_000.0), "1M");
+        assert_eq!(fmt_axis(1_050_000.0), "1.05M");
+        assert_eq!(fmt_axis(1_100_000.0), "1.1M");
+        assert_eq!(fmt_axis(-2_500_000.0), "-2.5M");
         assert_eq!(fmt_axis(1.5e-5), "1.5e-5");
-        assert_eq!(fmt_axis(950_000.0), "950000");
+        assert_eq!(fmt_axis(950_000.0), "950k");
+        assert_eq!(fmt_axis(12_500.0), "12.5k");
+        assert_eq!(fmt_axis(9_000.0), "9000");
+        assert_eq!(fmt_axis(3.2e9), "3.2G");
+        assert_eq!(fmt_axis(2e13), "2e13");
         assert_eq!(fmt_axis(0.25), "0.25");
         assert_eq!(fmt_axis(0.0), "0");
     }
