@@ -401,6 +401,9 @@ pub fn line_chart_fmt(
         (ylo, yhi) = (ylo.min(y), yhi.max(y));
     }
     let (y0, y1) = pad((ylo, yhi));
+    // Whole-number x (frame indices): at most one label per unit, so a three-frame curve is
+    // not labelled at frames 0.2, 0.4, ...
+    let x_labels = if !log_x && pts().all(|p| p.0.fract() == 0.0) { ((x1 - x0).floor() as usize + 1).clamp(2, 10) } else { 10 };
     let labels: Vec<&str> = series.iter().map(|s| s.0.as_str()).filter(|l| !l.is_empty()).collect();
     let (cols, rows) = legend_grid(&labels, WIDTH);
     let legend_h = if rows == 0 { 0 } else { 12 + 20 * rows };
@@ -417,6 +420,7 @@ pub fn line_chart_fmt(
                     .max_light_lines(2)
                     .x_desc(if log_x { format!("{xlabel}, log scale") } else { xlabel.to_string() })
                     .y_desc(ylabel)
+                    .x_labels(x_labels)
                     .x_label_formatter(&|v| xfmt(*v))
                     .y_label_formatter(&|v| fmt_axis(*v))
                     .label_style((FAMILY, 14))
