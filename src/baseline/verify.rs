@@ -26,7 +26,8 @@
 //! a mismatch, and so is any hit whose (instance, triangle, u, v) does not name the point at
 //! its distance t within that budget; κ = longest edge² / (2·area) ≥ 1 is how much f32
 //! barycentrics blow up a position error (≈ 1 to 10 for ordinary triangles, 1e7 for a sliver
-//! 1e-7 wide, whose (u, v) cannot be checked). Occlusion is checked on segments ending just
+//! 1e-7 wide, whose (u, v) cannot be checked), and so is any hit whose barycentrics lie
+//! outside its triangle (one of 1 − u − v, u, v below −1e-4). Occlusion is checked on segments ending just
 //! before (`0.999·t`) and just after (`1.001·t`) Embree's closest hit. Packets (`intersect8`)
 //! are checked against each back-end's own single-ray path on the camera rays.
 
@@ -131,11 +132,19 @@ impl HitGeom {
 fn compare_in(scene: &Scene, leaves: &[crate::scene::LeafInstance], ray: &Ray, r: Option<Hit>, c: Option<Hit>) -> Verdict {
     let geom = |h: &Hit| HitGeom::new(scene, leaves, ray, h);
     // Every reported hit must be self-consistent: its (instance, triangle, u, v) names the
-    // point at distance t along the ray (catches wrong IDs and barycentrics, not only t).
+    // point at distance t along the ray (catches wrong IDs and barycentrics, not only t),
+    // and that point lies in the triangle. Every correct test (watertight or not) accepts a
+    // hit only where its edge functions agree in sign, so its barycentrics are in [0, 1] up
+    // to rounding; a hit named outside would otherwise be excused by `uncertain` (a
+    // barycentric below BARY_EPS) as grazing: a triangle test accepting hits 0.5 outside
+    // every triangle passed on `cube` with 0 mismatches (review, base79).
     for h in [r, c].into_iter().flatten() {
         let Some(g) = HitGeom::get(scene, leaves, ray, &h) else {
             return Verdict::Mismatch;
         };
+        if ![1.0 - h.u - h.v, h.u, h.v].iter().all(|&w| w >= -BARY_EPS) {
+            return Verdict::Mismatch;
+        }
         if g.cos >= GRAZING_COS && (g.point(h.u, h.v) - (ray.org + ray.dir * h.t)).length() > 10.0 * g.kappa * g.tol / g.cos {
             return Verdict::Mismatch;
         }
