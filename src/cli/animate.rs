@@ -405,6 +405,13 @@ pub fn animate(a: &AnimateArgs) -> Result<AnimateStats> {
     })
 }
 
+/// The error for a built-in sequence whose mesh is not installed: worded like a built-in
+/// scene's, so that `demo` skips the sequence as it skips such a scene (it took the old
+/// "invalid option" for a failure and stopped after the triangle scenes, stop 79).
+pub(crate) fn missing_sequence_mesh(seq: &str, path: &std::path::Path) -> Error {
+    Error::Scene(format!("sequence '{seq}' needs the mesh {} (not found): {}", path.display(), crate::scene::builtin::MISSING_ASSET_HINT))
+}
+
 fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<AnimateStats> {
     let opts =
         SequenceOptions { detail: a.detail, armadillo: crate::scene::builtin::assets_dir().join("armadillo.off"), ..Default::default() };
@@ -412,12 +419,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     let mut seq = if Sequence::BUILTIN.contains(&a.scene.as_str()) {
         Sequence::builtin(&a.scene, &opts).map_err(derr).map_err(|e| match e {
             // A built-in sequence's mesh missing: say how to get it (as the built-in scenes do).
-            Error::Io { path, source } if source.kind() == std::io::ErrorKind::NotFound => Error::Scene(format!(
-                "sequence '{}' needs the mesh {} (not found): {}",
-                a.scene,
-                path.display(),
-                crate::scene::builtin::MISSING_ASSET_HINT
-            )),
+            Error::Io { path, source } if source.kind() == std::io::ErrorKind::NotFound => missing_sequence_mesh(&a.scene, &path),
             e => e,
         })?
     } else {

@@ -926,6 +926,8 @@ mod tests {
         let nf = || std::io::Error::from(std::io::ErrorKind::NotFound);
         assert!(is_missing_asset(&Error::io(crate::scene::builtin::assets_dir().join("armadillo.off"), nf())));
         assert!(is_missing_asset(&Error::Scene("scene 'complex' needs the mesh x (not found): run tools/setup".into())));
+        // A sequence's missing mesh too (`animate`'s error; the demo stopped on it, stop 79).
+        assert!(is_missing_asset(&crate::cli::animate::missing_sequence_mesh("armadillo-ball", std::path::Path::new("/x/armadillo.off"))));
         assert!(!is_missing_asset(&Error::io("/tmp/out/deform/x.png", nf())));
         let full = std::io::Error::new(std::io::ErrorKind::StorageFull, "disk full");
         assert!(!is_missing_asset(&Error::io(crate::scene::builtin::assets_dir().join("armadillo.off"), full)));
