@@ -7,7 +7,7 @@ use glam::Vec3;
 use lodtrace::baseline::accel::{self, Accel, AccelKind, Hit, Ray, K};
 use lodtrace::baseline::bvh::BvhAccel;
 use lodtrace::baseline::embree::EmbreeAccel;
-use lodtrace::baseline::verify::{verify_scene, verify_with, RaySet};
+use lodtrace::baseline::verify::{format_report, verify_scene, verify_with, RaySet};
 use lodtrace::core::rng::Sampler;
 use lodtrace::core::stats::Counters;
 use lodtrace::scene::{builtin, load::load_scene, Scene};
@@ -126,6 +126,46 @@ fn verify_catches_broken_intersectors() {
     // And the healthy candidate passes with the same rays.
     let good = BvhAccel::build(&s).unwrap();
     assert_eq!(verify_with(&s, &reference, &good, 5_000, 3).unwrap().mismatches(), 0);
+}
+
+/// A candidate that drops a ray's `tnear` or `tfar` (or both) from closest-hit queries.
+struct Unbounded {
+    inner: BvhAccel,
+    keep_tnear: bool,
+    keep_tfar: bool,
+}
+
+impl Accel for Unbounded {
+    fn name(&self) -> &'static str {
+        "unbounded"
+    }
+    fn intersect1(&self, ray: &Ray, c: &mut Counters) -> Option<Hit> {
+        let (tn, tf) = (if self.keep_tnear { ray.tnear } else { 0.0 }, if self.keep_tfar { ray.tfar } else { f32::INFINITY });
+        self.inner.intersect1(&Ray::segment(ray.org, ray.dir, tn, tf), c)
+    }
+    fn occluded1(&self, ray: &Ray, c: &mut Counters) -> bool {
+        self.inner.occluded1(ray, c)
+    }
+    fn memory_bytes(&self) -> usize {
+        0
+    }
+}
+
+/// `verify` checks closest hits on segments, not only on whole rays from 0: a back-end
+/// that ignored `tnear` or `tfar` passed every check, since every other verification ray
+/// starts at 0 and runs to infinity (review finding, stop 79).
+#[test]
+fn verify_catches_ignored_ray_intervals() {
+    let s = scene("spheres");
+    let reference = EmbreeAccel::build_with(&s, true).unwrap();
+    for (keep_tnear, keep_tfar) in [(false, true), (true, false), (false, false)] {
+        let cand = Unbounded { inner: BvhAccel::build(&s).unwrap(), keep_tnear, keep_tfar };
+        let rep = verify_with(&s, &reference, &cand, 5_000, 3).unwrap();
+        assert!(rep.segment_mismatches > 10, "tnear kept {keep_tnear}, tfar kept {keep_tfar}: {}", format_report(&rep));
+    }
+    let good = Unbounded { inner: BvhAccel::build(&s).unwrap(), keep_tnear: true, keep_tfar: true };
+    let rep = verify_with(&s, &reference, &good, 5_000, 3).unwrap();
+    assert!(rep.segment_checks > 1_000 && rep.mismatches() == 0, "{}", format_report(&rep));
 }
 
 /// A small triangle beside a huge floor: a candidate that loses every hit on it is caught
