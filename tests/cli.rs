@@ -2365,6 +2365,42 @@ fn render_summary_marks_builds_read_from_the_cache() {
     assert!(second.contains("trees from the cache), render"), "{second}");
 }
 
+/// The adaptive distributed tracer's `--spp` is a maximum: the summary line says how many
+/// samples per pixel it took (it said "spp 16" for 7.6 taken; review note, stop 79), from the
+/// stats' own counter; a fixed-rate render says nothing more.
+#[test]
+fn render_summary_says_how_many_samples_the_adaptive_tracer_took() {
+    let d = tmp("render-samples");
+    let (png, js) = (d.join("d.png"), d.join("d.json"));
+    let run = |method: &str| {
+        let (code, _, err) = lodtrace(&[
+            "render",
+            "spheres",
+            "--method",
+            method,
+            "--spp",
+            "16",
+            "--width",
+            "32",
+            "--height",
+            "32",
+            "--quiet",
+            "--out",
+            png.to_str().unwrap(),
+            "--stats",
+            js.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&js).unwrap()).unwrap();
+        (err, v["counters"]["samples"].as_u64().unwrap_or(0) as f64 / 1024.0)
+    };
+    let (err, taken) = run("distributed");
+    assert!(taken < 16.0, "the adaptive tracer took every sample: {taken}");
+    assert!(err.contains(&format!("spp 16 (at most; {taken:.1} taken per pixel)")), "{err}");
+    let (err, _) = run("whitted");
+    assert!(err.contains("spp 16:"), "{err}");
+}
+
 /// The bench table says when a row's point hierarchies were read from the on-disk cache
 /// instead of built: with `--repeat 2` the second round reads what the first built, and the
 /// best round's build time may be that read (review finding, stop 78).

@@ -293,13 +293,14 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         crate::status!("lodtrace: warning: the time budget ran out; the image is incomplete");
     }
     crate::status!(
-        "{}: {} {} {}x{} spp {}: build {:.3} s{}, render {:.3} s, {:.2} Mrays/s -> {}",
+        "{}: {} {} {}x{} spp {}{}: build {:.3} s{}, render {:.3} s, {:.2} Mrays/s -> {}",
         scene.name,
         stats.method,
         stats.accel,
         stats.width,
         stats.height,
         stats.spp,
+        samples_taken(&stats),
         stats.build_seconds,
         crate::experiment::bench::cache_note(&stats),
         stats.render_seconds,
@@ -307,6 +308,17 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         out.display()
     );
     Ok(())
+}
+
+/// " (at most; 7.3 taken per pixel)" where the adaptive distributed tracer took fewer samples
+/// than `--spp` allows (its first pass, then more only where the variance asks), as the
+/// stats' `samples` counter and bench's "samples per pixel" column say; else nothing.
+fn samples_taken(st: &crate::experiment::run::Stats) -> String {
+    let px = st.width as f64 * st.height as f64;
+    match st.counters.get("samples") {
+        Some(&n) if px > 0.0 && (n as f64) < st.spp as f64 * px => format!(" (at most; {:.1} taken per pixel)", n as f64 / px),
+        _ => String::new(),
+    }
 }
 
 /// `--method surfel` (Adams et al.): the first frame of a deforming sequence (or a mesh file
