@@ -686,6 +686,24 @@ fn animate_writes_frames_and_per_frame_stats() {
     assert!(v["counters"]["rays_shadow"].as_u64().unwrap() > 0);
 }
 
+/// `animate --out none` writes no images, as its help says; until stop 80 it wrote them into
+/// a folder `./none`.
+#[test]
+fn animate_out_none_writes_no_images() {
+    let d = tmp("animatenone");
+    let j = d.join("a.json");
+    let o = Command::new(env!("CARGO_BIN_EXE_lodtrace"))
+        .args(["animate", "heads", "--frames", "2", "--detail", "0.05", "--width", "32", "--height", "24", "--quiet", "--out", "none"])
+        .args(["--stats", j.to_str().unwrap()])
+        .current_dir(&d)
+        .output()
+        .expect("run lodtrace");
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(j.is_file());
+    let left: Vec<_> = std::fs::read_dir(&d).unwrap().map(|e| e.unwrap().file_name()).filter(|n| n != "a.json").collect();
+    assert!(left.is_empty(), "--out none left {left:?}");
+}
+
 /// `--update` also takes the spellings `lazycache` and `cache` for `lazy-cache`; the stats
 /// name the mode itself, not the spelling. `bench` keys its radius-ratio columns on that name,
 /// so a `surfel:update=cache` row had no root and mean ratio ("-", `null`), where the same

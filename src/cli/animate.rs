@@ -249,6 +249,13 @@ pub fn parse_mode(s: &str) -> Result<UpdateMode> {
 }
 
 pub fn run(a: &AnimateArgs) -> Result<()> {
+    // `--out none` means no images, as its help says. Until stop 80 it was taken as a
+    // folder name: the frames went to `./none`.
+    let mut a = a.clone();
+    if a.out.as_deref() == Some(std::path::Path::new("none")) {
+        a.out = None;
+    }
+    let a = &a;
     let stats = animate(a)?;
     if a.warm_pass {
         let warm: f64 = stats.per_frame.iter().filter_map(|r| r.warm_seconds).sum();
