@@ -197,6 +197,10 @@ pub struct LodMaps {
     /// LOD⁽¹⁾ of the reflected / transmitted level-1 ray (1 where there is none).
     pub lod_r: Vec<f32>,
     pub lod_t: Vec<f32>,
+    /// The lowest LOD⁽¹⁾ of any level-1 ray of the pixel, over all samples (1 where there is
+    /// none), not averaged: the pixel's coarsest level-1 model is `level_of` of it (stop 80:
+    /// the averages above put a pixel with one sample at level 3 and three at 1 "at L₀").
+    pub lod_min: Vec<f32>,
 }
 
 /// Everything a level-1 sub-tree needs from pass 1.
@@ -517,8 +521,15 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
     let mut buf = vec![empty; npix];
     let mut film = Film::new(w, h);
     // Sums over the samples (averaged at the end, in sample order as before).
-    let mut maps =
-        LodMaps { width: w, height: h, d_r: vec![0.0; npix], d_t: vec![0.0; npix], lod_r: vec![0.0; npix], lod_t: vec![0.0; npix] };
+    let mut maps = LodMaps {
+        width: w,
+        height: h,
+        d_r: vec![0.0; npix],
+        d_t: vec![0.0; npix],
+        lod_r: vec![0.0; npix],
+        lod_t: vec![0.0; npix],
+        lod_min: vec![1.0; npix],
+    };
     let mut counters = Counters::default();
     let mut pass1_seconds = 0.0;
     for s in 0..spp {
@@ -605,8 +616,9 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
             .zip(maps.d_t.par_chunks_mut(wu))
             .zip(maps.lod_r.par_chunks_mut(wu))
             .zip(maps.lod_t.par_chunks_mut(wu))
+            .zip(maps.lod_min.par_chunks_mut(wu))
             .enumerate()
-            .map(|(j, ((((color, dr_row), dt_row), lr_row), lt_row))| {
+            .map(|(j, (((((color, dr_row), dt_row), lr_row), lt_row), min_row))| {
                 let mut c = Counters::default();
                 for i in 0..wu {
                     let k = j * wu + i;
@@ -617,6 +629,7 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
                     dt_row[i] += dt;
                     lr_row[i] += lr;
                     lt_row[i] += lt;
+                    min_row[i] = min_row[i].min(lr).min(lt);
                 }
                 prog.tick();
                 c
