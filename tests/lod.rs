@@ -317,3 +317,21 @@ fn bench_full_lod_figure_at_several_samples_takes_every_sample() {
     assert!(c.max_pixel_diff > 0.0, "the LOD changed some pixels");
     assert_eq!(c.max_diff_full_lod_pixels, 0.0, "full-detail pixels differ with a = 0");
 }
+
+/// `--lod-selective-level 0` applies selective tracing (§4) from the primary hits on: with
+/// every ray at LOD 0.5 (a model coarser than L₀) the primary hits' weaker children are
+/// dropped too. Before stop 80 the primary hit's children were spawned by pass 2 without the
+/// rule, so level 0 rendered exactly what level 1 renders.
+#[test]
+fn selective_tracing_from_level_zero_thins_the_primary_hits() {
+    use lodtrace::core::stats::Counter;
+    let scene = builtin::get("chessboard").unwrap();
+    let o = opts(64, 48, 1);
+    let at = |l: u32| {
+        let la = LodArgs { lod_force: Some(0.5), lod_selective_level: l, ..Default::default() };
+        render(&scene, Method::Lod, AccelKind::Bvh, &o, &la).out.counters.get(Counter::lod_rays_dropped)
+    };
+    let (d0, d1) = (at(0), at(1));
+    assert!(d1 > 0, "level 1 drops rays");
+    assert!(d0 > d1, "level 0 drops no more rays than level 1: {d0} vs {d1}");
+}

@@ -316,22 +316,7 @@ impl<'a> LodTracer<'a> {
         let sec = secondary(&s, v);
         let kt = s.mat.transmit * luminance(s.mat.color);
         let kr = sec.reflect_w;
-        let mut do_t = sec.refract.is_some();
-        let mut do_r = sec.reflect_w > 0.0;
-        // "Provided that the LOD used is less than 100 %" (§4): the model, not the raw value.
-        let below_full = match self.p.selective_on {
-            SelectiveOn::Model => lv > 0,
-            SelectiveOn::Value => st.lod < 1.0,
-        };
-        if self.p.selective && depth >= self.p.selective_level && below_full && do_t && do_r {
-            if kr > self.p.selective_ratio * kt {
-                do_t = false;
-                c.inc(Counter::lod_rays_dropped);
-            } else if kt > self.p.selective_ratio * kr {
-                do_r = false;
-                c.inc(Counter::lod_rays_dropped);
-            }
-        }
+        let (do_t, do_r) = self.selective(depth, lv, st, sec.refract.is_some(), sec.reflect_w > 0.0, kr, kt, c);
         if do_t {
             let t = sec.refract.unwrap();
             let mut cs = self.child(st, kt);
@@ -350,6 +335,28 @@ impl<'a> LodTracer<'a> {
             l += self.radiance(&Ray::new(p_out, sec.mirror), depth + 1, &cs, c) * sec.reflect_w;
         }
         l
+    }
+
+    /// Selective tracing (§4) at a hit of a ray of level `depth` on level `lv`: which of the
+    /// transmitted and reflected children (`do_t`, `do_r`) are traced, the weaker dropped
+    /// when the strengths `kt`, `kr` differ by more than the ratio.
+    #[allow(clippy::too_many_arguments)]
+    fn selective(&self, depth: u32, lv: u32, st: &RayState, do_t: bool, do_r: bool, kr: f32, kt: f32, c: &mut Counters) -> (bool, bool) {
+        // "Provided that the LOD used is less than 100 %" (§4): the model, not the raw value.
+        let below_full = match self.p.selective_on {
+            SelectiveOn::Model => lv > 0,
+            SelectiveOn::Value => st.lod < 1.0,
+        };
+        if self.p.selective && depth >= self.p.selective_level && below_full && do_t && do_r {
+            if kr > self.p.selective_ratio * kt {
+                c.inc(Counter::lod_rays_dropped);
+                return (false, true);
+            } else if kt > self.p.selective_ratio * kr {
+                c.inc(Counter::lod_rays_dropped);
+                return (true, false);
+            }
+        }
+        (do_t, do_r)
     }
 
     /// Pass 1 for one primary ray and its hit: local shading and the distortion-buffer entry.
@@ -432,18 +439,22 @@ impl<'a> LodTracer<'a> {
             None => root.lod * (1.0 - d).max(0.0).powf(self.p.f),
         };
         let (mut lr, mut lt) = (1.0, 1.0);
-        if let Some(t) = sec.refract {
+        // The primary hit's children too (`--lod-selective-level 0`; stop 80: pass 2 spawned
+        // them without the rule, so level 0 rendered what level 1 renders).
+        let kt = s.mat.transmit * luminance(s.mat.color);
+        let (do_t, do_r) = self.selective(0, lv, &root, sec.refract.is_some(), sec.reflect_w > 0.0, sec.reflect_w, kt, c);
+        if let Some(t) = sec.refract.filter(|_| do_t) {
             let mut inside = Inside::default();
             if s.front {
                 inside.enter(h.inst, lv);
             }
-            let st = RayState { lod: lod1(d_t), k: s.mat.transmit * luminance(s.mat.color), d: d_t, inside };
+            let st = RayState { lod: lod1(d_t), k: kt, d: d_t, inside };
             lt = st.lod;
             c.inc(Counter::rays_refract);
             let x = self.radiance(&Ray::new(s.p - s.ng * eps, t), 1, &st, c);
             l += x * s.mat.color * s.mat.transmit;
         }
-        if sec.reflect_w > 0.0 {
+        if do_r {
             let st = RayState { lod: lod1(d_r), k: sec.reflect_w, d: d_r, inside: Inside::default() };
             lr = st.lod;
             c.inc(Counter::rays_reflect);
