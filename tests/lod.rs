@@ -287,3 +287,51 @@ fn lod_memory_does_not_grow_with_the_samples() {
     }
     let _ = std::fs::remove_file(&out);
 }
+
+/// The bench's "max diff, full-LOD pixels" at several samples per pixel: the pixels whose
+/// level-1 rays *all* selected L₀, in every sample. With no degradation below level 1
+/// (a = 0) such a pixel renders exactly as full detail, so the figure must be 0. Before
+/// stop 80 the pixels were picked by the LOD averaged over the samples: one sample at LOD
+/// 0.6 (level 3) and three at 1 average 0.9, "at L₀", and the chessboard at 4 spp reported
+/// 9.4 % where 1 spp reports 0.
+#[test]
+fn bench_full_lod_figure_at_several_samples_takes_every_sample() {
+    use lodtrace::experiment::bench::{self, BenchArgs};
+    let a = BenchArgs {
+        scenes: vec!["chessboard".into()],
+        methods: "whitted:bvh:spp=4,lod:bvh:spp=4:a=0".into(),
+        reference: None,
+        out: None,
+        width: 64,
+        height: 48,
+        threads: 2,
+        repeat: 1,
+        sweep: vec![],
+        sweep_max_spp: None,
+        regions: vec![],
+        sizes: None,
+        quiet: true,
+    };
+    let r = bench::bench(&a).unwrap();
+    let c = r.rows[1].lod_vs_full.as_ref().unwrap();
+    assert!(c.max_pixel_diff > 0.0, "the LOD changed some pixels");
+    assert_eq!(c.max_diff_full_lod_pixels, 0.0, "full-detail pixels differ with a = 0");
+}
+
+/// `--lod-selective-level 0` applies selective tracing (§4) from the primary hits on: with
+/// every ray at LOD 0.5 (a model coarser than L₀) the primary hits' weaker children are
+/// dropped too. Before stop 80 the primary hit's children were spawned by pass 2 without the
+/// rule, so level 0 rendered exactly what level 1 renders.
+#[test]
+fn selective_tracing_from_level_zero_thins_the_primary_hits() {
+    use lodtrace::core::stats::Counter;
+    let scene = builtin::get("chessboard").unwrap();
+    let o = opts(64, 48, 1);
+    let at = |l: u32| {
+        let la = LodArgs { lod_force: Some(0.5), lod_selective_level: l, ..Default::default() };
+        render(&scene, Method::Lod, AccelKind::Bvh, &o, &la).out.counters.get(Counter::lod_rays_dropped)
+    };
+    let (d0, d1) = (at(0), at(1));
+    assert!(d1 > 0, "level 1 drops rays");
+    assert!(d0 > d1, "level 0 drops no more rays than level 1: {d0} vs {d1}");
+}

@@ -1025,11 +1025,12 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                     // Pixels whose level-1 LODs select the full-detail model L₀ (§2: k =
                     // lvl_max − ⌈LOD·lvl_max⌉), not only LOD = 1: a flat mirror's absolute
                     // disparity (the pixel's own angle) leaves its LOD just below 1, at L₀.
+                    // In every sample: the lowest LOD, not the mean over the samples (stop 80).
                     let lvl_max = spec.lod.lod_levels.saturating_sub(1);
                     let at_l0 = |x: f32| crate::lod::chain::level_of(x, lvl_max) == 0;
                     let full_lod = maps
                         .as_ref()
-                        .map(|m| (0..d.len()).filter(|&i| at_l0(m.lod_r[i]) && at_l0(m.lod_t[i])).map(|i| d[i]).fold(0.0f32, f32::max))
+                        .map(|m| (0..d.len()).filter(|&i| at_l0(m.lod_min[i])).map(|i| d[i]).fold(0.0f32, f32::max))
                         .unwrap_or(0.0);
                     if !floors.iter().any(|(t, _)| *t == fs.text) {
                         floors.push((fs.text.clone(), floor_diff(scene, fs, ff, a)?));

@@ -197,6 +197,10 @@ pub struct LodMaps {
     /// LOD⁽¹⁾ of the reflected / transmitted level-1 ray (1 where there is none).
     pub lod_r: Vec<f32>,
     pub lod_t: Vec<f32>,
+    /// The lowest LOD⁽¹⁾ of any level-1 ray of the pixel, over all samples (1 where there is
+    /// none), not averaged: the pixel's coarsest level-1 model is `level_of` of it (stop 80:
+    /// the averages above put a pixel with one sample at level 3 and three at 1 "at L₀").
+    pub lod_min: Vec<f32>,
 }
 
 /// Everything a level-1 sub-tree needs from pass 1.
@@ -312,22 +316,7 @@ impl<'a> LodTracer<'a> {
         let sec = secondary(&s, v);
         let kt = s.mat.transmit * luminance(s.mat.color);
         let kr = sec.reflect_w;
-        let mut do_t = sec.refract.is_some();
-        let mut do_r = sec.reflect_w > 0.0;
-        // "Provided that the LOD used is less than 100 %" (§4): the model, not the raw value.
-        let below_full = match self.p.selective_on {
-            SelectiveOn::Model => lv > 0,
-            SelectiveOn::Value => st.lod < 1.0,
-        };
-        if self.p.selective && depth >= self.p.selective_level && below_full && do_t && do_r {
-            if kr > self.p.selective_ratio * kt {
-                do_t = false;
-                c.inc(Counter::lod_rays_dropped);
-            } else if kt > self.p.selective_ratio * kr {
-                do_r = false;
-                c.inc(Counter::lod_rays_dropped);
-            }
-        }
+        let (do_t, do_r) = self.selective(depth, lv, st, sec.refract.is_some(), sec.reflect_w > 0.0, kr, kt, c);
         if do_t {
             let t = sec.refract.unwrap();
             let mut cs = self.child(st, kt);
@@ -346,6 +335,28 @@ impl<'a> LodTracer<'a> {
             l += self.radiance(&Ray::new(p_out, sec.mirror), depth + 1, &cs, c) * sec.reflect_w;
         }
         l
+    }
+
+    /// Selective tracing (§4) at a hit of a ray of level `depth` on level `lv`: which of the
+    /// transmitted and reflected children (`do_t`, `do_r`) are traced, the weaker dropped
+    /// when the strengths `kt`, `kr` differ by more than the ratio.
+    #[allow(clippy::too_many_arguments)]
+    fn selective(&self, depth: u32, lv: u32, st: &RayState, do_t: bool, do_r: bool, kr: f32, kt: f32, c: &mut Counters) -> (bool, bool) {
+        // "Provided that the LOD used is less than 100 %" (§4): the model, not the raw value.
+        let below_full = match self.p.selective_on {
+            SelectiveOn::Model => lv > 0,
+            SelectiveOn::Value => st.lod < 1.0,
+        };
+        if self.p.selective && depth >= self.p.selective_level && below_full && do_t && do_r {
+            if kr > self.p.selective_ratio * kt {
+                c.inc(Counter::lod_rays_dropped);
+                return (false, true);
+            } else if kt > self.p.selective_ratio * kr {
+                c.inc(Counter::lod_rays_dropped);
+                return (true, false);
+            }
+        }
+        (do_t, do_r)
     }
 
     /// Pass 1 for one primary ray and its hit: local shading and the distortion-buffer entry.
@@ -428,18 +439,22 @@ impl<'a> LodTracer<'a> {
             None => root.lod * (1.0 - d).max(0.0).powf(self.p.f),
         };
         let (mut lr, mut lt) = (1.0, 1.0);
-        if let Some(t) = sec.refract {
+        // The primary hit's children too (`--lod-selective-level 0`; stop 80: pass 2 spawned
+        // them without the rule, so level 0 rendered what level 1 renders).
+        let kt = s.mat.transmit * luminance(s.mat.color);
+        let (do_t, do_r) = self.selective(0, lv, &root, sec.refract.is_some(), sec.reflect_w > 0.0, sec.reflect_w, kt, c);
+        if let Some(t) = sec.refract.filter(|_| do_t) {
             let mut inside = Inside::default();
             if s.front {
                 inside.enter(h.inst, lv);
             }
-            let st = RayState { lod: lod1(d_t), k: s.mat.transmit * luminance(s.mat.color), d: d_t, inside };
+            let st = RayState { lod: lod1(d_t), k: kt, d: d_t, inside };
             lt = st.lod;
             c.inc(Counter::rays_refract);
             let x = self.radiance(&Ray::new(s.p - s.ng * eps, t), 1, &st, c);
             l += x * s.mat.color * s.mat.transmit;
         }
-        if sec.reflect_w > 0.0 {
+        if do_r {
             let st = RayState { lod: lod1(d_r), k: sec.reflect_w, d: d_r, inside: Inside::default() };
             lr = st.lod;
             c.inc(Counter::rays_reflect);
@@ -517,8 +532,15 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
     let mut buf = vec![empty; npix];
     let mut film = Film::new(w, h);
     // Sums over the samples (averaged at the end, in sample order as before).
-    let mut maps =
-        LodMaps { width: w, height: h, d_r: vec![0.0; npix], d_t: vec![0.0; npix], lod_r: vec![0.0; npix], lod_t: vec![0.0; npix] };
+    let mut maps = LodMaps {
+        width: w,
+        height: h,
+        d_r: vec![0.0; npix],
+        d_t: vec![0.0; npix],
+        lod_r: vec![0.0; npix],
+        lod_t: vec![0.0; npix],
+        lod_min: vec![1.0; npix],
+    };
     let mut counters = Counters::default();
     let mut pass1_seconds = 0.0;
     for s in 0..spp {
@@ -605,8 +627,9 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
             .zip(maps.d_t.par_chunks_mut(wu))
             .zip(maps.lod_r.par_chunks_mut(wu))
             .zip(maps.lod_t.par_chunks_mut(wu))
+            .zip(maps.lod_min.par_chunks_mut(wu))
             .enumerate()
-            .map(|(j, ((((color, dr_row), dt_row), lr_row), lt_row))| {
+            .map(|(j, (((((color, dr_row), dt_row), lr_row), lt_row), min_row))| {
                 let mut c = Counters::default();
                 for i in 0..wu {
                     let k = j * wu + i;
@@ -617,6 +640,7 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
                     dt_row[i] += dt;
                     lr_row[i] += lr;
                     lt_row[i] += lt;
+                    min_row[i] = min_row[i].min(lr).min(lt);
                 }
                 prog.tick();
                 c
