@@ -2435,3 +2435,41 @@ fn bench_table_marks_builds_read_from_the_cache() {
         assert!(row.contains(&format!("{cached} of ")), "{row}");
     }
 }
+
+/// Options that another option switches off are refused, as another method's options are:
+/// beside `--no-selective` the selective-tracing options, beside `--lod-force` the LOD
+/// formula's f, a_LOD and thres_LOD. Until stop 80 they were ignored without a word (same
+/// image with `--lod-force 0.5 --lod-f 1` as with `--lod-force 0.5`).
+#[test]
+fn lod_options_switched_off_by_another_are_refused() {
+    let d = tmp("lodswitched");
+    let out = d.join("x.png");
+    let small = ["--width", "16", "--height", "12", "--quiet", "--out", out.to_str().unwrap()];
+    for (args, says) in [
+        (&["render", "spheres", "--method", "lod", "--no-selective", "--lod-selective-ratio", "100"][..], "--lod-selective-ratio"),
+        (&["render", "spheres", "--method", "lod", "--no-selective", "--lod-selective-level", "0"], "--lod-selective-level"),
+        (&["render", "spheres", "--method", "lod", "--no-selective", "--lod-selective-on", "value"], "--lod-selective-on"),
+        (&["render", "spheres", "--method", "lod", "--lod-force", "0.5", "--lod-f", "1"], "--lod-f"),
+        (&["render", "spheres", "--method", "lod", "--lod-force", "0.5", "--lod-a", "1"], "--lod-a"),
+        (&["render", "spheres", "--method", "lod", "--lod-force", "0.5", "--lod-threshold", "0"], "--lod-threshold"),
+    ] {
+        let args = [args, &small[..]].concat();
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(says), "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?} wrote an image");
+    }
+    for (spec, says) in [("lod:sel=0:selon=value", "--lod-selective-on"), ("lod:force=0.5:f=10", "--lod-f")] {
+        let (code, _, err) = lodtrace(&["bench", "spheres", "--methods", spec, "--width", "16", "--height", "12", "--quiet"]);
+        assert_eq!(code, 2, "{spec}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(says), "{spec}: {err}");
+    }
+    // Each alone still runs.
+    for o in [&["--no-selective"][..], &["--lod-force", "0.5"], &["--lod-f", "1"]] {
+        let args = [&["render", "spheres", "--method", "lod"][..], o, &small[..]].concat();
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 0, "{args:?}: {err}");
+    }
+}
