@@ -2473,3 +2473,49 @@ fn lod_options_switched_off_by_another_are_refused() {
         assert_eq!(code, 0, "{args:?}: {err}");
     }
 }
+
+/// The cone tracers' options for cones that `--primary-only` or `--no-shadows` does not
+/// trace are refused, as another method's options are: until stop 80 `--primary-only
+/// --secondary-clamp 1` or `--no-shadows --shadow-tri-weight mass` rendered the same image
+/// as without the option, without a word.
+#[test]
+fn cone_options_for_cones_not_traced_are_refused() {
+    let d = tmp("conesoff");
+    let out = d.join("x.png");
+    let small = ["--width", "16", "--height", "12", "--quiet", "--out", out.to_str().unwrap()];
+    let base = ["render", "effects", "--method", "multires"];
+    for (extra, says) in [
+        (&["--primary-only", "--secondary-clamp", "1"][..], "--secondary-clamp"),
+        (&["--primary-only", "--rough-scale", "1"], "--rough-scale"),
+        (&["--primary-only", "--light-scale", "1"], "--light-scale"),
+        (&["--primary-only", "--shadow-tri-weight", "mass"], "--shadow-tri-weight"),
+        (&["--primary-only", "--no-aggregate-shadow"], "--no-aggregate-shadow"),
+        (&["--primary-only", "--no-plane-skip"], "--no-plane-skip"),
+        (&["--primary-only", "--max-depth", "3"], "--max-depth"),
+        (&["--no-shadows", "--shadow-tri-weight", "mass"], "--shadow-tri-weight"),
+        (&["--no-shadows", "--light-scale", "1"], "--light-scale"),
+        (&["--no-shadows", "--no-aggregate-shadow"], "--no-aggregate-shadow"),
+        (&["--no-shadows", "--no-plane-skip"], "--no-plane-skip"),
+    ] {
+        let args = [&base[..], extra, &small[..]].concat();
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(says), "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?} wrote an image");
+    }
+    let (code, _, err) =
+        lodtrace(&["bench", "spheres", "--methods", "multires:primary=1:clamp2=1", "--width", "16", "--height", "12", "--quiet"]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains("--secondary-clamp"), "{err}");
+    // Each alone, and what the remaining cones still use, runs.
+    for extra in
+        [&["--primary-only"][..], &["--no-shadows", "--secondary-clamp", "1"], &["--paper", "--primary-only"], &["--paper", "--no-shadows"]]
+    {
+        let args = [&base[..], extra, &small[..]].concat();
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 0, "{args:?}: {err}");
+        std::fs::remove_file(&out).unwrap();
+    }
+}

@@ -125,6 +125,17 @@ pub fn check_method_options(a: &RenderArgs) -> Result<()> {
             if m == Surfel { "sphere tree" } else { "multi-resolution octree" }
         )));
     }
+    // Options of cones or rays that are not traced (stop 80: they were ignored without a
+    // word). `MultiresArgs::params` refuses the shadow and secondary cones' options beside
+    // `--primary-only`, for bench specs too.
+    if cone && a.no_shadows {
+        if let Some(o) = trace.iter().find(|o| crate::multires::MultiresArgs::SHADOW.contains(o)) {
+            return Err(Error::Usage(format!("{o} has no effect beside --no-shadows (no shadow cones)")));
+        }
+    }
+    if cone && a.multires.primary_only && a.max_depth.is_some() {
+        return Err(Error::Usage("--max-depth has no effect beside --primary-only (no reflected or refracted cones)".into()));
+    }
     let d = crate::baseline::render::RenderOpts::default();
     if m != Distributed && a.first_pass_spp != d.first_pass_spp {
         wrong.push(("--first-pass-spp", "--method distributed"));
