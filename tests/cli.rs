@@ -2519,3 +2519,40 @@ fn cone_options_for_cones_not_traced_are_refused() {
         std::fs::remove_file(&out).unwrap();
     }
 }
+
+/// `animate --cache-gate` beside `--unordered` is refused: the unordered descent looks the
+/// cache up every frame, as its help says, so the gate had no effect; until stop 80 it was
+/// taken without a word (bench: `gate=` beside `ordered=0` likewise).
+#[test]
+fn cache_gate_beside_unordered_is_refused() {
+    let d = tmp("gateunordered");
+    let out = d.join("f");
+    let (code, _, err) = lodtrace(&[
+        "animate",
+        "bend",
+        "--frames",
+        "2",
+        "--detail",
+        "0.05",
+        "--width",
+        "16",
+        "--height",
+        "12",
+        "--quiet",
+        "--unordered",
+        "--cache-gate",
+        "0.9",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains("--cache-gate"), "{err}");
+    assert!(!out.exists(), "left the --out folder");
+    let (code, _, err) =
+        lodtrace(&["bench", "bend", "--methods", "surfel:ordered=0:gate=0.9:frames=2", "--width", "16", "--height", "12", "--quiet"]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains("gate"), "{err}");
+}
+
