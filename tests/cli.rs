@@ -2556,3 +2556,24 @@ fn cache_gate_beside_unordered_is_refused() {
     assert!(err.contains("gate"), "{err}");
 }
 
+/// `render --seed` where nothing is random (whitted and lod at one sample per pixel: no
+/// jitter) is refused, as for the cone and surfel tracers: until stop 80 `--seed 5` rendered
+/// the same image as `--seed 0`, against its help's "same seed, same image".
+#[test]
+fn seed_without_random_sampling_is_refused() {
+    let d = tmp("seedspp1");
+    let out = d.join("x.png");
+    let small = ["--width", "16", "--height", "12", "--quiet", "--out", out.to_str().unwrap()];
+    for m in ["whitted", "lod"] {
+        let args = [&["render", "spheres", "--method", m, "--seed", "5"][..], &small[..]].concat();
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains("--seed"), "{err}");
+        assert!(!out.exists());
+        let args = [&["render", "spheres", "--method", m, "--seed", "5", "--spp", "2"][..], &small[..]].concat();
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 0, "{args:?}: {err}");
+        std::fs::remove_file(&out).unwrap();
+    }
+}

@@ -115,6 +115,14 @@ pub fn check_method_options(a: &RenderArgs) -> Result<()> {
     if (cone || m == Surfel) && a.seed != 0 {
         wrong.push(("--seed", "the ray tracers' sampling (the cone and surfel tracers are deterministic)"));
     }
+    // Whitted and lod draw random numbers only to jitter several samples per pixel: at one
+    // they render the same image whatever the seed (taken without a word until stop 80).
+    if matches!(m, Whitted | Lod) && a.spp == 1 && a.seed != 0 {
+        return Err(Error::Usage(format!(
+            "--seed has no effect on --method {} at --spp 1 (no jitter, nothing random): give --spp N",
+            m.name()
+        )));
+    }
     // The cone tracers trace their own octree, surfel its sphere tree: only the default
     // (which they do not use) passes unremarked.
     if matches!(m, Multires | Cone | Surfel) && a.accel.is_some() {
