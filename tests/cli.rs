@@ -2577,3 +2577,25 @@ fn seed_without_random_sampling_is_refused() {
         std::fs::remove_file(&out).unwrap();
     }
 }
+
+/// `render --method distributed --variance-threshold` where there is no second pass (the
+/// first pass takes every sample `--spp` allows) is refused: until stop 80 it was taken
+/// without effect (`--spp 4 --first-pass-spp 4` gave the same image at any threshold).
+#[test]
+fn variance_threshold_without_a_second_pass_is_refused() {
+    let d = tmp("vtnopass");
+    let out = d.join("x.png");
+    let small = ["--width", "16", "--height", "12", "--quiet", "--out", out.to_str().unwrap()];
+    let base = ["render", "spheres", "--method", "distributed", "--variance-threshold", "0"];
+    for extra in [&["--spp", "4", "--first-pass-spp", "4"][..], &["--spp", "2"]] {
+        let args = [&base[..], extra, &small[..]].concat();
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains("--variance-threshold"), "{err}");
+        assert!(!out.exists());
+    }
+    let args = [&base[..], &["--spp", "4"], &small[..]].concat();
+    let (code, _, err) = lodtrace(&args);
+    assert_eq!(code, 0, "{args:?}: {err}");
+}

@@ -162,6 +162,15 @@ pub fn check_method_options(a: &RenderArgs) -> Result<()> {
     if m != Distributed && a.variance_threshold != d.variance_threshold {
         wrong.push(("--variance-threshold", "--method distributed"));
     }
+    // The threshold picks the pixels of the second pass; there is none when the first pass
+    // takes every sample --spp allows (taken without effect until stop 80).
+    if m == Distributed && a.variance_threshold != d.variance_threshold && a.first_pass_spp >= a.spp {
+        return Err(Error::Usage(format!(
+            "--variance-threshold has no effect at --spp {} with --first-pass-spp {}: the first pass takes every sample, there is no second pass",
+            a.spp,
+            a.first_pass_spp.min(a.spp)
+        )));
+    }
     if m == Surfel {
         // The sequence brings its own camera and has no recursion.
         let c = &a.camera;
