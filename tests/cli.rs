@@ -2435,3 +2435,167 @@ fn bench_table_marks_builds_read_from_the_cache() {
         assert!(row.contains(&format!("{cached} of ")), "{row}");
     }
 }
+
+/// Options that another option switches off are refused, as another method's options are:
+/// beside `--no-selective` the selective-tracing options, beside `--lod-force` the LOD
+/// formula's f, a_LOD and thres_LOD. Until stop 80 they were ignored without a word (same
+/// image with `--lod-force 0.5 --lod-f 1` as with `--lod-force 0.5`).
+#[test]
+fn lod_options_switched_off_by_another_are_refused() {
+    let d = tmp("lodswitched");
+    let out = d.join("x.png");
+    let small = ["--width", "16", "--height", "12", "--quiet", "--out", out.to_str().unwrap()];
+    for (args, says) in [
+        (&["render", "spheres", "--method", "lod", "--no-selective", "--lod-selective-ratio", "100"][..], "--lod-selective-ratio"),
+        (&["render", "spheres", "--method", "lod", "--no-selective", "--lod-selective-level", "0"], "--lod-selective-level"),
+        (&["render", "spheres", "--method", "lod", "--no-selective", "--lod-selective-on", "value"], "--lod-selective-on"),
+        (&["render", "spheres", "--method", "lod", "--lod-force", "0.5", "--lod-f", "1"], "--lod-f"),
+        (&["render", "spheres", "--method", "lod", "--lod-force", "0.5", "--lod-a", "1"], "--lod-a"),
+        (&["render", "spheres", "--method", "lod", "--lod-force", "0.5", "--lod-threshold", "0"], "--lod-threshold"),
+    ] {
+        let args = [args, &small[..]].concat();
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(says), "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?} wrote an image");
+    }
+    for (spec, says) in [("lod:sel=0:selon=value", "--lod-selective-on"), ("lod:force=0.5:f=10", "--lod-f")] {
+        let (code, _, err) = lodtrace(&["bench", "spheres", "--methods", spec, "--width", "16", "--height", "12", "--quiet"]);
+        assert_eq!(code, 2, "{spec}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(says), "{spec}: {err}");
+    }
+    // Each alone still runs.
+    for o in [&["--no-selective"][..], &["--lod-force", "0.5"], &["--lod-f", "1"]] {
+        let args = [&["render", "spheres", "--method", "lod"][..], o, &small[..]].concat();
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 0, "{args:?}: {err}");
+    }
+}
+
+/// The cone tracers' options for cones that `--primary-only` or `--no-shadows` does not
+/// trace are refused, as another method's options are: until stop 80 `--primary-only
+/// --secondary-clamp 1` or `--no-shadows --shadow-tri-weight mass` rendered the same image
+/// as without the option, without a word.
+#[test]
+fn cone_options_for_cones_not_traced_are_refused() {
+    let d = tmp("conesoff");
+    let out = d.join("x.png");
+    let small = ["--width", "16", "--height", "12", "--quiet", "--out", out.to_str().unwrap()];
+    let base = ["render", "effects", "--method", "multires"];
+    for (extra, says) in [
+        (&["--primary-only", "--secondary-clamp", "1"][..], "--secondary-clamp"),
+        (&["--primary-only", "--rough-scale", "1"], "--rough-scale"),
+        (&["--primary-only", "--light-scale", "1"], "--light-scale"),
+        (&["--primary-only", "--shadow-tri-weight", "mass"], "--shadow-tri-weight"),
+        (&["--primary-only", "--no-aggregate-shadow"], "--no-aggregate-shadow"),
+        (&["--primary-only", "--no-plane-skip"], "--no-plane-skip"),
+        (&["--primary-only", "--max-depth", "3"], "--max-depth"),
+        (&["--no-shadows", "--shadow-tri-weight", "mass"], "--shadow-tri-weight"),
+        (&["--no-shadows", "--light-scale", "1"], "--light-scale"),
+        (&["--no-shadows", "--no-aggregate-shadow"], "--no-aggregate-shadow"),
+        (&["--no-shadows", "--no-plane-skip"], "--no-plane-skip"),
+    ] {
+        let args = [&base[..], extra, &small[..]].concat();
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(says), "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?} wrote an image");
+    }
+    let (code, _, err) =
+        lodtrace(&["bench", "spheres", "--methods", "multires:primary=1:clamp2=1", "--width", "16", "--height", "12", "--quiet"]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains("--secondary-clamp"), "{err}");
+    // Each alone, and what the remaining cones still use, runs.
+    for extra in
+        [&["--primary-only"][..], &["--no-shadows", "--secondary-clamp", "1"], &["--paper", "--primary-only"], &["--paper", "--no-shadows"]]
+    {
+        let args = [&base[..], extra, &small[..]].concat();
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 0, "{args:?}: {err}");
+        std::fs::remove_file(&out).unwrap();
+    }
+}
+
+/// `animate --cache-gate` beside `--unordered` is refused: the unordered descent looks the
+/// cache up every frame, as its help says, so the gate had no effect; until stop 80 it was
+/// taken without a word (bench: `gate=` beside `ordered=0` likewise).
+#[test]
+fn cache_gate_beside_unordered_is_refused() {
+    let d = tmp("gateunordered");
+    let out = d.join("f");
+    let (code, _, err) = lodtrace(&[
+        "animate",
+        "bend",
+        "--frames",
+        "2",
+        "--detail",
+        "0.05",
+        "--width",
+        "16",
+        "--height",
+        "12",
+        "--quiet",
+        "--unordered",
+        "--cache-gate",
+        "0.9",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains("--cache-gate"), "{err}");
+    assert!(!out.exists(), "left the --out folder");
+    let (code, _, err) =
+        lodtrace(&["bench", "bend", "--methods", "surfel:ordered=0:gate=0.9:frames=2", "--width", "16", "--height", "12", "--quiet"]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains("gate"), "{err}");
+}
+
+/// `render --seed` where nothing is random (whitted and lod at one sample per pixel: no
+/// jitter) is refused, as for the cone and surfel tracers: until stop 80 `--seed 5` rendered
+/// the same image as `--seed 0`, against its help's "same seed, same image".
+#[test]
+fn seed_without_random_sampling_is_refused() {
+    let d = tmp("seedspp1");
+    let out = d.join("x.png");
+    let small = ["--width", "16", "--height", "12", "--quiet", "--out", out.to_str().unwrap()];
+    for m in ["whitted", "lod"] {
+        let args = [&["render", "spheres", "--method", m, "--seed", "5"][..], &small[..]].concat();
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains("--seed"), "{err}");
+        assert!(!out.exists());
+        let args = [&["render", "spheres", "--method", m, "--seed", "5", "--spp", "2"][..], &small[..]].concat();
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 0, "{args:?}: {err}");
+        std::fs::remove_file(&out).unwrap();
+    }
+}
+
+/// `render --method distributed --variance-threshold` where there is no second pass (the
+/// first pass takes every sample `--spp` allows) is refused: until stop 80 it was taken
+/// without effect (`--spp 4 --first-pass-spp 4` gave the same image at any threshold).
+#[test]
+fn variance_threshold_without_a_second_pass_is_refused() {
+    let d = tmp("vtnopass");
+    let out = d.join("x.png");
+    let small = ["--width", "16", "--height", "12", "--quiet", "--out", out.to_str().unwrap()];
+    let base = ["render", "spheres", "--method", "distributed", "--variance-threshold", "0"];
+    for extra in [&["--spp", "4", "--first-pass-spp", "4"][..], &["--spp", "2"]] {
+        let args = [&base[..], extra, &small[..]].concat();
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        one_error_line(&err);
+        assert!(err.contains("--variance-threshold"), "{err}");
+        assert!(!out.exists());
+    }
+    let args = [&base[..], &["--spp", "4"], &small[..]].concat();
+    let (code, _, err) = lodtrace(&args);
+    assert_eq!(code, 0, "{args:?}: {err}");
+}

@@ -371,6 +371,11 @@ pub(crate) fn check(a: &AnimateArgs) -> Result<UpdateMode> {
         if !(0.0..=1.0).contains(&g) {
             return Err(Error::Usage(format!("--cache-gate {g}: a share of the lookups, in [0, 1]")));
         }
+        // The unordered descent is never gated (`TraceParams::cache_gate`); until stop 80
+        // the gate was taken beside it without a word.
+        if a.unordered {
+            return Err(Error::Usage("--cache-gate has no effect beside --unordered (which looks the cache up every frame)".into()));
+        }
     }
     if a.exact_below.is_some() && matches!(mode, UpdateMode::Naive | UpdateMode::Refit) {
         return Err(Error::Usage(format!("--exact-below is an option of the lazy updates; --update {} would ignore it", mode.name())));

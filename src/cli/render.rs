@@ -115,6 +115,14 @@ pub fn check_method_options(a: &RenderArgs) -> Result<()> {
     if (cone || m == Surfel) && a.seed != 0 {
         wrong.push(("--seed", "the ray tracers' sampling (the cone and surfel tracers are deterministic)"));
     }
+    // Whitted and lod draw random numbers only to jitter several samples per pixel: at one
+    // they render the same image whatever the seed (taken without a word until stop 80).
+    if matches!(m, Whitted | Lod) && a.spp == 1 && a.seed != 0 {
+        return Err(Error::Usage(format!(
+            "--seed has no effect on --method {} at --spp 1 (no jitter, nothing random): give --spp N",
+            m.name()
+        )));
+    }
     // The cone tracers trace their own octree, surfel its sphere tree: only the default
     // (which they do not use) passes unremarked.
     if matches!(m, Multires | Cone | Surfel) && a.accel.is_some() {
@@ -124,6 +132,17 @@ pub fn check_method_options(a: &RenderArgs) -> Result<()> {
             m.name(),
             if m == Surfel { "sphere tree" } else { "multi-resolution octree" }
         )));
+    }
+    // Options of cones or rays that are not traced (stop 80: they were ignored without a
+    // word). `MultiresArgs::params` refuses the shadow and secondary cones' options beside
+    // `--primary-only`, for bench specs too.
+    if cone && a.no_shadows {
+        if let Some(o) = trace.iter().find(|o| crate::multires::MultiresArgs::SHADOW.contains(o)) {
+            return Err(Error::Usage(format!("{o} has no effect beside --no-shadows (no shadow cones)")));
+        }
+    }
+    if cone && a.multires.primary_only && a.max_depth.is_some() {
+        return Err(Error::Usage("--max-depth has no effect beside --primary-only (no reflected or refracted cones)".into()));
     }
     let d = crate::baseline::render::RenderOpts::default();
     if m != Distributed && a.first_pass_spp != d.first_pass_spp {
@@ -142,6 +161,15 @@ pub fn check_method_options(a: &RenderArgs) -> Result<()> {
     }
     if m != Distributed && a.variance_threshold != d.variance_threshold {
         wrong.push(("--variance-threshold", "--method distributed"));
+    }
+    // The threshold picks the pixels of the second pass; there is none when the first pass
+    // takes every sample --spp allows (taken without effect until stop 80).
+    if m == Distributed && a.variance_threshold != d.variance_threshold && a.first_pass_spp >= a.spp {
+        return Err(Error::Usage(format!(
+            "--variance-threshold has no effect at --spp {} with --first-pass-spp {}: the first pass takes every sample, there is no second pass",
+            a.spp,
+            a.first_pass_spp.min(a.spp)
+        )));
     }
     if m == Surfel {
         // The sequence brings its own camera and has no recursion.

@@ -532,6 +532,10 @@ pub fn validate(spec: &MethodSpec) -> Result<()> {
         if !(0.0..=1.0).contains(&g) {
             return bad(format!("gate={g}: a share of the lookups, in [0, 1]"));
         }
+        // As `animate --cache-gate` beside `--unordered` (stop 80): never gated.
+        if !s.ordered {
+            return bad("gate has no effect beside ordered=0 (which looks the cache up every frame)".into());
+        }
     }
     use crate::deform::UpdateMode::{Naive, Refit};
     if s.exact_below.is_some() && matches!(mode, Naive | Refit) {

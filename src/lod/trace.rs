@@ -147,6 +147,31 @@ impl LodParams {
                 return Err(Error::Usage(format!("--lod-force {x} out of range (0..=1)")));
             }
         }
+        // An option another one switches off is refused, as another method's options are
+        // (`render::check_method_options`): until stop 80 `--no-selective` ignored the
+        // selective-tracing options and `--lod-force` the LOD formula's f, a_LOD and
+        // thres_LOD without a word (the same image either way).
+        let d = Self::default();
+        let ignored = |set: &[(bool, &str)], by: &str| match set.iter().find(|(s, _)| *s) {
+            Some((_, o)) => Err(Error::Usage(format!("{o} has no effect beside {by}"))),
+            None => Ok(()),
+        };
+        if !self.selective {
+            ignored(
+                &[
+                    (self.selective_level != d.selective_level, "--lod-selective-level"),
+                    (self.selective_ratio != d.selective_ratio, "--lod-selective-ratio"),
+                    (self.selective_on != d.selective_on, "--lod-selective-on"),
+                ],
+                "--no-selective (selective tracing off)",
+            )?;
+        }
+        if self.force.is_some() {
+            ignored(
+                &[(self.f != d.f, "--lod-f"), (self.a_lod != d.a_lod, "--lod-a"), (self.thres != d.thres, "--lod-threshold")],
+                "--lod-force (every ray's LOD is given)",
+            )?;
+        }
         Ok(())
     }
 }

@@ -293,7 +293,24 @@ impl MultiresArgs {
         (build, trace)
     }
 
+    /// The options of the cones that `--primary-only` does not trace: shadow cones
+    /// ([`Self::SHADOW`]) and reflected and refracted cones.
+    pub const AFTER_PRIMARY: [&'static str; 6] =
+        ["--secondary-clamp", "--rough-scale", "--shadow-tri-weight", "--light-scale", "--no-aggregate-shadow", "--no-plane-skip"];
+    /// The options of the shadow cones alone, which `render --no-shadows` does not trace.
+    pub const SHADOW: [&'static str; 4] = ["--shadow-tri-weight", "--light-scale", "--no-aggregate-shadow", "--no-plane-skip"];
+
     pub fn params(&self, points: bool) -> Result<(BuildParams, TraceParams)> {
+        // An option of cones that are not traced is refused, as another method's options
+        // are: until stop 80 `--primary-only --secondary-clamp 1` rendered what
+        // `--primary-only` did, without a word.
+        if self.primary_only {
+            if let Some(o) = self.changed().1.iter().find(|o| Self::AFTER_PRIMARY.contains(o)) {
+                return Err(crate::error::Error::Usage(format!(
+                    "{o} has no effect beside --primary-only (no shadow, reflected or refracted cones)"
+                )));
+            }
+        }
         let r = self.resolved()?;
         let b = BuildParams { k: r.k, c: r.oversampling, weights: r.point_weights, ..Default::default() };
         let t = TraceParams {
