@@ -2509,6 +2509,11 @@ fn cone_options_for_cones_not_traced_are_refused() {
     assert_eq!(code, 2, "{err}");
     one_error_line(&err);
     assert!(err.contains("--secondary-clamp"), "{err}");
+    let (code, _, err) =
+        lodtrace(&["bench", "spheres", "--methods", "cone:primary=1:depth=2", "--width", "16", "--height", "12", "--quiet"]);
+    assert_eq!(code, 2, "{err}");
+    one_error_line(&err);
+    assert!(err.contains("depth"), "{err}");
     // Each alone, and what the remaining cones still use, runs.
     for extra in
         [&["--primary-only"][..], &["--no-shadows", "--secondary-clamp", "1"], &["--paper", "--primary-only"], &["--paper", "--no-shadows"]]

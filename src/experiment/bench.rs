@@ -353,6 +353,11 @@ impl MethodSpec {
                 return Err(bad(format!("paper=1 sets {key} to the paper's choice; give one or the other")));
             }
         }
+        // As `render --max-depth` beside `--primary-only` (stop 80): no reflected or refracted
+        // cones to limit.
+        if cone && spec.multires.primary_only && seen.contains(&"depth") {
+            return Err(bad("depth has no effect beside primary=1 (no reflected or refracted cones)".into()));
+        }
         // Refused here, before any method of the list runs, not when its turn comes.
         if method == Method::Lod && spec.accel == AccelKind::Octree {
             return Err(bad("lod runs on bvh or embree; the octree serves whitted and distributed".into()));
