@@ -96,8 +96,8 @@ pub struct BenchArgs {
     pub regions: Vec<String>,
     /// Deforming sequences (`surfel` specs) only: run every spec at each of these image
     /// sizes instead of `--width`×`--height`, e.g. `128x96,256x192,512x384,1024x768`. Adds a
-    /// table and a plot (`speedup-vs-size.png`) of each method's speed-up over the first
-    /// against the rays per frame; each size's images and per-frame plots go to `OUT/WxH/`.
+    /// table and, with two methods or more, a plot (`speedup-vs-size.png`) of each method's
+    /// speed-up over the first against the rays per frame; each size's images and per-frame plots go to `OUT/WxH/`.
     /// Refused beside an explicit `--width` or `--height`, even one equal to the default.
     #[arg(long, value_name = "WxH,...", allow_hyphen_values = true, conflicts_with_all = ["width", "height"])]
     pub sizes: Option<String>,
