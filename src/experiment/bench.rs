@@ -992,8 +992,6 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             None => None,
         };
         let mut first_time = None;
-        // Full-detail Whitted films of this scene, for the lod rows.
-        let mut full: Vec<(MethodSpec, Film, run::Stats)> = Vec::new();
         // Floor differences already rendered: (full-detail spec, (other back-end, difference)).
         let mut floors: Vec<(String, Option<(String, Vec<f32>)>)> = Vec::new();
         // Best of `--repeat` renders per method, taken round the methods as for the deforming
@@ -1005,6 +1003,15 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             |r| r.1.render_seconds,
         )?;
         let paired = per_round_speedups(&rounds);
+        // Full-detail Whitted films of this scene, for the lod rows: all of them, taken before
+        // the rows (stop 80: gathered row by row, a Whitted row listed after the lod row was
+        // not yet there, and the lod row got no comparison at all).
+        let full: Vec<(MethodSpec, Film, run::Stats)> = specs
+            .iter()
+            .zip(&bests)
+            .filter(|(s, _)| s.method == Method::Whitted)
+            .map(|(s, (f, st, ..))| (s.clone(), f.clone(), st.clone()))
+            .collect();
         for ((spec, (film, stats, maps, pixel_tests)), per_round) in specs.iter().zip(bests).zip(paired) {
             if let (Some(out), Some(v)) = (&a.out, &pixel_tests) {
                 // Where the cone tracer's work went: tests per pixel, log-scale heat map.
@@ -1084,9 +1091,6 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             row.per_round_speedups = per_round;
             row.lod_vs_full = lod_vs_full;
             rows.push(row);
-            if spec.method == Method::Whitted {
-                full.push((spec.clone(), film, rows.last().expect("row").stats.clone()));
-            }
         }
         let first = rows.len() - specs.len();
         for (sw, rf) in sweeps.iter().filter_map(|sw| ref_film.as_ref().map(|rf| (sw, rf))) {
