@@ -1024,11 +1024,14 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             if spec.method == Method::Lod {
                 // Traced alike but for the LOD: the packet width too (a `packet=1` row taken as
                 // the partner credited the LOD with the packets' speed-up).
-                if let Some((fs, ff, fst)) = full.iter().find(|(f, _, _)| {
+                // Threads and depth as run, not as written (stop 80: `threads=1` beside
+                // `--threads 1`, or `depth=6` on a depth-6 scene, found no partner).
+                let depth = |m: &MethodSpec| m.max_depth.unwrap_or(scene.max_depth);
+                if let Some((fs, ff, fst)) = full.iter().find(|(f, _, fst)| {
                     f.accel == spec.accel
                         && f.spp == spec.spp
-                        && f.max_depth == spec.max_depth
-                        && f.threads == spec.threads
+                        && depth(f) == depth(spec)
+                        && fst.threads == stats.threads
                         && f.packet == spec.packet
                 }) {
                     let d = pixel_diff(&film, ff);
