@@ -627,7 +627,9 @@ fn diff_summary(d: &[f32]) -> (f32, usize, f32, f64) {
     let (imax, dmax) = d.iter().copied().enumerate().fold((0, 0.0f32), |a, (i, x)| if x > a.1 { (i, x) } else { a });
     let mut sorted = d.to_vec();
     sorted.sort_by(f32::total_cmp);
-    let p99 = sorted.get((sorted.len() * 99 / 100).min(sorted.len().saturating_sub(1))).copied().unwrap_or(0.0);
+    // Nearest rank, ⌈0.99 n⌉-th value: one pixel in a hundred differs more (stop 80: ⌊0.99 n⌋
+    // as an index took the value above it wherever 0.99 n is whole, as at 640×480).
+    let p99 = sorted.get((sorted.len() * 99).div_ceil(100).saturating_sub(1)).copied().unwrap_or(0.0);
     (dmax, imax, p99, d.iter().map(|&x| x as f64).sum::<f64>() / d.len().max(1) as f64)
 }
 
@@ -1753,6 +1755,22 @@ mod tests {
         assert!(e("whitted:spp=-1").contains("a whole number"), "{}", e("whitted:spp=-1"));
         assert!(e("distributed:fps=0").contains("fps=0 out of range"), "{}", e("distributed:fps=0"));
         assert!(e("whitted:packet=4").contains("packet=4"), "{}", e("whitted:packet=4"));
+    }
+
+    /// The 99th percentile is the value one pixel in a hundred exceeds (nearest rank): of
+    /// 100 differences 0.00, 0.01, …, 0.99 it is 0.98, which 0.99 alone exceeds. Until stop 80
+    /// it was the 100th value (the maximum here) wherever a hundredth of the pixels is a whole
+    /// number, as at the default 640×480.
+    #[test]
+    fn p99_is_exceeded_by_one_pixel_in_a_hundred() {
+        let d: Vec<f32> = (0..100).map(|i| i as f32 / 100.0).collect();
+        let (max, at, p99, _) = diff_summary(&d);
+        assert_eq!((max, at), (0.99, 99));
+        assert_eq!(p99, 0.98);
+        let d: Vec<f32> = (0..250).map(|i| i as f32).collect();
+        assert_eq!(diff_summary(&d).2, 247.0, "ceil(0.99 × 250) = 248th value");
+        assert_eq!(diff_summary(&[0.5]).2, 0.5);
+        assert_eq!(diff_summary(&[]).2, 0.0);
     }
 
     #[test]
