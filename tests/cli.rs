@@ -591,6 +591,30 @@ fn lod_bench_partner_has_the_same_packet_width() {
     assert_eq!(v["rows"][2]["lod_vs_full"]["against"], "whitted:bvh", "{}", v["rows"][2]["lod_vs_full"]);
 }
 
+/// The full-detail partner of a `lod` row is the first matching Whitted row of the scene
+/// wherever it stands in `--methods` (stop 80: one listed after the `lod` row was not seen,
+/// and the row got no comparison at all, without a word).
+#[test]
+fn lod_bench_partner_may_follow_the_lod_row() {
+    let (code, out, err, _d, json) = small_bench("lodafter", &["cabinet", "--threads", "1", "--methods", "lod:bvh,whitted:bvh"]);
+    assert_eq!(code, 0, "{out}{err}");
+    let v = json.unwrap();
+    assert_eq!(v["rows"][0]["lod_vs_full"]["against"], "whitted:bvh", "{}", v["rows"][0]);
+    assert!(out.contains("Per-ray LOD against full detail"), "{out}");
+}
+
+/// "Same threads and depth" are the counts the two rows ran with: `threads=1` beside
+/// `--threads 1`, `depth=6` on a scene whose own depth is 6, are the partner's (stop 80: the
+/// spec texts were compared, so such a lod row got no comparison at all, without a word).
+#[test]
+fn lod_bench_partner_matches_threads_and_depth_as_run() {
+    let (code, out, err, _d, json) =
+        small_bench("lodresolved", &["cabinet", "--threads", "1", "--methods", "whitted:bvh,lod:bvh:threads=1:depth=6"]);
+    assert_eq!(code, 0, "{out}{err}");
+    let v = json.unwrap();
+    assert_eq!(v["rows"][1]["lod_vs_full"]["against"], "whitted:bvh", "{}", v["rows"][1]);
+}
+
 #[test]
 fn bad_lod_options_are_one_line_exit_2() {
     let d = tmp("lodbad");

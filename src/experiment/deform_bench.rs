@@ -144,7 +144,7 @@ pub fn run(
 ) -> Result<Vec<DeformRow>> {
     let mut rows = Vec::new();
     // Each spec's update=naive partner (the same for every sequence).
-    let partners = naive_partners(specs);
+    let partners = naive_partners(specs, threads);
     for seq in seqs {
         let mut seq_rows: Vec<DeformRow> = Vec::new();
         // Each row's last frame, for the image checks against the first spec and the naive
@@ -267,19 +267,25 @@ pub fn run(
     Ok(rows)
 }
 
-/// Keys of a `surfel` spec that only the lazy updates take (`naive` refuses them), so they
-/// do not count in the pairing of [`naive_partners`].
-const LAZY_KEYS: [&str; 6] = ["update=", "exact=", "bound=", "cache_up=", "climb=", "gate="];
-
 /// For each spec, the index of its `update=naive` partner among `specs`: the first spec with
-/// `update=naive` whose other `:`-separated options are this spec's (in any order), the keys
-/// only the lazy updates take left aside (`exact=0:bound=paper` pairs with the plain naive
-/// spec). The naive spec is its own partner.
-pub fn naive_partners(specs: &[MethodSpec]) -> Vec<Option<usize>> {
-    let rest = |m: &MethodSpec| -> Vec<String> {
-        let mut v: Vec<String> = m.text.split(':').filter(|t| !LAZY_KEYS.iter().any(|k| t.starts_with(k))).map(str::to_string).collect();
-        v.sort();
-        v
+/// `update=naive` whose other options are this spec's, the options only the lazy updates take
+/// left aside (`exact=0:bound=paper` pairs with the plain naive spec). The naive spec is its
+/// own partner. The options are compared as parsed, threads as run (`threads` is the bench's
+/// `--threads`): until stop 80 the spec texts were, so `shadows=1`, `detail=1`, `packet=8` or
+/// a `threads=` equal to `--threads` left a row without its partner.
+pub fn naive_partners(specs: &[MethodSpec], threads: usize) -> Vec<Option<usize>> {
+    let rest = |m: &MethodSpec| -> String {
+        let d = SurfelSpec::default();
+        let s = SurfelSpec {
+            update: d.update,
+            exact_below: d.exact_below,
+            bound: d.bound,
+            cache_up: d.cache_up,
+            cache_climb: d.cache_climb,
+            cache_gate: d.cache_gate,
+            ..m.surfel.clone()
+        };
+        format!("{} packet {} threads {}", serde_json::to_string(&s).expect("spec serialises"), m.packet, m.threads.unwrap_or(threads))
     };
     specs
         .iter()
@@ -570,7 +576,20 @@ mod tests {
         .unwrap();
         // The sixth spec takes the default update (lazy-cache) and pairs like the second; the
         // last two pair across their lazy-only keys.
-        assert_eq!(naive_partners(&specs), [Some(0), Some(0), Some(2), Some(2), None, Some(0), Some(0), Some(2)]);
+        assert_eq!(naive_partners(&specs, 2), [Some(0), Some(0), Some(2), Some(2), None, Some(0), Some(0), Some(2)]);
+    }
+
+    /// The options are compared as they run, not as written (stop 80): a key at its default
+    /// value (`shadows=1`, `detail=1`, `packet=8`) or `threads=` equal to the bench's
+    /// `--threads` left the row without its naive partner ("-" and `null`).
+    #[test]
+    fn naive_partner_options_are_compared_as_they_run() {
+        let specs = crate::experiment::bench::parse_list(
+            "surfel:update=naive:frames=8,surfel:update=lazy-cache:frames=8:shadows=1:detail=1:packet=8,\
+             surfel:update=lazy:frames=8:threads=2,surfel:update=lazy:frames=8:threads=1",
+        )
+        .unwrap();
+        assert_eq!(naive_partners(&specs, 2), [Some(0), Some(0), Some(0), None]);
     }
 
     #[test]
