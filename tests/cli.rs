@@ -22,6 +22,14 @@ fn one_error_line(stderr: &str) {
     assert!(lines[0].starts_with("lodtrace: error:"), "{stderr:?}");
 }
 
+/// `lodtrace ARGS` is refused: exit 2 and one error line that names `says`.
+fn refused(args: &[&str], says: &str) {
+    let (code, _, err) = lodtrace(args);
+    assert_eq!(code, 2, "{args:?}: {err}");
+    one_error_line(&err);
+    assert!(err.contains(says), "{args:?}: {err}");
+}
+
 /// `lodtrace bench ARGS --width 48 --height 36 --quiet --out DIR` into a fresh folder:
 /// (exit code, stdout, stderr, folder, bench.json when it was written).
 fn small_bench(name: &str, args: &[&str]) -> (i32, String, String, Scratch, Option<serde_json::Value>) {
@@ -2478,17 +2486,11 @@ fn lod_options_switched_off_by_another_are_refused() {
         (&["render", "spheres", "--method", "lod", "--lod-force", "0.5", "--lod-threshold", "0"], "--lod-threshold"),
     ] {
         let args = [args, &small[..]].concat();
-        let (code, _, err) = lodtrace(&args);
-        assert_eq!(code, 2, "{args:?}: {err}");
-        one_error_line(&err);
-        assert!(err.contains(says), "{args:?}: {err}");
+        refused(&args, says);
         assert!(!out.exists(), "{args:?} wrote an image");
     }
     for (spec, says) in [("lod:sel=0:selon=value", "--lod-selective-on"), ("lod:force=0.5:f=10", "--lod-f")] {
-        let (code, _, err) = lodtrace(&["bench", "spheres", "--methods", spec, "--width", "16", "--height", "12", "--quiet"]);
-        assert_eq!(code, 2, "{spec}: {err}");
-        one_error_line(&err);
-        assert!(err.contains(says), "{spec}: {err}");
+        refused(&["bench", "spheres", "--methods", spec, "--width", "16", "--height", "12", "--quiet"], says);
     }
     // Each alone still runs.
     for o in [&["--no-selective"][..], &["--lod-force", "0.5"], &["--lod-f", "1"]] {
@@ -2522,22 +2524,14 @@ fn cone_options_for_cones_not_traced_are_refused() {
         (&["--no-shadows", "--no-plane-skip"], "--no-plane-skip"),
     ] {
         let args = [&base[..], extra, &small[..]].concat();
-        let (code, _, err) = lodtrace(&args);
-        assert_eq!(code, 2, "{args:?}: {err}");
-        one_error_line(&err);
-        assert!(err.contains(says), "{args:?}: {err}");
+        refused(&args, says);
         assert!(!out.exists(), "{args:?} wrote an image");
     }
-    let (code, _, err) =
-        lodtrace(&["bench", "spheres", "--methods", "multires:primary=1:clamp2=1", "--width", "16", "--height", "12", "--quiet"]);
-    assert_eq!(code, 2, "{err}");
-    one_error_line(&err);
-    assert!(err.contains("--secondary-clamp"), "{err}");
-    let (code, _, err) =
-        lodtrace(&["bench", "spheres", "--methods", "cone:primary=1:depth=2", "--width", "16", "--height", "12", "--quiet"]);
-    assert_eq!(code, 2, "{err}");
-    one_error_line(&err);
-    assert!(err.contains("depth"), "{err}");
+    refused(
+        &["bench", "spheres", "--methods", "multires:primary=1:clamp2=1", "--width", "16", "--height", "12", "--quiet"],
+        "--secondary-clamp",
+    );
+    refused(&["bench", "spheres", "--methods", "cone:primary=1:depth=2", "--width", "16", "--height", "12", "--quiet"], "depth");
     // Each alone, and what the remaining cones still use, runs.
     for extra in
         [&["--primary-only"][..], &["--no-shadows", "--secondary-clamp", "1"], &["--paper", "--primary-only"], &["--paper", "--no-shadows"]]
@@ -2556,33 +2550,29 @@ fn cone_options_for_cones_not_traced_are_refused() {
 fn cache_gate_beside_unordered_is_refused() {
     let d = tmp("gateunordered");
     let out = d.join("f");
-    let (code, _, err) = lodtrace(&[
-        "animate",
-        "bend",
-        "--frames",
-        "2",
-        "--detail",
-        "0.05",
-        "--width",
-        "16",
-        "--height",
-        "12",
-        "--quiet",
-        "--unordered",
+    refused(
+        &[
+            "animate",
+            "bend",
+            "--frames",
+            "2",
+            "--detail",
+            "0.05",
+            "--width",
+            "16",
+            "--height",
+            "12",
+            "--quiet",
+            "--unordered",
+            "--cache-gate",
+            "0.9",
+            "--out",
+            out.to_str().unwrap(),
+        ],
         "--cache-gate",
-        "0.9",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 2, "{err}");
-    one_error_line(&err);
-    assert!(err.contains("--cache-gate"), "{err}");
+    );
     assert!(!out.exists(), "left the --out folder");
-    let (code, _, err) =
-        lodtrace(&["bench", "bend", "--methods", "surfel:ordered=0:gate=0.9:frames=2", "--width", "16", "--height", "12", "--quiet"]);
-    assert_eq!(code, 2, "{err}");
-    one_error_line(&err);
-    assert!(err.contains("gate"), "{err}");
+    refused(&["bench", "bend", "--methods", "surfel:ordered=0:gate=0.9:frames=2", "--width", "16", "--height", "12", "--quiet"], "gate");
 }
 
 /// `render --seed` where nothing is random (whitted and lod at one sample per pixel: no
@@ -2595,10 +2585,7 @@ fn seed_without_random_sampling_is_refused() {
     let small = ["--width", "16", "--height", "12", "--quiet", "--out", out.to_str().unwrap()];
     for m in ["whitted", "lod"] {
         let args = [&["render", "spheres", "--method", m, "--seed", "5"][..], &small[..]].concat();
-        let (code, _, err) = lodtrace(&args);
-        assert_eq!(code, 2, "{args:?}: {err}");
-        one_error_line(&err);
-        assert!(err.contains("--seed"), "{err}");
+        refused(&args, "--seed");
         assert!(!out.exists());
         let args = [&["render", "spheres", "--method", m, "--seed", "5", "--spp", "2"][..], &small[..]].concat();
         let (code, _, err) = lodtrace(&args);
@@ -2618,10 +2605,7 @@ fn variance_threshold_without_a_second_pass_is_refused() {
     let base = ["render", "spheres", "--method", "distributed", "--variance-threshold", "0"];
     for extra in [&["--spp", "4", "--first-pass-spp", "4"][..], &["--spp", "2"]] {
         let args = [&base[..], extra, &small[..]].concat();
-        let (code, _, err) = lodtrace(&args);
-        assert_eq!(code, 2, "{args:?}: {err}");
-        one_error_line(&err);
-        assert!(err.contains("--variance-threshold"), "{err}");
+        refused(&args, "--variance-threshold");
         assert!(!out.exists());
     }
     let args = [&base[..], &["--spp", "4"], &small[..]].concat();

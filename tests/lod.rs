@@ -229,18 +229,11 @@ fn distance_lod_and_ray_lod_multiply() {
     assert!(got.iter().zip(&want).all(|(g, w)| g >= w), "triangles per ray level {got:?}, at least {want:?}");
 }
 
-/// The bench's "max diff, full-LOD pixels" is documented as the largest difference among
-/// the pixels whose level-1 rays all kept full detail, "e.g. those seen in a flat mirror":
-/// the pixels whose level-1 LODs map to the full-detail model L₀ (§2: k = lvl_max −
-/// ⌈LOD·lvl_max⌉). With deeper rays degrading everywhere (thres = 0, a = 1) those
-/// pixels differ from full detail, and the figure must say so.
-#[test]
-fn bench_full_lod_figure_covers_the_pixels_at_the_full_detail_model() {
-    use lodtrace::experiment::bench::{self, BenchArgs};
-    use lodtrace::lod::chain::level_of;
-    let a = BenchArgs {
-        scenes: vec!["cabinet".into()],
-        methods: "whitted:bvh,lod:bvh:thres=0:a=1".into(),
+/// `lodtrace bench SCENE --methods METHODS` at 64×48 on two threads, one round, quiet.
+fn small_bench_args(scene: &str, methods: &str) -> lodtrace::experiment::bench::BenchArgs {
+    lodtrace::experiment::bench::BenchArgs {
+        scenes: vec![scene.into()],
+        methods: methods.into(),
         reference: None,
         out: None,
         width: 64,
@@ -252,7 +245,19 @@ fn bench_full_lod_figure_covers_the_pixels_at_the_full_detail_model() {
         regions: vec![],
         sizes: None,
         quiet: true,
-    };
+    }
+}
+
+/// The bench's "max diff, full-LOD pixels" is documented as the largest difference among
+/// the pixels whose level-1 rays all kept full detail, "e.g. those seen in a flat mirror":
+/// the pixels whose level-1 LODs map to the full-detail model L₀ (§2: k = lvl_max −
+/// ⌈LOD·lvl_max⌉). With deeper rays degrading everywhere (thres = 0, a = 1) those
+/// pixels differ from full detail, and the figure must say so.
+#[test]
+fn bench_full_lod_figure_covers_the_pixels_at_the_full_detail_model() {
+    use lodtrace::experiment::bench;
+    use lodtrace::lod::chain::level_of;
+    let a = small_bench_args("cabinet", "whitted:bvh,lod:bvh:thres=0:a=1");
     let got = bench::bench(&a).unwrap().rows[1].lod_vs_full.as_ref().unwrap().max_diff_full_lod_pixels;
     // The same figure, computed here.
     let scene = builtin::get("cabinet").unwrap();
@@ -296,22 +301,8 @@ fn lod_memory_does_not_grow_with_the_samples() {
 /// 9.4 % where 1 spp reports 0.
 #[test]
 fn bench_full_lod_figure_at_several_samples_takes_every_sample() {
-    use lodtrace::experiment::bench::{self, BenchArgs};
-    let a = BenchArgs {
-        scenes: vec!["chessboard".into()],
-        methods: "whitted:bvh:spp=4,lod:bvh:spp=4:a=0".into(),
-        reference: None,
-        out: None,
-        width: 64,
-        height: 48,
-        threads: 2,
-        repeat: 1,
-        sweep: vec![],
-        sweep_max_spp: None,
-        regions: vec![],
-        sizes: None,
-        quiet: true,
-    };
+    use lodtrace::experiment::bench;
+    let a = small_bench_args("chessboard", "whitted:bvh:spp=4,lod:bvh:spp=4:a=0");
     let r = bench::bench(&a).unwrap();
     let c = r.rows[1].lod_vs_full.as_ref().unwrap();
     assert!(c.max_pixel_diff > 0.0, "the LOD changed some pixels");
