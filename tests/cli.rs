@@ -736,6 +736,28 @@ fn animate_out_none_writes_no_images() {
     assert!(left.is_empty(), "--out none left {left:?}");
 }
 
+/// `--stats -` writes the JSON to standard output, which render and animate leave to it
+/// (their summaries go to standard error), so it pipes into `jq`; until stop 80 it was a file
+/// named `-`. `verify --json -` is refused: verify's table is on standard output.
+#[test]
+fn stats_dash_goes_to_standard_output() {
+    let d = tmp("statsdash");
+    let run = |args: &[&str]| Command::new(env!("CARGO_BIN_EXE_lodtrace")).args(args).current_dir(&d).output().expect("run lodtrace");
+    let png = d.join("x.png");
+    let o = run(&["render", "spheres", "--width", "16", "--height", "12", "--quiet", "--out", png.to_str().unwrap(), "--stats", "-"]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("stdout is the stats JSON");
+    assert_eq!(v["width"], 16);
+    let o = run(&["animate", "heads", "--frames", "2", "--detail", "0.05", "--width", "16", "--height", "12", "--quiet", "--stats", "-"]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("stdout is the stats JSON");
+    assert_eq!(v["per_frame"].as_array().map(Vec::len), Some(2));
+    assert!(!d.join("-").exists(), "a file named -");
+    let o = run(&["verify", "cube", "--rays", "100", "--json", "-"]);
+    assert_eq!(o.status.code(), Some(2));
+    one_error_line(&String::from_utf8_lossy(&o.stderr));
+}
+
 /// `--update` also takes the spellings `lazycache` and `cache` for `lazy-cache`; the stats
 /// name the mode itself, not the spelling. `bench` keys its radius-ratio columns on that name,
 /// so a `surfel:update=cache` row had no root and mean ratio ("-", `null`), where the same

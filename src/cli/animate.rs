@@ -64,7 +64,8 @@ pub struct AnimateArgs {
     /// evenly spaced over the run (contact_sheet.png); none = no images.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Statistics as JSON: per-frame times and work counts, radius ratios per level, totals.
+    /// Statistics as JSON: per-frame times and work counts, radius ratios per level, totals
+    /// (`-`: to standard output).
     #[arg(long)]
     pub stats: Option<PathBuf>,
     /// Surfel and node counts relative to the paper's models (1 ≈ paper size).
@@ -601,7 +602,7 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
     };
     if let Some(p) = &a.stats {
         let json = serde_json::to_string_pretty(&stats).expect("stats serialise") + "\n";
-        io::write_atomic(p, |tmp| std::fs::write(tmp, json.as_bytes()).map_err(|e| Error::io(p, e)))?;
+        super::render::write_json(p, &json)?;
     }
     Ok(stats)
 }

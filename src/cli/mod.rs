@@ -118,7 +118,8 @@ pub struct RenderArgs {
     /// per pixel, log-scale heat map or counts).
     #[arg(long, value_parser = parse_aov)]
     pub aov: Vec<(String, PathBuf)>,
-    /// Statistics as JSON: times, counters, hierarchy and per-cone-kind profile.
+    /// Statistics as JSON: times, counters, hierarchy and per-cone-kind profile (`-`: to
+    /// standard output).
     #[arg(long)]
     pub stats: Option<PathBuf>,
     #[command(flatten)]
@@ -230,7 +231,8 @@ pub(crate) fn readme_commands<A: clap::Args>(sub: &str) -> Vec<(String, A)> {
         .lines()
         .filter_map(|line| line.trim().strip_prefix(prefix.as_str()))
         .map(|cmd| {
-            let words = std::iter::once(sub).chain(cmd.split('#').next().unwrap().split_whitespace());
+            // A comment, or a pipe into another program (`--stats - | jq`), ends the command.
+            let words = std::iter::once(sub).chain(cmd.split('#').next().unwrap().split(" | ").next().unwrap().split_whitespace());
             let parsed = A::augment_args(clap::Command::new("lodtrace"))
                 .try_get_matches_from(words)
                 .map_err(|e| e.to_string())

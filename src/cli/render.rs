@@ -30,11 +30,30 @@ pub fn apply_camera(scene: &mut Scene, c: &CameraArgs) -> Result<()> {
 /// A JSON output (`--stats`, `--json`) named like an image is a slip of the keyboard
 /// (`--stats s.png` beside `--out s.exr`): refused.
 pub fn check_json_path(p: &Path, option: &str) -> Result<()> {
+    if is_stdout(p) {
+        return Ok(());
+    }
     const IMAGES: [&str; 5] = ["png", "exr", "jpg", "jpeg", "ppm"];
     if p.extension().is_some_and(|e| IMAGES.iter().any(|x| e.eq_ignore_ascii_case(x))) {
         return Err(Error::Usage(format!("{}: {option} writes JSON; name it .json", p.display())));
     }
     check_out_path(p)
+}
+
+/// `--stats -`: the JSON goes to standard output, which the commands leave to it (their
+/// summaries and progress go to standard error). Until stop 80 it was a file named `-`.
+pub fn is_stdout(p: &Path) -> bool {
+    p.as_os_str() == "-"
+}
+
+/// Writes `json` to `p` (atomically), or to standard output for `-` ([`is_stdout`]).
+pub fn write_json(p: &Path, json: &str) -> Result<()> {
+    if is_stdout(p) {
+        use std::io::Write as _;
+        let mut o = std::io::stdout().lock();
+        return o.write_all(json.as_bytes()).and_then(|_| o.flush()).map_err(|e| Error::io(p, e));
+    }
+    io::write_atomic(p, |tmp| std::fs::write(tmp, json.as_bytes()).map_err(|e| Error::io(p, e)))
 }
 
 pub fn check_out_path(p: &Path) -> Result<()> {
@@ -314,7 +333,11 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     let stats = r.stats(&scene, a.method, a.accel.unwrap_or(crate::baseline::accel::AccelKind::Embree), &opts);
     if let Some(p) = &a.stats {
         let json = serde_json::to_string_pretty(&stats).expect("stats serialise") + "\n";
-        outs.wrote(p, io::write_atomic(p, |tmp| std::fs::write(tmp, json.as_bytes()).map_err(|e| Error::io(p, e))))?;
+        if is_stdout(p) {
+            write_json(p, &json)?;
+        } else {
+            outs.wrote(p, write_json(p, &json))?;
+        }
     }
     outs.keep();
     if !r.finished {

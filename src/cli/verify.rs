@@ -31,6 +31,9 @@ pub fn run(a: &VerifyArgs) -> Result<i32> {
         return Err(Error::Usage(format!("--rays {} is out of range (1..=10000000)", a.rays)));
     }
     if let Some(p) = &a.json {
+        if super::render::is_stdout(p) {
+            return Err(Error::Usage("--json -: verify prints its table on standard output; give --json a file name".into()));
+        }
         super::render::check_json_path(p, "--json")?;
         crate::film::io::check_outputs_apart_from_scene(&a.scene, &[p])?;
     }
