@@ -30,6 +30,12 @@ fn refused(args: &[&str], says: &str) {
     assert!(err.contains(says), "{args:?}: {err}");
 }
 
+/// `lodtrace ARGS` runs (exit 0), the counterpart of [`refused`].
+fn runs(args: &[&str]) {
+    let (code, _, err) = lodtrace(args);
+    assert_eq!(code, 0, "{args:?}: {err}");
+}
+
 /// `lodtrace bench ARGS --width 48 --height 36 --quiet --out DIR` into a fresh folder:
 /// (exit code, stdout, stderr, folder, bench.json when it was written).
 fn small_bench(name: &str, args: &[&str]) -> (i32, String, String, Scratch, Option<serde_json::Value>) {
@@ -2517,8 +2523,7 @@ fn lod_options_switched_off_by_another_are_refused() {
     // Each alone still runs.
     for o in [&["--no-selective"][..], &["--lod-force", "0.5"], &["--lod-f", "1"]] {
         let args = [&["render", "spheres", "--method", "lod"][..], o, &small[..]].concat();
-        let (code, _, err) = lodtrace(&args);
-        assert_eq!(code, 0, "{args:?}: {err}");
+        runs(&args);
     }
 }
 
@@ -2559,8 +2564,7 @@ fn cone_options_for_cones_not_traced_are_refused() {
         [&["--primary-only"][..], &["--no-shadows", "--secondary-clamp", "1"], &["--paper", "--primary-only"], &["--paper", "--no-shadows"]]
     {
         let args = [&base[..], extra, &small[..]].concat();
-        let (code, _, err) = lodtrace(&args);
-        assert_eq!(code, 0, "{args:?}: {err}");
+        runs(&args);
         std::fs::remove_file(&out).unwrap();
     }
 }
@@ -2610,8 +2614,7 @@ fn seed_without_random_sampling_is_refused() {
         refused(&args, "--seed");
         assert!(!out.exists());
         let args = [&["render", "spheres", "--method", m, "--seed", "5", "--spp", "2"][..], &small[..]].concat();
-        let (code, _, err) = lodtrace(&args);
-        assert_eq!(code, 0, "{args:?}: {err}");
+        runs(&args);
         std::fs::remove_file(&out).unwrap();
     }
 }
@@ -2631,6 +2634,5 @@ fn variance_threshold_without_a_second_pass_is_refused() {
         assert!(!out.exists());
     }
     let args = [&base[..], &["--spp", "4"], &small[..]].concat();
-    let (code, _, err) = lodtrace(&args);
-    assert_eq!(code, 0, "{args:?}: {err}");
+    runs(&args);
 }
