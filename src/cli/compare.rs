@@ -118,8 +118,10 @@ pub struct RegionFigures {
     /// summed, on display values (clamped to [0, 1]). It is exact: the remainder is the
     /// within-block variance of the difference.
     /// Near 0 the error is aliasing or noise; near 1 it is bias that no amount of samples
-    /// would remove.
-    pub smooth_share: f64,
+    /// would remove. `None` (n/a, `null` in JSON) for a region narrower or lower than one
+    /// block: there every block is cut, scales under 8 pixels count as smooth, and a region
+    /// of one pixel read 100 % (until stop 81).
+    pub smooth_share: Option<f64>,
 }
 
 /// Per-region figures ([`RegionFigures`]) from the whole image's per-pixel FLIP values
@@ -162,8 +164,18 @@ pub fn region_figures(r: &Region, flip: &[f32], total: f64, a: &[glam::Vec3], b:
         flip_share: if total > 0.0 { fsum / total } else { 0.0 },
         rmse: (sq / (3 * n) as f64).sqrt(),
         luma_bias: (ya > 0.0).then(|| yb / ya - 1.0),
-        smooth_share: if sq_display > 0.0 { (smooth / sq_display).min(1.0) } else { 0.0 },
+        smooth_share: (r.x1 - r.x0 >= SMOOTH_BLOCK && r.y1 - r.y0 >= SMOOTH_BLOCK).then_some(if sq_display > 0.0 {
+            (smooth / sq_display).min(1.0)
+        } else {
+            0.0
+        }),
     }
+}
+
+/// A smooth share ([`RegionFigures::smooth_share`]) as a percentage with `digits` decimals
+/// and `sep` before the `%`, or `n/a` for a region smaller than a block.
+pub fn smooth_share_text(s: Option<f64>, digits: usize, sep: &str) -> String {
+    s.map_or_else(|| "n/a".to_string(), |v| format!("{:.digits$}{sep}%", 100.0 * v))
 }
 
 /// A luma bias as a signed percentage (`+1.2%`, with `sep` before the `%`), or `n/a` where
@@ -310,14 +322,14 @@ pub fn run(a: &CompareArgs) -> Result<i32> {
                 let rect = format!("{},{},{},{}", r.x0, r.y0, r.x1, r.y1);
                 let _ = writeln!(
                     text,
-                    "  {:<nw$}  {rect:>19}  {:>5.1}%  {:>9.6}  {:>10.1}%  {:>9.6}  {:>10}  {:>11.1}%",
+                    "  {:<nw$}  {rect:>19}  {:>5.1}%  {:>9.6}  {:>10.1}%  {:>9.6}  {:>10}  {:>12}",
                     r.name,
                     100.0 * area,
                     g.flip_mean,
                     100.0 * g.flip_share,
                     g.rmse,
                     luma_bias_text(g.luma_bias, ""),
-                    100.0 * g.smooth_share
+                    smooth_share_text(g.smooth_share, 1, "")
                 );
             }
         }
@@ -351,7 +363,7 @@ mod tests {
     fn a_uniform_offset_is_all_smooth_error_and_shows_as_bias() {
         // Blocks cut by the region's edges (21×13 is not a multiple of 8) still sum exactly.
         let g = figures(|_, _| Vec3::splat(0.6), region(0, 0, 21, 13));
-        assert!((g.smooth_share - 1.0).abs() < 1e-9, "{g:?}");
+        assert!((g.smooth_share.unwrap() - 1.0).abs() < 1e-9, "{g:?}");
         assert!((g.luma_bias.unwrap() - 0.2).abs() < 1e-6, "{g:?}");
         assert!((g.rmse - 0.1).abs() < 1e-6, "{g:?}");
         assert!((g.flip_mean - 0.1).abs() < 1e-6 && (g.flip_share - 1.0).abs() < 1e-6, "{g:?}");
@@ -361,7 +373,7 @@ mod tests {
     fn pixel_scale_noise_is_fine_error_without_bias() {
         // ±0.1 in a pixel checkerboard: every 8×8 block (even sides) averages to zero.
         let g = figures(|x, y| Vec3::splat(if (x + y) % 2 == 0 { 0.6 } else { 0.4 }), region(1, 2, 17, 10));
-        assert!(g.smooth_share.abs() < 1e-9, "{g:?}");
+        assert!(g.smooth_share.unwrap().abs() < 1e-9, "{g:?}");
         assert!(g.luma_bias.unwrap().abs() < 1e-6, "{g:?}");
         assert!((g.rmse - 0.1).abs() < 1e-6, "{g:?}");
     }
@@ -371,19 +383,34 @@ mod tests {
         // Offset +0.1 plus ±0.1 checkerboard: a smooth part of 0.01 and a fine part of 0.01
         // per pixel and channel, so half the squared error is smooth.
         let g = figures(|x, y| Vec3::splat(if (x + y) % 2 == 0 { 0.7 } else { 0.5 }), region(0, 0, 16, 8));
-        assert!((g.smooth_share - 0.5).abs() < 1e-9, "{g:?}");
+        assert!((g.smooth_share.unwrap() - 0.5).abs() < 1e-9, "{g:?}");
         // A black reference region: no bias figure to divide by, reported as undefined (n/a),
         // not NaN and not 0 (which read as "no bias").
         let w = 4u32;
         let a = vec![Vec3::ZERO; 16];
         let b = vec![Vec3::ONE; 16];
         let z = region_figures(&region(0, 0, 4, 4), &[0.0; 16], 0.0, &a, &b, w);
-        assert!(z.luma_bias.is_none() && z.flip_share == 0.0 && z.smooth_share == 1.0, "{z:?}");
+        assert!(z.luma_bias.is_none() && z.flip_share == 0.0, "{z:?}");
         assert_eq!(luma_bias_text(z.luma_bias, ""), "n/a");
         assert_eq!(luma_bias_text(Some(0.0123), " "), "+1.2 %");
         // A highlight far above 1 counts as display white for bias, not as 9.5² of error.
         let g = figures(|x, y| Vec3::splat(if (x, y) == (3, 3) { 10.0 } else { 0.5 }), region(0, 0, 8, 8));
         assert!((g.luma_bias.unwrap() - 0.5 / 64.0 / 0.5).abs() < 1e-9, "{g:?}");
-        assert!((g.smooth_share - 1.0 / 64.0).abs() < 1e-9, "{g:?}");
+        assert!((g.smooth_share.unwrap() - 1.0 / 64.0).abs() < 1e-9, "{g:?}");
+    }
+
+    /// A region narrower or lower than one block has no scale split: n/a, not the 100 % that
+    /// a one-pixel region read (every block cut, all its error counted as smooth).
+    #[test]
+    fn smooth_share_of_a_region_smaller_than_a_block_is_undefined() {
+        let fine = |x: u32, y: u32| Vec3::splat(if (x + y) % 2 == 0 { 0.6 } else { 0.4 });
+        for r in [region(3, 3, 4, 4), region(0, 0, 7, 13), region(0, 0, 21, 7)] {
+            let g = figures(fine, r.clone());
+            assert!(g.smooth_share.is_none(), "{r:?}: {g:?}");
+        }
+        assert_eq!(smooth_share_text(None, 1, ""), "n/a");
+        assert_eq!(smooth_share_text(Some(0.25), 0, " "), "25 %");
+        // One block exactly: defined, and this pixel-scale error is all fine.
+        assert!(figures(fine, region(0, 0, 8, 8)).smooth_share.unwrap().abs() < 1e-9);
     }
 }

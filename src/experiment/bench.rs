@@ -1440,9 +1440,9 @@ pub fn table_string(report: &BenchReport) -> String {
             s.push_str(&format!("| {} | {} |", md_cell(&r.scene), r.spec));
             for g in &r.regions {
                 s.push_str(&format!(
-                    " {} / {:.0} % |",
+                    " {} / {} |",
                     crate::cli::compare::luma_bias_text(g.figures.luma_bias, " "),
-                    100.0 * g.figures.smooth_share
+                    crate::cli::compare::smooth_share_text(g.figures.smooth_share, 0, " ")
                 ));
             }
             s.push('\n');

@@ -726,11 +726,11 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
                 for g in &row.regions {
                     let _ = write!(
                         h,
-                        "<td>{:.4} ({:.0} %)<br><small>{} / {:.0} % smooth</small></td>",
+                        "<td>{:.4} ({:.0} %)<br><small>{} / {} smooth</small></td>",
                         g.figures.flip_mean,
                         100.0 * g.figures.flip_share,
                         crate::cli::compare::luma_bias_text(g.figures.luma_bias, " "),
-                        100.0 * g.figures.smooth_share
+                        crate::cli::compare::smooth_share_text(g.figures.smooth_share, 0, " ")
                     );
                 }
                 h.push_str("</tr>");
