@@ -766,7 +766,7 @@ fn stats_dash_goes_to_standard_output() {
 
 /// `--update` also takes the spellings `lazycache` and `cache` for `lazy-cache`; the stats
 /// name the mode itself, not the spelling. `bench` keys its radius-ratio columns on that name,
-/// so a `surfel:update=cache` row had no root and mean ratio ("-", `null`), where the same
+/// so a `surfel:update=cache` row had no root and mean ratio ("–", `null`), where the same
 /// run spelt `update=lazy-cache` had them.
 #[test]
 fn animate_update_spellings_name_the_mode() {

@@ -562,14 +562,14 @@ pub fn equal_time(sweep: &[(f64, f64, f64)], t: f64, flip: f64, name: &str) -> E
 /// traversal is opaque, and its rows carry 0 (not a measurement) for every test counter.
 pub fn counted(stats: &run::Stats, key: &str) -> String {
     if stats.accel == AccelKind::Embree.name() {
-        return "–".into();
+        return super::NA.into();
     }
     stats.counters.get(key).copied().unwrap_or(0).to_string()
 }
 
 /// A share as "12.3 %", or "–" where it was not measured.
 pub fn pct_or_dash(x: Option<f64>) -> String {
-    x.map_or("–".into(), |v| format!("{:.1} %", 100.0 * v))
+    x.map_or(super::NA.into(), |v| format!("{:.1} %", 100.0 * v))
 }
 
 /// A `lod` row against its full-detail Whitted counterpart (Papaioannou et al. Fig. 4).
@@ -726,9 +726,9 @@ pub fn per_round_speedups(rounds: &[Vec<f64>]) -> Vec<Vec<f64>> {
     (0..specs).map(|j| if rounds.len() < 2 { Vec::new() } else { rounds.iter().map(|r| r[0] / r[j].max(1e-12)).collect() }).collect()
 }
 
-/// "median [min–max]" of per-round speed-ups, or "-" for none.
+/// "median [min–max]" of per-round speed-ups, or "–" for none.
 pub fn median_range(v: &[f64]) -> String {
-    let Some(med) = median(v) else { return "-".into() };
+    let Some(med) = median(v) else { return super::NA.into() };
     let (lo, hi) = v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
     format!("{med:.2}x [{lo:.2}–{hi:.2}]")
 }
@@ -1396,7 +1396,7 @@ pub fn table_string(report: &BenchReport) -> String {
     s.push_str("| scene | method | thr | build s | render s | Mrays/s | speed-up vs first | per-round speed-up: median [range] | RMSE | PSNR dB | FLIP | triangle tests | node tests | point tests | eigen solves | fragments merged |\n");
     s.push_str("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for r in &report.rows {
-        let f = |x: Option<f64>, p: usize| x.map(|v| format!("{v:.p$}")).unwrap_or_else(|| "-".into());
+        let f = |x: Option<f64>, p: usize| x.map(|v| format!("{v:.p$}")).unwrap_or_else(|| super::NA.into());
         s.push_str(&format!(
             "| {} | {}{} | {} | {} | {:.3} | {:.2} | {:.2}x | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
             md_cell(&r.scene),
@@ -1494,7 +1494,7 @@ pub fn table_string(report: &BenchReport) -> String {
             for &&(r, e) in &eqr {
                 s.push_str(&format!("| {} | {} | {:.3} |", md_cell(&r.scene), r.spec, r.stats.render_seconds));
                 for g in &e.regions {
-                    let at = g.sweep_flip_at_equal_time.map_or("-".into(), |f| {
+                    let at = g.sweep_flip_at_equal_time.map_or(super::NA.into(), |f| {
                         if g.sweep_beyond {
                             format!("≤ {f:.4}")
                         } else {
@@ -1548,8 +1548,8 @@ pub fn table_string(report: &BenchReport) -> String {
                 100.0 * c.max_diff_full_lod_pixels,
                 r.stats.lod.as_ref().map(|l| l.mean_query_level).unwrap_or(0.0),
                 r.stats.counters.get("lod_rays_dropped").copied().unwrap_or(0),
-                c.floor.as_ref().map_or("-".into(), DiffFloor::summary),
-                c.floor.as_ref().map_or("-".into(), |f| f.lod_pixels_above_floor_max.to_string()),
+                c.floor.as_ref().map_or(super::NA.into(), DiffFloor::summary),
+                c.floor.as_ref().map_or(super::NA.into(), |f| f.lod_pixels_above_floor_max.to_string()),
             ));
         }
     }
@@ -1661,7 +1661,7 @@ mod tests {
         assert_eq!(p[2], [2.5, 2.5, 3.0]);
         assert_eq!(median_range(&p[1]), "2.00x [1.50–2.00]");
         assert_eq!(median_range(&[3.0, 1.0]), "2.00x [1.00–3.00]");
-        assert_eq!(median_range(&[]), "-");
+        assert_eq!(median_range(&[]), crate::experiment::NA);
         // One round: nothing to pair beyond the best-of speed-up.
         assert!(per_round_speedups(&[vec![1.0, 2.0]]).iter().all(Vec::is_empty));
         assert!(per_round_speedups(&[]).is_empty());
@@ -1775,7 +1775,7 @@ mod tests {
 
     #[test]
     fn unmeasured_shares_show_as_a_dash() {
-        assert_eq!(pct_or_dash(None), "–");
+        assert_eq!(pct_or_dash(None), crate::experiment::NA);
         assert_eq!(pct_or_dash(Some(0.0)), "0.0 %");
         assert_eq!(pct_or_dash(Some(0.1234)), "12.3 %");
     }

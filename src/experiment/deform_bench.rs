@@ -355,7 +355,7 @@ pub fn table(rows: &[DeformRow]) -> String {
     s.push_str("| sequence | method | size | surfels | frames | thr | ms/frame | speed-up vs first | per-round speed-up: median [range] | ÷ naive, same options: best (per-round median) | update ms/frame | rays ms/frame (warm) | BV tests/frame | leaf tests/frame | MLS runs/frame | MLS it. | cache hits | inner nodes updated/frame | root ratio | mean ratio | same image |\n");
     s.push_str("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
     for r in rows {
-        let f = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
+        let f = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| super::NA.into());
         s.push_str(&format!(
             "| {} | {} | {}x{} | {} | {} | {} | {:.1} | {:.2}x | {} | {} | {:.1} | {} | {:.0} | {:.0} | {:.0} | {:.2} | {} | {:.0} | {} | {} | {} |\n",
             super::bench::md_cell(&r.scene),
@@ -370,12 +370,12 @@ pub fn table(rows: &[DeformRow]) -> String {
             super::bench::median_range(&r.per_round_speedups),
             vs_naive(r),
             r.update_ms_per_frame,
-            r.rays_ms_per_frame.map(|v| format!("{v:.1}")).unwrap_or_else(|| "-".into()),
+            r.rays_ms_per_frame.map(|v| format!("{v:.1}")).unwrap_or_else(|| super::NA.into()),
             r.sphere_tests_per_frame,
             r.leaf_tests_per_frame,
             r.mls_runs_per_frame,
             r.mls_iterations_mean,
-            if r.cache_lookups > 0 { format!("{}/{}", r.cache_hits, r.cache_lookups) } else { "-".into() },
+            if r.cache_lookups > 0 { format!("{}/{}", r.cache_hits, r.cache_lookups) } else { super::NA.into() },
             r.inner_nodes_updated_per_frame,
             f(r.root_radius_ratio),
             f(r.mean_radius_ratio),
@@ -385,10 +385,10 @@ pub fn table(rows: &[DeformRow]) -> String {
     s
 }
 
-/// The table's "÷ naive, same options" cell: "-" without a naive partner, "=" for the naive
+/// The table's "÷ naive, same options" cell: "–" without a naive partner, "=" for the naive
 /// spec itself; a trailing "≠ image" if the partners' last frames differ.
 fn vs_naive(r: &DeformRow) -> String {
-    let Some(x) = r.speedup_vs_naive else { return "-".into() };
+    let Some(x) = r.speedup_vs_naive else { return super::NA.into() };
     if r.update == "naive" {
         return "=".into();
     }
@@ -432,7 +432,7 @@ pub fn size_table(rows: &[DeformRow]) -> String {
         for &(w, h) in &sizes {
             match rows.iter().find(|r| r.scene == scene && r.spec == spec && (r.width, r.height) == (w, h)) {
                 Some(r) => s.push_str(&format!(" {:.2}x ({:.1}) |", r.speedup_vs_first, r.ms_per_frame)),
-                None => s.push_str(" - |"),
+                None => s.push_str(&format!(" {} |", super::NA)),
             }
         }
         s.push('\n');
@@ -581,7 +581,7 @@ mod tests {
 
     /// The options are compared as they run, not as written (stop 80): a key at its default
     /// value (`shadows=1`, `detail=1`, `packet=8`) or `threads=` equal to the bench's
-    /// `--threads` left the row without its naive partner ("-" and `null`).
+    /// `--threads` left the row without its naive partner ("–" and `null`).
     #[test]
     fn naive_partner_options_are_compared_as_they_run() {
         let specs = crate::experiment::bench::parse_list(

@@ -230,7 +230,7 @@ fn deform_section(a: &DemoArgs, skipped: &mut Vec<String>) -> Result<(String, Ve
         "<h2>Adams et al.: deforming point-sampled surfaces</h2><p>Each sequence ({frames} frames, {w}×{h}, detail {detail}) rendered with the hierarchy rebuilt every frame (naive), updated lazily (§4.1), lazily with per-ray caching (§4.2.2; under front-to-back traversal the cache is looked up only while at least a quarter of its lookups hit, probed every 8 frames otherwise: <code>--cache-gate</code>, a deviation), and — not in the paper — an obvhs BVH2 refitted every frame; the same recorded motion, so the images must be identical (last column). The last two rows per sequence descend the tree unordered, as the paper does, without and with the cache (climbing from each ray's cached leaf until a node holds a hit, a deviation: the leaf itself moves away within a frame): there the cache cuts the leaf tests, as in the paper; front-to-back traversal (the other rows) cuts more by itself. Per-frame time curves like the paper's Fig. 5. Same as <code>lodtrace bench SEQ --methods surfel:update=naive,surfel:update=lazy,...</code>.</p><table><tr><th>sequence</th><th>update</th><th>surfels</th><th>ms/frame</th><th>vs naive</th><th>BV tests/frame</th><th>leaf tests/frame</th><th>cache hits</th><th>MLS iterations</th><th>root radius ratio</th><th>mean radius ratio</th><th>same image</th></tr>"
     );
     for r in &rows {
-        let f = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| "-".into());
+        let f = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| super::NA.into());
         let _ = write!(
             h_out,
             "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.1}</td><td>{:.2}×</td><td>{:.0}</td><td>{:.0}</td><td>{}</td><td>{:.2}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
@@ -241,7 +241,7 @@ fn deform_section(a: &DemoArgs, skipped: &mut Vec<String>) -> Result<(String, Ve
             r.speedup_vs_first,
             r.sphere_tests_per_frame,
             r.leaf_tests_per_frame,
-            if r.cache_lookups > 0 { format!("{}/{}", r.cache_hits, r.cache_lookups) } else { "-".into() },
+            if r.cache_lookups > 0 { format!("{}/{}", r.cache_hits, r.cache_lookups) } else { super::NA.into() },
             r.mls_iterations_mean,
             f(r.root_radius_ratio),
             f(r.mean_radius_ratio),
@@ -346,7 +346,7 @@ fn size_section(a: &DemoArgs, dir: &Path, detail: f32) -> Result<String> {
                     Some(r) => {
                         let _ = write!(h, "<td>{:.2}× ({:.1} ms)</td>", r.speedup_vs_first, r.ms_per_frame);
                     }
-                    None => h.push_str("<td>-</td>"),
+                    None => h.push_str(&format!("<td>{}</td>", super::NA)),
                 }
             }
             h.push_str("</tr>");
@@ -655,7 +655,7 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
     for (job, r) in sections {
         let _ = write!(h, "<h2>{} ({}×{})</h2><table><tr><th>method</th><th>spec</th><th>threads</th><th>build s</th><th>render s</th><th>Mrays/s</th><th>speed-up</th><th>RMSE</th><th>PSNR dB</th><th>mean FLIP</th></tr>", esc(job.scene), job.width, job.height);
         for row in &r.rows {
-            let f = |x: Option<f64>, p: usize| x.map(|v| format!("{v:.p$}")).unwrap_or_else(|| "-".into());
+            let f = |x: Option<f64>, p: usize| x.map(|v| format!("{v:.p$}")).unwrap_or_else(|| super::NA.into());
             let _ = write!(
                 h,
                 "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{:.2}</td><td>{:.2}×</td><td>{}</td><td>{}</td><td>{}</td></tr>",
@@ -695,7 +695,7 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
                     dir.join(img).display(),
                     esc(&row.spec),
                     row.stats.render_seconds,
-                    row.flip.map(|v| format!("{v:.4}")).unwrap_or("-".into())
+                    row.flip.map(|v| format!("{v:.4}")).unwrap_or(super::NA.into())
                 );
                 // Its FLIP map against the reference, written beside it by the bench.
                 if let (Some(_), Ok(spec)) = (row.flip, bench::MethodSpec::parse(&row.spec)) {
@@ -750,7 +750,7 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
                 if name.contains(":octree") { " This is the paper's comparison (§6): the distributed tracer on the same code basis as the multi-resolution tracer." } else { "" }
             );
             for (row, e) in &eq {
-                let o = |x: Option<f64>, p: usize| x.map(|v| format!("{v:.p$}")).unwrap_or_else(|| "-".into());
+                let o = |x: Option<f64>, p: usize| x.map(|v| format!("{v:.p$}")).unwrap_or_else(|| super::NA.into());
                 let _ = write!(
                     h,
                     "<tr><td>{}</td><td>{:.3}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
@@ -801,8 +801,8 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
                     100.0 * c.p99_pixel_diff,
                     100.0 * c.mean_pixel_diff,
                     100.0 * c.max_diff_full_lod_pixels,
-                    c.floor.as_ref().map_or("–".into(), bench::DiffFloor::summary),
-                    c.floor.as_ref().map_or("–".into(), |f| f.lod_pixels_above_floor_max.to_string()),
+                    c.floor.as_ref().map_or(super::NA.into(), bench::DiffFloor::summary),
+                    c.floor.as_ref().map_or(super::NA.into(), |f| f.lod_pixels_above_floor_max.to_string()),
                 );
             }
             h.push_str("</table>");
@@ -939,7 +939,7 @@ mod tests {
         assert_eq!(status_of(&[Some(true), Some(true)]), "met");
         assert_eq!(status_of(&[Some(false), None]), "not met");
         assert_eq!(status_of(&[Some(true), Some(false)]), "partly");
-        assert_eq!(status_of(&[None]), "–");
+        assert_eq!(status_of(&[None]), crate::experiment::NA);
     }
 
     /// Each paper's target stands beside this run's figure, with a verdict from the figure
@@ -1023,7 +1023,7 @@ mod tests {
 
     /// The page says what each per-image scale means and gives the CPU time saved (the
     /// one-thread rows' robust figure, in bench.md but missing from the page); a method faster
-    /// than the sweep's 1 spp is said so, not "-".
+    /// than the sweep's 1 spp is said so, not "–".
     #[test]
     fn page_states_scales_cpu_time_and_faster_than_one_spp() {
         let job = |scene: &'static str, sweep: Vec<String>| Job {

@@ -96,7 +96,7 @@ impl ConeProfileStats {
                 Some(c) if c.cones > 0 => {
                     format!("{:.3} s, {:.0}/cone, {:.0} %", c.traversal_cpu_seconds, c.tests_per_cone, 100.0 * c.share_of_tests)
                 }
-                _ => "–".into(),
+                _ => super::NA.into(),
             })
             .collect();
         let t = &self.pixel_tests;
