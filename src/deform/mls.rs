@@ -77,7 +77,8 @@ pub fn ellipse_hit(o: Vec3, d: Vec3, c: Vec3, u: Vec3, v: Vec3, tnear: f32, tfar
 }
 
 /// The MLS iteration from the start point `(t0, x0)` on the ray. `nb` are the deformed
-/// neighbours (position, unit normal); `(sc, sr)` is the leaf sphere that bounds the result.
+/// neighbours (position, unit normal); `(sc, sr)` is the leaf sphere that bounds every point
+/// the iteration moves to (the start point itself, on the leaf's ellipse, is not checked).
 #[allow(clippy::too_many_arguments)]
 pub fn mls_intersect(
     o: Vec3,
