@@ -42,8 +42,10 @@
 //!
 //! Shadow rays (`occluded`) use the §4.4 optimisation: at a hit parent, a child that is
 //! already current is visited before one that would need an update; any accepted hit ends the
-//! ray. Accepted hits pass the clipping test of §4.3 against the two nearest surfels of every
-//! partner collection.
+//! ray. *Deviation:* shadow rays do not apply Eq. 11 (§4.4 tightens a node at any revisit);
+//! only the closest-hit descents do (`child_spheres`), and shadow rays use the spheres they
+//! left. No effect on hits, only on sphere tests. Accepted hits pass the clipping test of
+//! §4.3 against the two nearest surfels of every partner collection.
 //!
 //! **Concurrency and determinism.** `intersect` and `occluded` take `&self` and may run on any
 //! number of threads. Lazy state lives in atomics: a node or surfel carries the frame stamp
@@ -55,7 +57,7 @@
 //! inside all its ancestors' balls and an MLS hit must lie inside its leaf ball, so culling
 //! never removes the closest accepted hit, whatever radii the inner nodes have when a ray
 //! tests them; ties are broken by (instance, surfel). Images are therefore identical for any
-//! thread count and in all three modes. Work counters (sphere tests, nodes updated) may vary
+//! thread count and in all update modes. Work counters (sphere tests, nodes updated) may vary
 //! slightly between multi-threaded runs, because which rays see a tightened radius depends
 //! on timing; single-threaded they are deterministic.
 //!
@@ -291,7 +293,9 @@ impl std::str::FromStr for UpdateMode {
     }
 }
 
-/// Tracer parameters (paper defaults; the switches exist for ablations).
+/// Tracer parameters. The defaults are the paper's rules plus the deviations the module docs
+/// describe (support stretch, ordered descent, re-centred bounds, subtree refits, instance
+/// tree, nearest ellipse, early clip, cache gate); each switch turns one off for ablations.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct TraceParams {
     pub mls: MlsParams,
@@ -1620,8 +1624,8 @@ impl DeformTracer {
         ctr.inc(Counter::surfel_tests);
         // Ellipse and MLS run over the ray's whole interval, not [tnear, best t]: an
         // iteration may pass beyond the current best and still converge in front of it, and
-        // the result must not depend on the order in which leaves are visited. `tfar` only
-        // culls the final hit (in `Best::offer`).
+        // the result must not depend on the order in which leaves are visited. The best hit
+        // so far only culls the result (`Best::offer`).
         let (t0, x0) = ellipse_hit(ray.org, ray.dir, ds.p, ds.u, ds.v, ray.tnear, ray.tfar)?;
         Some((ds, t0, x0))
     }
@@ -2098,8 +2102,9 @@ impl DeformTracer {
 
     /// Closest hits of up to eight rays (`slots` as in [`intersect`](Self::intersect), one
     /// per ray), traversed together: a node's sphere is fetched (and lazily updated) once and
-    /// tested against all rays still active in it in one [`RayPacketX8`] step; leaves are
-    /// tested ray by ray. The hits equal [`intersect_ex`](Self::intersect_ex)'s for every ray
+    /// tested against all rays still active in it in one [`RayPacketX8`] step; a leaf's ellipse
+    /// too (`ellipse_x8`), the MLS iteration then ray by ray. The hits equal
+    /// [`intersect_ex`](Self::intersect_ex)'s for every ray
     /// (the closest accepted hit does not depend on the traversal order, module docs), so
     /// images are identical; `sphere_tests` counts one per active ray and sphere, as there.
     /// The children are visited nearer-first by the smallest entry over the rays that hit
