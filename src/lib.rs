@@ -4,7 +4,7 @@
 //! conventional baselines and verified against Embree:
 //!
 //! 1. Wand & Straßer 2003, *Multi-Resolution Point-Sample Raytracing* (`multires`),
-//! 2. Adams et al. 2005, *Ray Tracing Dynamic Scenes with Point-Sampled Surfaces* (`deform`),
+//! 2. Adams et al. 2005, *Efficient Raytracing of Deforming Point-Sampled Surfaces* (`deform`),
 //! 3. Papaioannou et al., *Multiresolution models accelerate ray tracing* (`lod`).
 //!
 //! Data flows one way: [`scene`] (SoA meshes, materials, lights, camera, instancing) →

@@ -77,7 +77,8 @@ pub fn ellipse_hit(o: Vec3, d: Vec3, c: Vec3, u: Vec3, v: Vec3, tnear: f32, tfar
 }
 
 /// The MLS iteration from the start point `(t0, x0)` on the ray. `nb` are the deformed
-/// neighbours (position, unit normal); `(sc, sr)` is the leaf sphere that bounds the result.
+/// neighbours (position, unit normal); `(sc, sr)` is the leaf sphere that bounds every point
+/// the iteration moves to (the start point itself, on the leaf's ellipse, is not checked).
 #[allow(clippy::too_many_arguments)]
 pub fn mls_intersect(
     o: Vec3,
@@ -201,7 +202,10 @@ impl MlsNbr {
 /// [`mls_intersect`] with the weighted sums over the neighbourhood 8 lanes at a time (16
 /// neighbours: two f32x8 steps per iteration). The same iteration and rejection rules; the
 /// sums are added in another order, so results agree with the scalar reference to rounding
-/// (tested: same outcome and iteration count, t within 1e-5).
+/// (`x8_matches_scalar`): the same points to a few ε; near the convergence threshold one may
+/// take one step more than the other, and rarely (≤ 3 of its 3,000 cases) a borderline
+/// iteration is accepted by one and rejected by the other. The tracer uses only this one,
+/// so its paths agree bit for bit.
 #[allow(clippy::too_many_arguments)]
 pub fn mls_intersect_x8(
     o: Vec3,

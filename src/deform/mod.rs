@@ -1,6 +1,6 @@
-//! Adams et al. 2005, *Ray Tracing Dynamic Scenes with Point-Sampled Surfaces* (Eurographics
-//! Symposium on Point-Based Graphics): surfels embedded in a simulation (§3), a bounding-sphere
-//! hierarchy updated lazily under deformation (§4.1), MLS ray–surface intersection (§4.2.1),
+//! Adams et al. 2005, *Efficient Raytracing of Deforming Point-Sampled Surfaces* (Computer
+//! Graphics Forum 24(3), Eurographics 2005): surfels embedded in a simulation (§3), a
+//! bounding-sphere hierarchy updated lazily under deformation (§4.1), MLS ray–surface intersection (§4.2.1),
 //! per-ray caching of the hit node (§4.2.2), clipping for sharp edges (§4.3), and the
 //! shadow-ray optimisation (§4.4).
 //!

@@ -142,8 +142,12 @@ impl SurfelSoa {
     /// Errors if two surfels in `range` share a position (they would make MLS weights and
     /// the neighbourhoods degenerate). Different surfaces may share points (an edge).
     pub fn check_duplicates(&self, range: std::ops::Range<usize>) -> Result<(), DeformError> {
-        let mut keys: Vec<(u32, u32, u32, u32)> =
-            range.map(|i| (self.px[i].to_bits(), self.py[i].to_bits(), self.pz[i].to_bits(), i as u32)).collect();
+        let mut keys: Vec<(u32, u32, u32, u32)> = range
+            .map(|i| {
+                let [x, y, z] = pos_key(self.pos(i));
+                (x, y, z, i as u32)
+            })
+            .collect();
         keys.sort_unstable();
         for w in keys.windows(2) {
             if (w[0].0, w[0].1, w[0].2) == (w[1].0, w[1].1, w[1].2) {
@@ -152,6 +156,14 @@ impl SurfelSoa {
         }
         Ok(())
     }
+}
+
+/// A position as a hashable key, equal exactly where the positions are equal as f32 numbers:
+/// −0.0 counts as +0.0 (their bits differ; adding +0.0 turns −0.0 into +0.0 and changes
+/// nothing else). The duplicate checks and the mesh vertices' de-duplication use it.
+#[inline]
+fn pos_key(p: Vec3) -> [u32; 3] {
+    [(p.x + 0.0).to_bits(), (p.y + 0.0).to_bits(), (p.z + 0.0).to_bits()]
 }
 
 /// A named range of surfels forming one surface (§4.3 "surfel collections").
@@ -286,7 +298,7 @@ pub fn surfels_from_mesh_vertices(mesh: &Mesh) -> Result<SurfelSoa, DeformError>
     for i in 0..nv {
         let p = m.pos(i as u32);
         let n = m.normal(i as u32);
-        if rad[i] > 0.0 && p.is_finite() && n.length_squared() > 0.5 && seen.insert((p.x.to_bits(), p.y.to_bits(), p.z.to_bits())) {
+        if rad[i] > 0.0 && p.is_finite() && n.length_squared() > 0.5 && seen.insert(pos_key(p)) {
             s.push(p, n.normalize(), rad[i]);
         }
     }
@@ -462,6 +474,30 @@ mod tests {
         let p = s.pos(2);
         s.push(p, Vec3::X, 0.1);
         assert!(matches!(s.validate(), Err(DeformError::DuplicatePoint { .. })));
+    }
+
+    /// −0.0 and +0.0 are the same coordinate (equal as f32 numbers, as `DuplicatePoint`
+    /// says): two surfels at (0, 0, 2) and (−0, 0, 2) are duplicates, and a mesh whose split
+    /// vertex differs only in the sign of a zero keeps one surfel there. Until the review of
+    /// stop 80 both compared the bits, which differ.
+    #[test]
+    fn signed_zeros_are_the_same_position() {
+        let mut s = sphere_surfels(Vec3::ZERO, 1.0, 50);
+        s.push(Vec3::new(0.0, 0.0, 2.0), Vec3::Z, 0.1);
+        s.push(Vec3::new(-0.0, 0.0, 2.0), Vec3::Z, 0.1);
+        assert!(matches!(s.validate(), Err(DeformError::DuplicatePoint { .. })));
+        let mut m = Mesh::new("tet");
+        let v = [Vec3::new(0.0, 0.0, 0.0), Vec3::X, Vec3::Y, Vec3::Z, Vec3::new(-0.0, 0.0, 0.0)];
+        for p in v {
+            m.push_vertex(p);
+        }
+        for t in [[0, 2, 1], [0, 1, 3], [1, 2, 3], [4, 3, 2]] {
+            m.push_tri(t[0], t[1], t[2], 0);
+        }
+        let s = surfels_from_mesh_vertices(&m).unwrap();
+        let at_origin = (0..s.len()).filter(|&i| s.pos(i) == Vec3::ZERO).count();
+        assert_eq!(at_origin, 1, "{} surfels at the origin", at_origin);
+        s.clone().validate().unwrap();
     }
 
     #[test]

@@ -42,8 +42,10 @@
 //!
 //! Shadow rays (`occluded`) use the §4.4 optimisation: at a hit parent, a child that is
 //! already current is visited before one that would need an update; any accepted hit ends the
-//! ray. Accepted hits pass the clipping test of §4.3 against the two nearest surfels of every
-//! partner collection.
+//! ray. *Deviation:* shadow rays do not apply Eq. 11 (§4.4 tightens a node at any revisit);
+//! only the closest-hit descents do (`child_spheres`), and shadow rays use the spheres they
+//! left. No effect on hits, only on sphere tests. Accepted hits pass the clipping test of
+//! §4.3 against the two nearest surfels of every partner collection.
 //!
 //! **Concurrency and determinism.** `intersect` and `occluded` take `&self` and may run on any
 //! number of threads. Lazy state lives in atomics: a node or surfel carries the frame stamp
@@ -55,7 +57,7 @@
 //! inside all its ancestors' balls and an MLS hit must lie inside its leaf ball, so culling
 //! never removes the closest accepted hit, whatever radii the inner nodes have when a ray
 //! tests them; ties are broken by (instance, surfel). Images are therefore identical for any
-//! thread count and in all three modes. Work counters (sphere tests, nodes updated) may vary
+//! thread count and in all update modes. Work counters (sphere tests, nodes updated) may vary
 //! slightly between multi-threaded runs, because which rays see a tightened radius depends
 //! on timing; single-threaded they are deterministic.
 //!
@@ -291,7 +293,9 @@ impl std::str::FromStr for UpdateMode {
     }
 }
 
-/// Tracer parameters (paper defaults; the switches exist for ablations).
+/// Tracer parameters. The defaults are the paper's rules plus the deviations the module docs
+/// describe (support stretch, ordered descent, re-centred bounds, subtree refits, instance
+/// tree, nearest ellipse, early clip, cache gate); each switch turns one off for ablations.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct TraceParams {
     pub mls: MlsParams,
@@ -1620,8 +1624,8 @@ impl DeformTracer {
         ctr.inc(Counter::surfel_tests);
         // Ellipse and MLS run over the ray's whole interval, not [tnear, best t]: an
         // iteration may pass beyond the current best and still converge in front of it, and
-        // the result must not depend on the order in which leaves are visited. `tfar` only
-        // culls the final hit (in `Best::offer`).
+        // the result must not depend on the order in which leaves are visited. The best hit
+        // so far only culls the result (`Best::offer`).
         let (t0, x0) = ellipse_hit(ray.org, ray.dir, ds.p, ds.u, ds.v, ray.tnear, ray.tfar)?;
         Some((ds, t0, x0))
     }
@@ -1642,7 +1646,12 @@ impl DeformTracer {
         let ii = &self.inst[k];
         let obj = &ii.obj;
         let (sc, sr) = leaf_sphere(ds);
-        if ii.clipped && self.params.clip_early && self.ball_clipped(ii, s, sc, sr) {
+        // The ball around sc that holds every point the iteration may return: the leaf ball,
+        // which bounds the points it moves to, and the start point x0, which it does not
+        // (in the ellipse, up to the rounding of o + d·t: far from the camera's origin that
+        // exceeds `ball_clipped`'s margin on a small splat; review finding, stop 80, test
+        // `early_clip_bounds_the_start_point_too`).
+        if ii.clipped && self.params.clip_early && self.ball_clipped(ii, s, sc, sr.max((x0 - sc).length())) {
             dc.clipped_early += 1;
             return None;
         }
@@ -1694,10 +1703,11 @@ impl DeformTracer {
         }
     }
 
-    /// Whether every point of surfel `s`'s leaf ball `(sc, sr)` is clipped (§4.3) by one of
-    /// its partner surfaces: the ball lies more than its radius in front of both clipping
-    /// neighbours' tangent planes. An MLS hit from `s` lies in that ball (`mls_intersect_x8`
-    /// rejects it otherwise), and there `clipped_by` sees both distances positive: the hit
+    /// Whether every point of the ball `(sc, sr)` around surfel `s` is clipped (§4.3) by one
+    /// of its partner surfaces: the ball lies more than its radius in front of both clipping
+    /// neighbours' tangent planes. `iterate` passes a ball that holds every point an MLS hit
+    /// from `s` may lie at (the leaf ball, which `mls_intersect_x8` holds the moved points
+    /// to, and the start point), and there `clipped_by` sees both distances positive: the hit
     /// would be clipped, so the iteration is skipped (not in the paper; same hits, since the
     /// clipping test at the hit would reject it anyway). On `heads` most ellipse hits of
     /// the clipped surfaces are such (the part of a surface inside another).
@@ -2092,8 +2102,9 @@ impl DeformTracer {
 
     /// Closest hits of up to eight rays (`slots` as in [`intersect`](Self::intersect), one
     /// per ray), traversed together: a node's sphere is fetched (and lazily updated) once and
-    /// tested against all rays still active in it in one [`RayPacketX8`] step; leaves are
-    /// tested ray by ray. The hits equal [`intersect_ex`](Self::intersect_ex)'s for every ray
+    /// tested against all rays still active in it in one [`RayPacketX8`] step; a leaf's ellipse
+    /// too (`ellipse_x8`), the MLS iteration then ray by ray. The hits equal
+    /// [`intersect_ex`](Self::intersect_ex)'s for every ray
     /// (the closest accepted hit does not depend on the traversal order, module docs), so
     /// images are identical; `sphere_tests` counts one per active ray and sphere, as there.
     /// The children are visited nearer-first by the smallest entry over the rays that hit
@@ -3266,5 +3277,59 @@ mod tests {
                 reads += 1;
             }
         });
+    }
+
+    /// The early clip (`TraceParams::clip_early`) rejects what the full clipping test would
+    /// reject for every point the iteration can return, its start point included. That start
+    /// point, the ray's ellipse hit x0, is not held to the leaf ball by `mls_intersect_x8`
+    /// (only the points it moves to are): it lies in the ellipse up to the rounding of
+    /// o + d·t, which from a far camera exceeds the early clip's 0.1 % margin on a small
+    /// splat. Here x0 lies beside the ball, on the unclipped side of the partner's plane (1 cm
+    /// beside a 4 cm ball, where rounding puts it a fraction of that; the logic is the same):
+    /// the full test accepts the hit at x0, and so must the early one. Until the review of stop 80
+    /// the early clip bounded only the leaf ball and rejected it.
+    #[test]
+    fn early_clip_bounds_the_start_point_too() {
+        use super::super::object::ObjectParams;
+        use super::super::sequences::nodes_inside;
+        use super::super::surfel::{rect_surfels, SurfelModel};
+        let sp = 0.05;
+        let top = rect_surfels(Vec3::ZERO, Vec3::X, Vec3::Y, (-1.0, 0.3), (-0.5, 0.5), sp); // normal +z
+        let side = rect_surfels(Vec3::ZERO, Vec3::Y, Vec3::Z, (-0.5, 0.5), (-1.0, 0.3), sp); // normal +x
+        let (nd, _) = nodes_inside(&|_| true, Vec3::splat(-1.0), Vec3::splat(0.3), 60);
+        let mut model = SurfelModel::default();
+        model.add_collection("top", &top, [1.0; 3]);
+        model.add_collection("side", &side, [1.0; 3]);
+        model.clip.push((0, 1));
+        let m = vec![1.0; nd.len()];
+        let obj = SurfelObject::build(model, nd.clone(), m, &ObjectParams::default()).unwrap();
+        let scene = DeformScene { objects: vec![obj.clone()], instances: vec![0] };
+        let tracer = |clip_early: bool| {
+            let mut t = DeformTracer::new(&scene, UpdateMode::Lazy, TraceParams { clip_early, ..TraceParams::default() }).unwrap();
+            t.begin_frame(std::slice::from_ref(&nd)).unwrap();
+            t
+        };
+        let (on, off) = (tracer(true), tracer(false));
+        let ii = &on.inst[0];
+        // The top's surfel nearest the edge x = 0 whose whole leaf ball is clipped.
+        let c = &obj.model.collections[0];
+        let s = (c.start as usize..c.end as usize)
+            .filter(|&s| {
+                let (sc, sr) = leaf_sphere(&on.surfel(ii, s));
+                sc.y.abs() < 0.2 && on.ball_clipped(ii, s, sc, sr)
+            })
+            .min_by(|&a, &b| on.surfel(ii, a).p.x.total_cmp(&on.surfel(ii, b).p.x))
+            .unwrap();
+        let ds = on.surfel(ii, s);
+        let (sc, sr) = leaf_sphere(&ds);
+        assert!(sc.x > sr && sc.x < 2.0 * sr, "surfel at {sc}, radius {sr}");
+        // On the top's plane, just inside the side's half-space x < 0.
+        let x0 = Vec3::new(-1e-3, sc.y, 0.0);
+        let ray = Ray::new(x0 + Vec3::Z, -Vec3::Z);
+        let mut dc = DeformCounters::default();
+        let full = off.iterate(0, s, u32::MAX, &ray, &ds, (1.0, x0), &mut dc);
+        assert!(full.is_some_and(|h| (h.p - x0).length() < 1e-6), "the full test accepts x0: {full:?}");
+        let early = on.iterate(0, s, u32::MAX, &ray, &ds, (1.0, x0), &mut dc);
+        assert_eq!(early, full, "early clip against the full test");
     }
 }
