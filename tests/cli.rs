@@ -269,7 +269,7 @@ fn bench_sweep_gives_equal_time_rows() {
 /// overstated the sweep's advantage about twofold), and does not extend the sweep either.
 #[test]
 fn bench_sweep_meets_only_rows_on_the_sweeps_threads() {
-    let (code, _, err, _d, json) = small_bench(
+    let (code, _, err, d, json) = small_bench(
         "sweepthreads",
         &[
             "spheres",
@@ -294,6 +294,22 @@ fn bench_sweep_meets_only_rows_on_the_sweeps_threads() {
     assert!(sweep.iter().all(|r| r["stats"]["threads"] == 2));
     assert_eq!(rows[0]["equal_time"].as_array().map(Vec::len), Some(1), "{}", rows[0]);
     assert!(rows[1].get("equal_time").is_none(), "one thread against a two-thread sweep: {}", rows[1]["equal_time"]);
+    // The plot leaves the one-thread row out as the tables do (it was drawn beside the
+    // two-thread sweep's curve on one time axis).
+    assert!(d.join("spheres-equal-time.png").exists());
+    use lodtrace::experiment::bench::{equal_time_series, PlotPoint};
+    let points: Vec<PlotPoint> = rows
+        .iter()
+        .map(|r| PlotPoint {
+            spec: r["spec"].as_str().unwrap(),
+            sweep: r["sweep"].as_str(),
+            threads: r["stats"]["threads"].as_u64().unwrap() as usize,
+            seconds: r["stats"]["render_seconds"].as_f64().unwrap(),
+            flip: r["flip"].as_f64().unwrap(),
+        })
+        .collect();
+    let names: Vec<String> = equal_time_series(&points).into_iter().map(|s| s.0).collect();
+    assert_eq!(names, ["distributed:bvh:vt=0, spp 1, 2, 4, ...", "whitted:bvh"], "{names:?}");
 }
 
 #[test]

@@ -1284,24 +1284,16 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
     for sc in &scenes {
         let rows = report.rows.iter().filter(|r| r.scene == *sc && r.flip.is_some());
         if report.rows.iter().any(|r| r.scene == *sc && r.sweep.is_some()) {
-            // Each sweep a curve (first in the legend), each method a point.
-            let mut curves: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
-            let mut per: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
-            for r in rows {
-                let p = (r.stats.render_seconds, r.flip.unwrap_or(0.0));
-                match &r.sweep {
-                    Some(name) => {
-                        let name = format!("{name}, spp 1, 2, 4, ...");
-                        match curves.iter_mut().find(|c| c.0 == name) {
-                            Some(c) => c.1.push(p),
-                            None => curves.push((name, vec![p])),
-                        }
-                    }
-                    None => per.push((r.spec.clone(), vec![p])),
-                }
-            }
-            curves.append(&mut per);
-            let per = curves;
+            let points: Vec<PlotPoint> = rows
+                .map(|r| PlotPoint {
+                    spec: &r.spec,
+                    sweep: r.sweep.as_deref(),
+                    threads: r.stats.threads,
+                    seconds: r.stats.render_seconds,
+                    flip: r.flip.unwrap_or(0.0),
+                })
+                .collect();
+            let per = equal_time_series(&points);
             // Fast, noisy renders sit top left and the converged sweep bottom right. Times
             // spanning more than a decade go on a log axis: on a linear one the fast methods
             // crowded into one spot at the left edge.
@@ -1332,6 +1324,44 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
         )?;
     }
     Ok(())
+}
+
+/// One row of a scene as the equal-time plot sees it.
+#[derive(Clone, Copy, Debug)]
+pub struct PlotPoint<'a> {
+    pub spec: &'a str,
+    /// The sweep that rendered the row, `None` for a method's row.
+    pub sweep: Option<&'a str>,
+    pub threads: usize,
+    pub seconds: f64,
+    pub flip: f64,
+}
+
+/// The series of a scene's `SCENE-equal-time.png`: each sweep a curve (first in the
+/// legend), then each method a point. A method run on another thread count than every
+/// sweep is left out, as the equal-time tables leave it out: its wall-clock time on the
+/// sweep's time axis compared unequal resources (a one-thread row beside a two-thread
+/// sweep sat twice as far right as it would on two threads).
+pub fn equal_time_series(points: &[PlotPoint]) -> Vec<(String, Vec<(f64, f64)>)> {
+    let sweep_threads: Vec<usize> = points.iter().filter(|p| p.sweep.is_some()).map(|p| p.threads).collect();
+    let mut curves: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    let mut per: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    for p in points {
+        let xy = (p.seconds, p.flip);
+        match p.sweep {
+            Some(name) => {
+                let name = format!("{name}, spp 1, 2, 4, ...");
+                match curves.iter_mut().find(|c| c.0 == name) {
+                    Some(c) => c.1.push(xy),
+                    None => curves.push((name, vec![xy])),
+                }
+            }
+            None if sweep_threads.contains(&p.threads) => per.push((p.spec.to_string(), vec![xy])),
+            None => {}
+        }
+    }
+    curves.append(&mut per);
+    curves
 }
 
 /// A Markdown header and rule: `fixed` columns (scene and method left-aligned, the rest
