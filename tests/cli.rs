@@ -312,6 +312,30 @@ fn bench_sweep_meets_only_rows_on_the_sweeps_threads() {
     assert_eq!(names, ["distributed:bvh:vt=0, spp 1, 2, 4, ...", "whitted:bvh"], "{names:?}");
 }
 
+/// A `--region` given without a name is named after its rectangle; the bench tables head
+/// its column with the rectangle once (they read `0,0,24,18 0,0,24,18`).
+#[test]
+fn bench_unnamed_region_is_headed_once() {
+    let (code, out, err, _d, _) = small_bench(
+        "region-unnamed",
+        &[
+            "spheres",
+            "--methods",
+            "whitted:bvh",
+            "--reference",
+            "distributed:bvh:spp=4:vt=0",
+            "--region",
+            "0,0,24,18",
+            "--region",
+            "low=0,18,48,36",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(!out.contains("0,0,24,18 0,0,24,18"), "{out}");
+    assert!(out.contains("| FLIP (whole) | 0,0,24,18 | low 0,18,48,36 |"), "{out}");
+    assert!(out.contains("| scene | method | 0,0,24,18 | low 0,18,48,36 |"), "{out}");
+}
+
 #[test]
 fn render_writes_exr_aovs() {
     let d = tmp("aov");

@@ -1326,6 +1326,17 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
     Ok(())
 }
 
+/// A region's column heading, `NAME X0,Y0,X1,Y1`; a region given without a name (`--region
+/// 0,0,40,30`, named after its rectangle) shows the rectangle once, not `0,0,40,30 0,0,40,30`.
+pub fn region_heading(name: &str, rect: [u32; 4]) -> String {
+    let r = format!("{},{},{},{}", rect[0], rect[1], rect[2], rect[3]);
+    if name == r {
+        r
+    } else {
+        format!("{name} {r}")
+    }
+}
+
 /// One row of a scene as the equal-time plot sees it.
 #[derive(Clone, Copy, Debug)]
 pub struct PlotPoint<'a> {
@@ -1450,8 +1461,7 @@ pub fn table_string(report: &BenchReport) -> String {
     }
     if let Some(first) = report.rows.iter().find(|r| !r.regions.is_empty()) {
         s.push_str("\nError by region (mean FLIP against the reference; in brackets the region's share of the image's FLIP error):\n\n");
-        let cols: Vec<String> =
-            first.regions.iter().map(|g| format!("{} {},{},{},{}", g.name, g.rect[0], g.rect[1], g.rect[2], g.rect[3])).collect();
+        let cols: Vec<String> = first.regions.iter().map(|g| region_heading(&g.name, g.rect)).collect();
         s.push_str(&table_header(&["scene", "method", "render s", "FLIP (whole)"], &cols));
         for r in report.rows.iter().filter(|r| !r.regions.is_empty()) {
             s.push_str(&format!("| {} | {} | {:.3} | {:.4} |", md_cell(&r.scene), r.spec, r.stats.render_seconds, r.flip.unwrap_or(0.0)));

@@ -711,7 +711,7 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
         if let Some(first) = r.rows.iter().find(|row| !row.regions.is_empty()) {
             h.push_str("<h3>Where the error sits</h3><p>Mean FLIP against the reference inside each pixel rectangle (x0,y0,x1,y1), from the whole image's FLIP map; in brackets the region's share of the image's FLIP error. Below it the kind of error: the luminance against the reference's, and the part of the squared error at scales of 8 pixels or more (near 100 %: bias that more samples would not remove; near 0 %: aliasing or noise).</p><table><tr><th>method</th><th>spec</th><th>render s</th><th>whole</th>");
             for g in &first.regions {
-                let _ = write!(h, "<th>{} {},{},{},{}</th>", esc(&g.name), g.rect[0], g.rect[1], g.rect[2], g.rect[3]);
+                let _ = write!(h, "<th>{}</th>", esc(&super::bench::region_heading(&g.name, g.rect)));
             }
             h.push_str("</tr>");
             for row in r.rows.iter().filter(|row| !row.regions.is_empty()) {
