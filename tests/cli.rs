@@ -228,6 +228,8 @@ fn bench_sweep_gives_equal_time_rows() {
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("Equal time and equal error against distributed:bvh:vt=0"), "{out}");
     assert!(out.contains("Equal time and equal error against distributed:octree:vt=0"), "{out}");
+    // The figure in brackets is the samples the adaptive sweep took, not its spp= setting.
+    assert!(out.contains("| sweep FLIP at equal time (samples taken per pixel) |"), "{out}");
     let v = json.unwrap();
     let rows = v["rows"].as_array().unwrap();
     let f = |r: &serde_json::Value| r["flip"].as_f64().unwrap();

@@ -1499,7 +1499,7 @@ pub fn table_string(report: &BenchReport) -> String {
         let eq: Vec<(&BenchRow, &EqualTime)> =
             report.rows.iter().filter_map(|r| r.equal_time.iter().find(|e| e.sweep == name).map(|e| (r, e))).collect();
         s.push_str(&format!("\nEqual time and equal error against {name} (mean FLIP against the reference; the rows run on as many threads as the sweep):\n\n"));
-        s.push_str("| scene | method | render s | FLIP | sweep FLIP at equal time (samples per pixel) | sweep time to match FLIP | time ratio at equal error |\n");
+        s.push_str("| scene | method | render s | FLIP | sweep FLIP at equal time (samples taken per pixel) | sweep time to match FLIP | time ratio at equal error |\n");
         s.push_str("|---|---|---:|---:|---:|---:|---:|\n");
         for &(r, e) in &eq {
             let at = match (e.sweep_flip_at_equal_time, e.sweep_spp_at_equal_time) {

@@ -745,7 +745,7 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
             }
             let _ = write!(
                 h,
-                "<h3>Equal time and equal error against {}</h3><p>The sweep renders it at 1, 2, 4, … samples per pixel; its error at each method's time and the time it needs to reach each method's error are interpolated in log time (time ratio &gt; 1: the method reaches that error faster).{}</p><table><tr><th>method</th><th>render s</th><th>mean FLIP</th><th>sweep FLIP at equal time</th><th>sweep samples per pixel at equal time</th><th>sweep time to match</th><th>time ratio at equal error</th></tr>",
+                "<h3>Equal time and equal error against {}</h3><p>The sweep renders it at 1, 2, 4, … samples per pixel (the adaptive distributed tracer takes fewer: the samples column gives those taken); its error at each method's time and the time it needs to reach each method's error are interpolated in log time (time ratio &gt; 1: the method reaches that error faster).{}</p><table><tr><th>method</th><th>render s</th><th>mean FLIP</th><th>sweep FLIP at equal time</th><th>sweep samples taken per pixel at equal time</th><th>sweep time to match</th><th>time ratio at equal error</th></tr>",
                 esc(&name),
                 if name.contains(":octree") { " This is the paper's comparison (§6): the distributed tracer on the same code basis as the multi-resolution tracer." } else { "" }
             );
