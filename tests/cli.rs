@@ -1857,6 +1857,14 @@ fn debug_pixel_explains_the_rendered_pixel() {
         assert_eq!(code, 0, "{err}");
         assert!(out.contains("| frag | part | mesh |"), "{out}");
         let line = out.lines().find(|l| l.starts_with("pixel ")).expect("pixel line");
+        // "1 part of 1 fragment", "3 parts of 2 fragments" (it said "1 parts of 1 fragments").
+        let tail: Vec<&str> = line.rsplit("; ").next().unwrap().split_whitespace().collect();
+        let (n, m): (usize, usize) = (tail[0].parse().unwrap(), tail[3].parse().unwrap());
+        assert_eq!(tail[1], if n == 1 { "part" } else { "parts" }, "{line}");
+        assert_eq!(tail[4], if m == 1 { "fragment" } else { "fragments" }, "{line}");
+        if (x, y) == (20, 15) {
+            assert!(line.ends_with("; 1 part of 1 fragment composited"), "{line}");
+        }
         let v: Vec<f32> = line.split_whitespace().skip(1).take(3).map(|t| t.parse().unwrap()).collect();
         let want = img[(y * 40 + x) as usize];
         assert!((glam::Vec3::new(v[0], v[1], v[2]) - want).abs().max_element() < 2e-3, "{px}: {line} against {want}");
