@@ -691,11 +691,12 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
             if let Some(img) = &row.image {
                 let _ = write!(
                     h,
-                    "<figure><img src=\"{}\"><figcaption>{} — {:.3} s, FLIP {}</figcaption></figure>",
+                    "<figure><img src=\"{}\"><figcaption>{} — {:.3} s{}</figcaption></figure>",
                     dir.join(img).display(),
                     esc(&row.spec),
                     row.stats.render_seconds,
-                    row.flip.map(|v| format!("{v:.4}")).unwrap_or("-".into())
+                    // No reference (the LOD scenes), no FLIP: the caption said "FLIP -".
+                    row.flip.map(|v| format!(", FLIP {v:.4}")).unwrap_or_default()
                 );
                 // Its FLIP map against the reference, written beside it by the bench.
                 if let (Some(_), Ok(spec)) = (row.flip, bench::MethodSpec::parse(&row.spec)) {
@@ -1048,8 +1049,10 @@ mod tests {
             max_diff_full_lod_pixels: 0.063,
             floor: None,
         });
+        lod.image = Some("chessboard-lod_bvh_spp_4.png".into());
         let mut w = row("spheres", "whitted:embree", stats("whitted", "embree", 0.08, &[]));
         w.flip = Some(0.03);
+        w.image = Some("spheres-whitted_embree.png".into());
         w.equal_time.push(bench::equal_time(&[(0.5, 1.0, 0.033), (1.0, 2.0, 0.026)], 0.08, 0.03, "distributed:octree"));
         let h = index_html(
             &[(job("chessboard", vec![]), report(vec![lod])), (job("spheres", vec!["distributed:octree".into()]), report(vec![w]))],
@@ -1058,6 +1061,10 @@ mod tests {
         assert!(h.contains("<th>CPU time saved</th>") && h.contains("<td>17.2 %</td>"), "CPU time column");
         assert!(h.contains("difference to whitted:bvh:spp=4 (magnified: black = 32.9 %)"), "diff caption");
         assert!(h.contains("<td>faster than its 1 spp</td><td>&lt; 1</td>"), "faster than 1 spp");
+        // Captions give the FLIP only where there is a reference (they said "FLIP -").
+        assert!(h.contains("<figcaption>lod:bvh:spp=4 — 1.000 s</figcaption>"), "caption without a reference");
+        assert!(h.contains("<figcaption>whitted:embree — 0.080 s, FLIP 0.0300</figcaption>"), "caption with FLIP");
+        assert!(!h.contains("FLIP -"), "no FLIP placeholder");
     }
 
     #[test]
