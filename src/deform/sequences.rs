@@ -31,7 +31,8 @@ use std::sync::Arc;
 pub struct SequenceOptions {
     /// Scales surfel and node counts (1.0 ≈ paper sizes; tests use ~0.02–0.1).
     pub detail: f32,
-    /// Armadillo mesh for `armadillo-ball`.
+    /// Armadillo mesh for `armadillo-ball` (default: `armadillo.off` in
+    /// [`assets_dir`](crate::scene::builtin::assets_dir), which honours `$LODTRACE_ASSETS`).
     pub armadillo: PathBuf,
     /// For meshes: `None` = one surfel per vertex when the mesh has at least the target count
     /// of vertices, else area samples; `Some(n)` = exactly n area samples (about).
@@ -46,7 +47,9 @@ impl Default for SequenceOptions {
     fn default() -> Self {
         SequenceOptions {
             detail: 1.0,
-            armadillo: PathBuf::from("assets/armadillo.off"),
+            // Not "assets/armadillo.off" relative to the working directory: that ignored
+            // $LODTRACE_ASSETS (a second worktree sharing one assets folder failed).
+            armadillo: crate::scene::builtin::assets_dir().join("armadillo.off"),
             mesh_surfels: None,
             mesh_nodes: 450,
             object: ObjectParams::default(),
