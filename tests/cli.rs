@@ -1155,6 +1155,9 @@ fn bench_sizes_sweep_deforming_sequences() {
     let rows = v["deform"].as_array().unwrap();
     let sizes: Vec<(u64, u64)> = rows.iter().map(|r| (r["width"].as_u64().unwrap(), r["height"].as_u64().unwrap())).collect();
     assert_eq!(sizes, [(16, 12), (16, 12), (40, 30), (40, 30)]);
+    // The top level names every size, not only the first (its width and height).
+    assert_eq!(v["sizes"], serde_json::json!([[16, 12], [40, 30]]), "{}", v["sizes"]);
+    assert_eq!((v["width"].as_u64(), v["height"].as_u64()), (Some(16), Some(12)));
     for r in rows {
         assert_eq!(r["same_image_as_first"], true, "{r}");
     }

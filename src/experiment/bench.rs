@@ -670,8 +670,13 @@ pub fn diff_image(d: &[f32], w: u32, h: u32) -> image::RgbImage {
 
 #[derive(Serialize, Debug, Clone)]
 pub struct BenchReport {
+    /// The image size; with `--sizes`, the first of them (`sizes` lists them all).
     pub width: u32,
     pub height: u32,
+    /// `--sizes`: every image size the deforming sequences ran at, `[width, height]`, in
+    /// order (omitted without `--sizes`; `width` and `height` alone named only the first).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sizes: Vec<[u32; 2]>,
     /// SIMD level of the binary ([`crate::core::SIMD_LEVEL`]).
     pub simd: &'static str,
     /// `--repeat`: every time is the best of this many rounds of renders (each round renders
@@ -962,6 +967,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
         let report = BenchReport {
             width,
             height,
+            sizes: if a.sizes.is_some() { sizes.iter().map(|&(w, h)| [w, h]).collect() } else { Vec::new() },
             simd: crate::core::SIMD_LEVEL,
             repeat: a.repeat,
             threads: a.threads,
@@ -1171,6 +1177,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
     let report = BenchReport {
         width: a.width,
         height: a.height,
+        sizes: Vec::new(),
         simd: crate::core::SIMD_LEVEL,
         repeat: a.repeat,
         threads: a.threads,
@@ -1682,7 +1689,17 @@ pub(crate) mod fixtures {
     }
 
     pub fn report(rows: Vec<BenchRow>) -> BenchReport {
-        BenchReport { width: 4, height: 4, simd: "sse2", repeat: 1, threads: 0, reference: None, rows, deform: Vec::new() }
+        BenchReport {
+            width: 4,
+            height: 4,
+            sizes: Vec::new(),
+            simd: "sse2",
+            repeat: 1,
+            threads: 0,
+            reference: None,
+            rows,
+            deform: Vec::new(),
+        }
     }
 }
 

@@ -627,7 +627,17 @@ fn is_missing_asset(e: &Error) -> bool {
 
 /// A report holding deforming-sequence rows only, for `bench.json` and `bench.md`.
 fn deform_report(width: u32, height: u32, threads: usize, deform: Vec<super::deform_bench::DeformRow>) -> BenchReport {
-    BenchReport { width, height, simd: crate::core::SIMD_LEVEL, repeat: 1, threads, reference: None, rows: Vec::new(), deform }
+    BenchReport {
+        width,
+        height,
+        sizes: Vec::new(),
+        simd: crate::core::SIMD_LEVEL,
+        repeat: 1,
+        threads,
+        reference: None,
+        rows: Vec::new(),
+        deform,
+    }
 }
 
 /// How this page was made: quick or full, SIMD level, threads (timings depend on all three).
