@@ -228,6 +228,8 @@ fn bench_sweep_gives_equal_time_rows() {
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("Equal time and equal error against distributed:bvh:vt=0"), "{out}");
     assert!(out.contains("Equal time and equal error against distributed:octree:vt=0"), "{out}");
+    // The figure in brackets is the samples the adaptive sweep took, not its spp= setting.
+    assert!(out.contains("| sweep FLIP at equal time (samples taken per pixel) |"), "{out}");
     let v = json.unwrap();
     let rows = v["rows"].as_array().unwrap();
     let f = |r: &serde_json::Value| r["flip"].as_f64().unwrap();
@@ -269,7 +271,7 @@ fn bench_sweep_gives_equal_time_rows() {
 /// overstated the sweep's advantage about twofold), and does not extend the sweep either.
 #[test]
 fn bench_sweep_meets_only_rows_on_the_sweeps_threads() {
-    let (code, _, err, _d, json) = small_bench(
+    let (code, _, err, d, json) = small_bench(
         "sweepthreads",
         &[
             "spheres",
@@ -294,6 +296,46 @@ fn bench_sweep_meets_only_rows_on_the_sweeps_threads() {
     assert!(sweep.iter().all(|r| r["stats"]["threads"] == 2));
     assert_eq!(rows[0]["equal_time"].as_array().map(Vec::len), Some(1), "{}", rows[0]);
     assert!(rows[1].get("equal_time").is_none(), "one thread against a two-thread sweep: {}", rows[1]["equal_time"]);
+    // The plot leaves the one-thread row out as the tables do (it was drawn beside the
+    // two-thread sweep's curve on one time axis).
+    assert!(d.join("spheres-equal-time.png").exists());
+    use lodtrace::experiment::bench::{equal_time_series, PlotPoint};
+    let points: Vec<PlotPoint> = rows
+        .iter()
+        .map(|r| PlotPoint {
+            spec: r["spec"].as_str().unwrap(),
+            sweep: r["sweep"].as_str(),
+            threads: r["stats"]["threads"].as_u64().unwrap() as usize,
+            seconds: r["stats"]["render_seconds"].as_f64().unwrap(),
+            flip: r["flip"].as_f64().unwrap(),
+        })
+        .collect();
+    let names: Vec<String> = equal_time_series(&points).into_iter().map(|s| s.0).collect();
+    assert_eq!(names, ["distributed:bvh:vt=0, spp 1, 2, 4, ...", "whitted:bvh"], "{names:?}");
+}
+
+/// A `--region` given without a name is named after its rectangle; the bench tables head
+/// its column with the rectangle once (they read `0,0,24,18 0,0,24,18`).
+#[test]
+fn bench_unnamed_region_is_headed_once() {
+    let (code, out, err, _d, _) = small_bench(
+        "region-unnamed",
+        &[
+            "spheres",
+            "--methods",
+            "whitted:bvh",
+            "--reference",
+            "distributed:bvh:spp=4:vt=0",
+            "--region",
+            "0,0,24,18",
+            "--region",
+            "low=0,18,48,36",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(!out.contains("0,0,24,18 0,0,24,18"), "{out}");
+    assert!(out.contains("| FLIP (whole) | 0,0,24,18 | low 0,18,48,36 |"), "{out}");
+    assert!(out.contains("| scene | method | 0,0,24,18 | low 0,18,48,36 |"), "{out}");
 }
 
 #[test]
@@ -1113,6 +1155,9 @@ fn bench_sizes_sweep_deforming_sequences() {
     let rows = v["deform"].as_array().unwrap();
     let sizes: Vec<(u64, u64)> = rows.iter().map(|r| (r["width"].as_u64().unwrap(), r["height"].as_u64().unwrap())).collect();
     assert_eq!(sizes, [(16, 12), (16, 12), (40, 30), (40, 30)]);
+    // The top level names every size, not only the first (its width and height).
+    assert_eq!(v["sizes"], serde_json::json!([[16, 12], [40, 30]]), "{}", v["sizes"]);
+    assert_eq!((v["width"].as_u64(), v["height"].as_u64()), (Some(16), Some(12)));
     for r in rows {
         assert_eq!(r["same_image_as_first"], true, "{r}");
     }
@@ -1815,6 +1860,14 @@ fn debug_pixel_explains_the_rendered_pixel() {
         assert_eq!(code, 0, "{err}");
         assert!(out.contains("| frag | part | mesh |"), "{out}");
         let line = out.lines().find(|l| l.starts_with("pixel ")).expect("pixel line");
+        // "1 part of 1 fragment", "3 parts of 2 fragments" (it said "1 parts of 1 fragments").
+        let tail: Vec<&str> = line.rsplit("; ").next().unwrap().split_whitespace().collect();
+        let (n, m): (usize, usize) = (tail[0].parse().unwrap(), tail[3].parse().unwrap());
+        assert_eq!(tail[1], if n == 1 { "part" } else { "parts" }, "{line}");
+        assert_eq!(tail[4], if m == 1 { "fragment" } else { "fragments" }, "{line}");
+        if (x, y) == (20, 15) {
+            assert!(line.ends_with("; 1 part of 1 fragment composited"), "{line}");
+        }
         let v: Vec<f32> = line.split_whitespace().skip(1).take(3).map(|t| t.parse().unwrap()).collect();
         let want = img[(y * 40 + x) as usize];
         assert!((glam::Vec3::new(v[0], v[1], v[2]) - want).abs().max_element() < 2e-3, "{px}: {line} against {want}");

@@ -676,6 +676,40 @@ fn clipping_gives_a_sharp_edge() {
     assert!(lh > 0.25, "unclipped surface should extend to x ≈ 0.3: {lh}");
 }
 
+/// A dropped mesh is in the picture from the drop to rest: every surfel of a cube (the
+/// widest and deepest shape the placement allows) projects inside the image with a margin,
+/// at its start 0.5 above the floor and resting on it. (Aimed at 0.5 above the floor, the
+/// camera put the cube's top front edge on the image's top row: `animate box.obj`.)
+#[test]
+fn dropped_mesh_stays_in_the_picture() {
+    let mut mesh = Mesh::new("cube");
+    for i in 0..8 {
+        mesh.push_vertex(Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32));
+    }
+    for f in [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]] {
+        mesh.push_tri(f[0], f[1], f[2], 0);
+        mesh.push_tri(f[0], f[2], f[3], 0);
+    }
+    let opts = SequenceOptions { detail: 0.02, mesh_surfels: Some(3000), mesh_nodes: 120, ..Default::default() };
+    let seq = Sequence::from_mesh(&mesh, &opts).unwrap();
+    let pos = &seq.scene.objects[0].pos;
+    let (lo, hi) = pos.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(a, b), p| (a.min(*p), b.max(*p)));
+    assert!((lo.y - 0.5).abs() < 0.02 && (hi.y - 1.5).abs() < 0.02, "placed at 0.5..1.5: {lo} {hi}");
+    let (w, h) = (512, 384);
+    let c = &seq.camera;
+    let (f, s) = ((c.look - c.eye).normalize(), (c.fovy.to_radians() * 0.5).tan());
+    let r = f.cross(c.up).normalize();
+    let u = r.cross(f);
+    for drop in [0.0, 0.5] {
+        for p in pos {
+            let d = *p - Vec3::new(0.0, drop, 0.0) - c.eye;
+            let z = d.dot(f);
+            let (x, y) = (d.dot(r) / (z * s * w as f32 / h as f32), d.dot(u) / (z * s));
+            assert!(x.abs() < 0.95 && y.abs() < 0.95, "surfel {p} (lowered by {drop}) at ({x}, {y}) of ±1");
+        }
+    }
+}
+
 /// The simulation stays bounded: no energy gain, finite positions, nothing falls through the
 /// floor (single body dropped; several bodies colliding). The energy bound is the contacts'
 /// and the damping's own: `World::cap_energy`, which would hold the energy at its start

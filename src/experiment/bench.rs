@@ -670,8 +670,13 @@ pub fn diff_image(d: &[f32], w: u32, h: u32) -> image::RgbImage {
 
 #[derive(Serialize, Debug, Clone)]
 pub struct BenchReport {
+    /// The image size; with `--sizes`, the first of them (`sizes` lists them all).
     pub width: u32,
     pub height: u32,
+    /// `--sizes`: every image size the deforming sequences ran at, `[width, height]`, in
+    /// order (omitted without `--sizes`; `width` and `height` alone named only the first).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sizes: Vec<[u32; 2]>,
     /// SIMD level of the binary ([`crate::core::SIMD_LEVEL`]).
     pub simd: &'static str,
     /// `--repeat`: every time is the best of this many rounds of renders (each round renders
@@ -962,6 +967,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
         let report = BenchReport {
             width,
             height,
+            sizes: if a.sizes.is_some() { sizes.iter().map(|&(w, h)| [w, h]).collect() } else { Vec::new() },
             simd: crate::core::SIMD_LEVEL,
             repeat: a.repeat,
             threads: a.threads,
@@ -1171,6 +1177,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
     let report = BenchReport {
         width: a.width,
         height: a.height,
+        sizes: Vec::new(),
         simd: crate::core::SIMD_LEVEL,
         repeat: a.repeat,
         threads: a.threads,
@@ -1284,24 +1291,16 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
     for sc in &scenes {
         let rows = report.rows.iter().filter(|r| r.scene == *sc && r.flip.is_some());
         if report.rows.iter().any(|r| r.scene == *sc && r.sweep.is_some()) {
-            // Each sweep a curve (first in the legend), each method a point.
-            let mut curves: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
-            let mut per: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
-            for r in rows {
-                let p = (r.stats.render_seconds, r.flip.unwrap_or(0.0));
-                match &r.sweep {
-                    Some(name) => {
-                        let name = format!("{name}, spp 1, 2, 4, ...");
-                        match curves.iter_mut().find(|c| c.0 == name) {
-                            Some(c) => c.1.push(p),
-                            None => curves.push((name, vec![p])),
-                        }
-                    }
-                    None => per.push((r.spec.clone(), vec![p])),
-                }
-            }
-            curves.append(&mut per);
-            let per = curves;
+            let points: Vec<PlotPoint> = rows
+                .map(|r| PlotPoint {
+                    spec: &r.spec,
+                    sweep: r.sweep.as_deref(),
+                    threads: r.stats.threads,
+                    seconds: r.stats.render_seconds,
+                    flip: r.flip.unwrap_or(0.0),
+                })
+                .collect();
+            let per = equal_time_series(&points);
             // Fast, noisy renders sit top left and the converged sweep bottom right. Times
             // spanning more than a decade go on a log axis: on a linear one the fast methods
             // crowded into one spot at the left edge.
@@ -1332,6 +1331,55 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
         )?;
     }
     Ok(())
+}
+
+/// A region's column heading, `NAME X0,Y0,X1,Y1`; a region given without a name (`--region
+/// 0,0,40,30`, named after its rectangle) shows the rectangle once, not `0,0,40,30 0,0,40,30`.
+pub fn region_heading(name: &str, rect: [u32; 4]) -> String {
+    let r = format!("{},{},{},{}", rect[0], rect[1], rect[2], rect[3]);
+    if name == r {
+        r
+    } else {
+        format!("{name} {r}")
+    }
+}
+
+/// One row of a scene as the equal-time plot sees it.
+#[derive(Clone, Copy, Debug)]
+pub struct PlotPoint<'a> {
+    pub spec: &'a str,
+    /// The sweep that rendered the row, `None` for a method's row.
+    pub sweep: Option<&'a str>,
+    pub threads: usize,
+    pub seconds: f64,
+    pub flip: f64,
+}
+
+/// The series of a scene's `SCENE-equal-time.png`: each sweep a curve (first in the
+/// legend), then each method a point. A method run on another thread count than every
+/// sweep is left out, as the equal-time tables leave it out: its wall-clock time on the
+/// sweep's time axis compared unequal resources (a one-thread row beside a two-thread
+/// sweep sat twice as far right as it would on two threads).
+pub fn equal_time_series(points: &[PlotPoint]) -> Vec<(String, Vec<(f64, f64)>)> {
+    let sweep_threads: Vec<usize> = points.iter().filter(|p| p.sweep.is_some()).map(|p| p.threads).collect();
+    let mut curves: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    let mut per: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    for p in points {
+        let xy = (p.seconds, p.flip);
+        match p.sweep {
+            Some(name) => {
+                let name = format!("{name}, spp 1, 2, 4, ...");
+                match curves.iter_mut().find(|c| c.0 == name) {
+                    Some(c) => c.1.push(xy),
+                    None => curves.push((name, vec![xy])),
+                }
+            }
+            None if sweep_threads.contains(&p.threads) => per.push((p.spec.to_string(), vec![xy])),
+            None => {}
+        }
+    }
+    curves.append(&mut per);
+    curves
 }
 
 /// A Markdown header and rule: `fixed` columns (scene and method left-aligned, the rest
@@ -1420,8 +1468,7 @@ pub fn table_string(report: &BenchReport) -> String {
     }
     if let Some(first) = report.rows.iter().find(|r| !r.regions.is_empty()) {
         s.push_str("\nError by region (mean FLIP against the reference; in brackets the region's share of the image's FLIP error):\n\n");
-        let cols: Vec<String> =
-            first.regions.iter().map(|g| format!("{} {},{},{},{}", g.name, g.rect[0], g.rect[1], g.rect[2], g.rect[3])).collect();
+        let cols: Vec<String> = first.regions.iter().map(|g| region_heading(&g.name, g.rect)).collect();
         s.push_str(&table_header(&["scene", "method", "render s", "FLIP (whole)"], &cols));
         for r in report.rows.iter().filter(|r| !r.regions.is_empty()) {
             s.push_str(&format!("| {} | {} | {:.3} | {:.4} |", md_cell(&r.scene), r.spec, r.stats.render_seconds, r.flip.unwrap_or(0.0)));
@@ -1459,7 +1506,7 @@ pub fn table_string(report: &BenchReport) -> String {
         let eq: Vec<(&BenchRow, &EqualTime)> =
             report.rows.iter().filter_map(|r| r.equal_time.iter().find(|e| e.sweep == name).map(|e| (r, e))).collect();
         s.push_str(&format!("\nEqual time and equal error against {name} (mean FLIP against the reference; the rows run on as many threads as the sweep):\n\n"));
-        s.push_str("| scene | method | render s | FLIP | sweep FLIP at equal time (samples per pixel) | sweep time to match FLIP | time ratio at equal error |\n");
+        s.push_str("| scene | method | render s | FLIP | sweep FLIP at equal time (samples taken per pixel) | sweep time to match FLIP | time ratio at equal error |\n");
         s.push_str("|---|---|---:|---:|---:|---:|---:|\n");
         for &(r, e) in &eq {
             let at = match (e.sweep_flip_at_equal_time, e.sweep_spp_at_equal_time) {
@@ -1642,7 +1689,17 @@ pub(crate) mod fixtures {
     }
 
     pub fn report(rows: Vec<BenchRow>) -> BenchReport {
-        BenchReport { width: 4, height: 4, simd: "sse2", repeat: 1, threads: 0, reference: None, rows, deform: Vec::new() }
+        BenchReport {
+            width: 4,
+            height: 4,
+            sizes: Vec::new(),
+            simd: "sse2",
+            repeat: 1,
+            threads: 0,
+            reference: None,
+            rows,
+            deform: Vec::new(),
+        }
     }
 }
 

@@ -627,7 +627,17 @@ fn is_missing_asset(e: &Error) -> bool {
 
 /// A report holding deforming-sequence rows only, for `bench.json` and `bench.md`.
 fn deform_report(width: u32, height: u32, threads: usize, deform: Vec<super::deform_bench::DeformRow>) -> BenchReport {
-    BenchReport { width, height, simd: crate::core::SIMD_LEVEL, repeat: 1, threads, reference: None, rows: Vec::new(), deform }
+    BenchReport {
+        width,
+        height,
+        sizes: Vec::new(),
+        simd: crate::core::SIMD_LEVEL,
+        repeat: 1,
+        threads,
+        reference: None,
+        rows: Vec::new(),
+        deform,
+    }
 }
 
 /// How this page was made: quick or full, SIMD level, threads (timings depend on all three).
@@ -691,11 +701,12 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
             if let Some(img) = &row.image {
                 let _ = write!(
                     h,
-                    "<figure><img src=\"{}\"><figcaption>{} — {:.3} s, FLIP {}</figcaption></figure>",
+                    "<figure><img src=\"{}\"><figcaption>{} — {:.3} s{}</figcaption></figure>",
                     dir.join(img).display(),
                     esc(&row.spec),
                     row.stats.render_seconds,
-                    row.flip.map(|v| format!("{v:.4}")).unwrap_or(super::NA.into())
+                    // No reference (the LOD scenes), no FLIP: the caption said "FLIP -".
+                    row.flip.map(|v| format!(", FLIP {v:.4}")).unwrap_or_default()
                 );
                 // Its FLIP map against the reference, written beside it by the bench.
                 if let (Some(_), Ok(spec)) = (row.flip, bench::MethodSpec::parse(&row.spec)) {
@@ -711,7 +722,7 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
         if let Some(first) = r.rows.iter().find(|row| !row.regions.is_empty()) {
             h.push_str("<h3>Where the error sits</h3><p>Mean FLIP against the reference inside each pixel rectangle (x0,y0,x1,y1), from the whole image's FLIP map; in brackets the region's share of the image's FLIP error. Below it the kind of error: the luminance against the reference's, and the part of the squared error at scales of 8 pixels or more (near 100 %: bias that more samples would not remove; near 0 %: aliasing or noise).</p><table><tr><th>method</th><th>spec</th><th>render s</th><th>whole</th>");
             for g in &first.regions {
-                let _ = write!(h, "<th>{} {},{},{},{}</th>", esc(&g.name), g.rect[0], g.rect[1], g.rect[2], g.rect[3]);
+                let _ = write!(h, "<th>{}</th>", esc(&super::bench::region_heading(&g.name, g.rect)));
             }
             h.push_str("</tr>");
             for row in r.rows.iter().filter(|row| !row.regions.is_empty()) {
@@ -745,7 +756,7 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
             }
             let _ = write!(
                 h,
-                "<h3>Equal time and equal error against {}</h3><p>The sweep renders it at 1, 2, 4, … samples per pixel; its error at each method's time and the time it needs to reach each method's error are interpolated in log time (time ratio &gt; 1: the method reaches that error faster).{}</p><table><tr><th>method</th><th>render s</th><th>mean FLIP</th><th>sweep FLIP at equal time</th><th>sweep samples per pixel at equal time</th><th>sweep time to match</th><th>time ratio at equal error</th></tr>",
+                "<h3>Equal time and equal error against {}</h3><p>The sweep renders it at 1, 2, 4, … samples per pixel (the adaptive distributed tracer takes fewer: the samples column gives those taken); its error at each method's time and the time it needs to reach each method's error are interpolated in log time (time ratio &gt; 1: the method reaches that error faster).{}</p><table><tr><th>method</th><th>render s</th><th>mean FLIP</th><th>sweep FLIP at equal time</th><th>sweep samples taken per pixel at equal time</th><th>sweep time to match</th><th>time ratio at equal error</th></tr>",
                 esc(&name),
                 if name.contains(":octree") { " This is the paper's comparison (§6): the distributed tracer on the same code basis as the multi-resolution tracer." } else { "" }
             );
@@ -1048,8 +1059,10 @@ mod tests {
             max_diff_full_lod_pixels: 0.063,
             floor: None,
         });
+        lod.image = Some("chessboard-lod_bvh_spp_4.png".into());
         let mut w = row("spheres", "whitted:embree", stats("whitted", "embree", 0.08, &[]));
         w.flip = Some(0.03);
+        w.image = Some("spheres-whitted_embree.png".into());
         w.equal_time.push(bench::equal_time(&[(0.5, 1.0, 0.033), (1.0, 2.0, 0.026)], 0.08, 0.03, "distributed:octree"));
         let h = index_html(
             &[(job("chessboard", vec![]), report(vec![lod])), (job("spheres", vec!["distributed:octree".into()]), report(vec![w]))],
@@ -1058,6 +1071,10 @@ mod tests {
         assert!(h.contains("<th>CPU time saved</th>") && h.contains("<td>17.2 %</td>"), "CPU time column");
         assert!(h.contains("difference to whitted:bvh:spp=4 (magnified: black = 32.9 %)"), "diff caption");
         assert!(h.contains("<td>faster than its 1 spp</td><td>&lt; 1</td>"), "faster than 1 spp");
+        // Captions give the FLIP only where there is a reference (they said "FLIP -").
+        assert!(h.contains("<figcaption>lod:bvh:spp=4 — 1.000 s</figcaption>"), "caption without a reference");
+        assert!(h.contains("<figcaption>whitted:embree — 0.080 s, FLIP 0.0300</figcaption>"), "caption with FLIP");
+        assert!(!h.contains("FLIP -"), "no FLIP placeholder");
     }
 
     #[test]

@@ -437,7 +437,11 @@ pub fn line_chart_fmt(
                     });
                     chart.draw_series(dashes).map_err(|x| e(&x))?;
                     let style = TextStyle::from((FAMILY, 13).into_font()).color(&grey).pos(Pos::new(HPos::Left, VPos::Bottom));
-                    chart.draw_series(std::iter::once(Text::new(label.to_string(), (x0, y), style))).map_err(|x| e(&x))?;
+                    // Above its line and clear of the y axis: anchored on the line itself, the
+                    // dashes struck through the label's descenders and it touched the axis.
+                    chart
+                        .draw_series(std::iter::once(EmptyElement::at((x0, y)) + Text::new(label.to_string(), (6, -5), style)))
+                        .map_err(|x| e(&x))?;
                 }
                 for (k, (_, data)) in series.iter().enumerate() {
                     let color = series_color(k);

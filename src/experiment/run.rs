@@ -377,13 +377,15 @@ pub fn explain_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &Multi
     }
     let _ = writeln!(s);
     let frags = parts.last().map_or(0, |p| p.frag + 1);
+    let n = parts.len();
     let _ = writeln!(
         s,
-        "pixel {} (alpha {:.3}, background {:.3}); {} parts of {frags} fragments composited",
+        "pixel {} (alpha {:.3}, background {:.3}); {n} part{} of {frags} fragment{} composited",
         rgb(r.color),
         r.alpha,
         1.0 - r.alpha,
-        parts.len()
+        if n == 1 { "" } else { "s" },
+        if frags == 1 { "" } else { "s" }
     );
     let _ = writeln!(s);
     let _ = writeln!(
