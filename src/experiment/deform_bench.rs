@@ -352,7 +352,7 @@ fn plots(out: &Path, rows: &[DeformRow]) -> Result<()> {
 /// The rows as a Markdown table.
 pub fn table(rows: &[DeformRow]) -> String {
     let mut s = String::from("\nDeforming sequences (Adams et al.):\n\n");
-    s.push_str("| sequence | method | size | surfels | frames | thr | ms/frame | speed-up vs first | per-round speed-up: median [range] | ÷ naive, same options: best (per-round median) | update ms/frame | rays ms/frame (warm) | BV tests/frame | leaf tests/frame | MLS runs/frame | MLS it. | cache hits | inner nodes updated/frame | root ratio | mean ratio | same image |\n");
+    s.push_str("| sequence | method | size | surfels | frames | thr | ms/frame | speed-up vs first | per-round speed-up: median [range] | ÷ naive, same options: best (per-round median) | update ms/frame | rays ms/frame (warm) | BV tests/frame | leaf tests/frame | MLS runs/frame | MLS it. | cache hits (all frames) | inner nodes updated/frame | root ratio | mean ratio | same image |\n");
     s.push_str("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
     for r in rows {
         let f = |x: Option<f64>| x.map(|v| format!("{v:.2}")).unwrap_or_else(|| super::NA.into());
