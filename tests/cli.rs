@@ -2636,3 +2636,25 @@ fn variance_threshold_without_a_second_pass_is_refused() {
     let args = [&base[..], &["--spp", "4"], &small[..]].concat();
     runs(&args);
 }
+
+/// An OBJ without line ends (here a sparse 3 GiB file of zeros, as a binary file named .obj
+/// would be) is refused once a line passes 64 MB: it was read into one line until the memory
+/// ran out, and the failed allocation aborted (exit 134, a backtrace, no error line).
+#[test]
+fn obj_without_line_ends_is_refused_before_the_memory_runs_out() {
+    let d = tmp("objnoeol");
+    let obj = d.join("sparse.obj");
+    std::fs::File::create(&obj).unwrap().set_len(3 << 30).unwrap();
+    let exe = env!("CARGO_BIN_EXE_lodtrace");
+    let out = d.join("x.png");
+    let o = Command::new("sh")
+        .arg("-c")
+        .arg(format!("ulimit -v 2000000; exec {exe} render {} --width 16 --height 12 --quiet --out {}", obj.display(), out.display()))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    one_error_line(&err);
+    assert!(err.contains("line 1 is longer than 64 MB"), "{err}");
+    assert!(!out.exists());
+}
