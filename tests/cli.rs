@@ -2658,3 +2658,27 @@ fn obj_without_line_ends_is_refused_before_the_memory_runs_out() {
     assert!(err.contains("line 1 is longer than 64 MB"), "{err}");
     assert!(!out.exists());
 }
+
+/// A surfel object larger than the memory the process may have is refused before its
+/// neighbourhoods and hierarchy are built: `animate bend --detail 2` (212k surfels) under
+/// `ulimit -v 400000` aborted on a failed allocation (exit 134, no error line), as any mesh
+/// or point file of enough vertices or `--detail` does.
+#[test]
+fn surfel_objects_larger_than_the_memory_are_refused() {
+    let d = tmp("surfelmem");
+    let stats = d.join("s.json");
+    let exe = env!("CARGO_BIN_EXE_lodtrace");
+    let o = Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -v 400000; exec {exe} animate bend --frames 1 --detail 2 --width 16 --height 12 --quiet --stats {}",
+            stats.display()
+        ))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    one_error_line(&err);
+    assert!(err.contains("surfels needs about"), "{err}");
+    assert!(!stats.exists());
+}
