@@ -2682,3 +2682,23 @@ fn surfel_objects_larger_than_the_memory_are_refused() {
     assert!(err.contains("surfels needs about"), "{err}");
     assert!(!stats.exists());
 }
+
+/// `verify --rays N` beyond the memory the process may have is refused before the rays are
+/// made: `--rays 10000000` (1.7 GB) under `ulimit -v 1200000` aborted on a failed
+/// allocation (exit 134, a backtrace, no error line).
+#[test]
+fn verify_rays_beyond_the_memory_are_refused() {
+    let d = tmp("verifymem");
+    let json = d.join("v.json");
+    let exe = env!("CARGO_BIN_EXE_lodtrace");
+    let o = Command::new("sh")
+        .arg("-c")
+        .arg(format!("ulimit -v 1200000; exec {exe} verify plane --rays 10000000 --json {}", json.display()))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    one_error_line(&err);
+    assert!(err.contains("--rays 10000000 needs about"), "{err}");
+    assert!(!json.exists());
+}
