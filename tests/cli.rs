@@ -2702,3 +2702,42 @@ fn verify_rays_beyond_the_memory_are_refused() {
     assert!(err.contains("--rays 10000000 needs about"), "{err}");
     assert!(!json.exists());
 }
+
+/// A PLY header declaring an element or a property twice is refused, naming it: a second
+/// `element vertex` was dropped without a word (half the points rendered, exit 0) and a
+/// second `property float x` shifted the values read ("zero or non-finite normal").
+#[test]
+fn ply_names_declared_twice_are_refused() {
+    let d = tmp("plytwice");
+    let props = "property float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\n";
+    let rows = "0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 0 1\n1 1 0 0 0 1\n2 0 0 0 0 1\n";
+    let two_elements = format!("ply\nformat ascii 1.0\nelement vertex 5\n{props}element vertex 5\n{props}end_header\n{rows}{rows}");
+    let two_x = format!(
+        "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\n{props}end_header\n{}",
+        rows.lines().map(|r| format!("9 {r}\n")).collect::<String>()
+    );
+    for (name, text, says) in
+        [("elements.ply", two_elements, "element 'vertex' is declared twice"), ("x.ply", two_x, "property 'x' is declared twice")]
+    {
+        let p = d.join(name);
+        std::fs::write(&p, text).unwrap();
+        let stats = d.join("s.json");
+        let (code, _, err) = lodtrace(&[
+            "animate",
+            p.to_str().unwrap(),
+            "--frames",
+            "1",
+            "--width",
+            "16",
+            "--height",
+            "12",
+            "--quiet",
+            "--stats",
+            stats.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 2, "{name}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(says) && err.contains(name), "{name}: {err}");
+        assert!(!stats.exists());
+    }
+}
