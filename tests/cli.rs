@@ -2741,3 +2741,30 @@ fn ply_names_declared_twice_are_refused() {
         assert!(!stats.exists());
     }
 }
+
+/// A cache file grown to gigabytes (corrupted, or sparse) is a miss, rebuilt and rewritten
+/// like any bad cache file: its read reserved the whole size first, and under `ulimit -v
+/// 2000000` a 3 GiB `.ptree` aborted the render (exit 134, a backtrace, no error line).
+#[test]
+fn a_cache_file_larger_than_the_memory_is_a_miss() {
+    let d = tmp("bigcache");
+    let cache = d.join("cache");
+    std::fs::create_dir(&cache).unwrap();
+    let out = d.join("x.png");
+    let exe = env!("CARGO_BIN_EXE_lodtrace");
+    let run = |limit: &str| {
+        Command::new("sh")
+            .arg("-c")
+            .arg(format!("{limit} exec {exe} render plane --method multires --width 8 --height 6 --quiet --out {}", out.display()))
+            .env("LODTRACE_CACHE", &cache)
+            .output()
+            .unwrap()
+    };
+    assert_eq!(run("").status.code(), Some(0));
+    let tree: Vec<PathBuf> = std::fs::read_dir(&cache).unwrap().map(|e| e.unwrap().path()).collect();
+    assert_eq!(tree.len(), 1, "{tree:?}");
+    std::fs::OpenOptions::new().write(true).open(&tree[0]).unwrap().set_len(3 << 30).unwrap();
+    let o = run("ulimit -v 2000000;");
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::metadata(&tree[0]).unwrap().len() < 1 << 20, "the bad cache file was not rewritten");
+}
