@@ -2768,3 +2768,44 @@ fn a_cache_file_larger_than_the_memory_is_a_miss() {
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(std::fs::metadata(&tree[0]).unwrap().len() < 1 << 20, "the bad cache file was not rewritten");
 }
+
+/// `LODTRACE_FONT` naming a FIFO or a device is refused in one line: a FIFO blocked `bench`
+/// forever at its first plot (bench.json, bench.md and the images already written), and
+/// `/dev/zero` was read until the memory ran out.
+#[test]
+fn a_font_that_is_not_a_regular_file_is_refused() {
+    let d = tmp("fontfifo");
+    let fifo = d.join("font.ttf");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    for font in [fifo.as_path(), std::path::Path::new("/dev/zero")] {
+        let out = d.join("b");
+        // Under a memory limit: the old read of /dev/zero took all there was.
+        let exe = env!("CARGO_BIN_EXE_lodtrace");
+        let mut child = Command::new("sh")
+            .arg("-c")
+            .arg(format!(
+                "ulimit -v 2000000; exec {exe} bench plane --methods whitted --width 8 --height 6 --quiet --out {}",
+                out.display()
+            ))
+            .env("LODTRACE_FONT", font)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let t0 = std::time::Instant::now();
+        while child.try_wait().unwrap().is_none() {
+            if t0.elapsed().as_secs() > 30 {
+                child.kill().unwrap();
+                child.wait().unwrap();
+                panic!("{}: still running after 30 s", font.display());
+            }
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{}: {err}", font.display());
+        one_error_line(&err);
+        assert!(err.contains("is not a font file"), "{err}");
+        assert!(!out.exists(), "{}: the failed bench left its folder", font.display());
+    }
+}
