@@ -2689,3 +2689,176 @@ fn variance_threshold_without_a_second_pass_is_refused() {
     let args = [&base[..], &["--spp", "4"], &small[..]].concat();
     runs(&args);
 }
+
+/// An OBJ without line ends (here a sparse 3 GiB file of zeros, as a binary file named .obj
+/// would be) is refused once a line passes 64 MB: it was read into one line until the memory
+/// ran out, and the failed allocation aborted (exit 134, a backtrace, no error line).
+#[test]
+fn obj_without_line_ends_is_refused_before_the_memory_runs_out() {
+    let d = tmp("objnoeol");
+    let obj = d.join("sparse.obj");
+    std::fs::File::create(&obj).unwrap().set_len(3 << 30).unwrap();
+    let exe = env!("CARGO_BIN_EXE_lodtrace");
+    let out = d.join("x.png");
+    let o = Command::new("sh")
+        .arg("-c")
+        .arg(format!("ulimit -v 2000000; exec {exe} render {} --width 16 --height 12 --quiet --out {}", obj.display(), out.display()))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    one_error_line(&err);
+    assert!(err.contains("line 1 is longer than 64 MB"), "{err}");
+    assert!(!out.exists());
+}
+
+/// A surfel object larger than the memory the process may have is refused before its
+/// neighbourhoods and hierarchy are built: `animate bend --detail 2` (212k surfels) under
+/// `ulimit -v 400000` aborted on a failed allocation (exit 134, no error line), as any mesh
+/// or point file of enough vertices or `--detail` does.
+#[test]
+fn surfel_objects_larger_than_the_memory_are_refused() {
+    let d = tmp("surfelmem");
+    let stats = d.join("s.json");
+    let exe = env!("CARGO_BIN_EXE_lodtrace");
+    let o = Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -v 400000; exec {exe} animate bend --frames 1 --detail 2 --width 16 --height 12 --quiet --stats {}",
+            stats.display()
+        ))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    one_error_line(&err);
+    assert!(err.contains("surfels needs about"), "{err}");
+    assert!(!stats.exists());
+}
+
+/// `verify --rays N` beyond the memory the process may have is refused before the rays are
+/// made: `--rays 10000000` (1.7 GB) under `ulimit -v 1200000` aborted on a failed
+/// allocation (exit 134, a backtrace, no error line).
+#[test]
+fn verify_rays_beyond_the_memory_are_refused() {
+    let d = tmp("verifymem");
+    let json = d.join("v.json");
+    let exe = env!("CARGO_BIN_EXE_lodtrace");
+    let o = Command::new("sh")
+        .arg("-c")
+        .arg(format!("ulimit -v 1200000; exec {exe} verify plane --rays 10000000 --json {}", json.display()))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    one_error_line(&err);
+    assert!(err.contains("--rays 10000000 needs about"), "{err}");
+    assert!(!json.exists());
+}
+
+/// A PLY header declaring an element or a property twice is refused, naming it: a second
+/// `element vertex` was dropped without a word (half the points rendered, exit 0) and a
+/// second `property float x` shifted the values read ("zero or non-finite normal").
+#[test]
+fn ply_names_declared_twice_are_refused() {
+    let d = tmp("plytwice");
+    let props = "property float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\n";
+    let rows = "0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 0 1\n1 1 0 0 0 1\n2 0 0 0 0 1\n";
+    let two_elements = format!("ply\nformat ascii 1.0\nelement vertex 5\n{props}element vertex 5\n{props}end_header\n{rows}{rows}");
+    let two_x = format!(
+        "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\n{props}end_header\n{}",
+        rows.lines().map(|r| format!("9 {r}\n")).collect::<String>()
+    );
+    for (name, text, says) in
+        [("elements.ply", two_elements, "element 'vertex' is declared twice"), ("x.ply", two_x, "property 'x' is declared twice")]
+    {
+        let p = d.join(name);
+        std::fs::write(&p, text).unwrap();
+        let stats = d.join("s.json");
+        let (code, _, err) = lodtrace(&[
+            "animate",
+            p.to_str().unwrap(),
+            "--frames",
+            "1",
+            "--width",
+            "16",
+            "--height",
+            "12",
+            "--quiet",
+            "--stats",
+            stats.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 2, "{name}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(says) && err.contains(name), "{name}: {err}");
+        assert!(!stats.exists());
+    }
+}
+
+/// A cache file grown to gigabytes (corrupted, or sparse) is a miss, rebuilt and rewritten
+/// like any bad cache file: its read reserved the whole size first, and under `ulimit -v
+/// 2000000` a 3 GiB `.ptree` aborted the render (exit 134, a backtrace, no error line).
+#[test]
+fn a_cache_file_larger_than_the_memory_is_a_miss() {
+    let d = tmp("bigcache");
+    let cache = d.join("cache");
+    std::fs::create_dir(&cache).unwrap();
+    let out = d.join("x.png");
+    let exe = env!("CARGO_BIN_EXE_lodtrace");
+    let run = |limit: &str| {
+        Command::new("sh")
+            .arg("-c")
+            .arg(format!("{limit} exec {exe} render plane --method multires --width 8 --height 6 --quiet --out {}", out.display()))
+            .env("LODTRACE_CACHE", &cache)
+            .output()
+            .unwrap()
+    };
+    assert_eq!(run("").status.code(), Some(0));
+    let tree: Vec<PathBuf> = std::fs::read_dir(&cache).unwrap().map(|e| e.unwrap().path()).collect();
+    assert_eq!(tree.len(), 1, "{tree:?}");
+    std::fs::OpenOptions::new().write(true).open(&tree[0]).unwrap().set_len(3 << 30).unwrap();
+    let o = run("ulimit -v 2000000;");
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::metadata(&tree[0]).unwrap().len() < 1 << 20, "the bad cache file was not rewritten");
+}
+
+/// `LODTRACE_FONT` naming a FIFO or a device is refused in one line: a FIFO blocked `bench`
+/// forever at its first plot (bench.json, bench.md and the images already written), and
+/// `/dev/zero` was read until the memory ran out.
+#[test]
+fn a_font_that_is_not_a_regular_file_is_refused() {
+    let d = tmp("fontfifo");
+    let fifo = d.join("font.ttf");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    for font in [fifo.as_path(), std::path::Path::new("/dev/zero")] {
+        let out = d.join("b");
+        // Under a memory limit: the old read of /dev/zero took all there was.
+        let exe = env!("CARGO_BIN_EXE_lodtrace");
+        let mut child = Command::new("sh")
+            .arg("-c")
+            .arg(format!(
+                "ulimit -v 2000000; exec {exe} bench plane --methods whitted --width 8 --height 6 --quiet --out {}",
+                out.display()
+            ))
+            .env("LODTRACE_FONT", font)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let t0 = std::time::Instant::now();
+        while child.try_wait().unwrap().is_none() {
+            if t0.elapsed().as_secs() > 30 {
+                child.kill().unwrap();
+                child.wait().unwrap();
+                panic!("{}: still running after 30 s", font.display());
+            }
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{}: {err}", font.display());
+        one_error_line(&err);
+        assert!(err.contains("is not a font file"), "{err}");
+        assert!(!out.exists(), "{}: the failed bench left its folder", font.display());
+    }
+}

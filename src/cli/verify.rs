@@ -25,11 +25,14 @@ pub struct VerifyArgs {
 /// Returns the exit code: 0 agreement, 1 disagreement beyond tolerance.
 #[cfg(feature = "embree")]
 pub fn run(a: &VerifyArgs) -> Result<i32> {
-    // The rays and both intersectors' hits are held at once (about 150 bytes a ray): 1e7
-    // rays take 1.5 GB.
+    // The rays and both intersectors' hits are held at once (about 170 bytes a ray, peak
+    // RSS `/usr/bin/time -f %M`): 1e7 rays take 1.7 GB.
     if a.rays == 0 || a.rays > 10_000_000 {
         return Err(Error::Usage(format!("--rays {} is out of range (1..=10000000)", a.rays)));
     }
+    // A failed allocation aborts without an error line (`--rays 10000000` under `ulimit -v
+    // 1200000`).
+    crate::error::check_memory(a.rays as u64 * 170, &format!("--rays {}", a.rays)).map_err(Error::Usage)?;
     if let Some(p) = &a.json {
         if super::render::is_stdout(p) {
             return Err(Error::Usage("--json -: verify prints its table on standard output; give --json a file name".into()));

@@ -27,7 +27,7 @@ pub fn cache_dir() -> Option<PathBuf> {
 /// Reads a cache file, or None when there is none to read. Only a regular file (after
 /// following symlinks) is read, and only as many bytes as its size said: a FIFO, a device
 /// (`/dev/zero` behind a symlink) or a directory at the cache path is a miss, never a hang or
-/// an unbounded read. Callers treat None as a miss and rebuild (their atomic write then
+/// an unbounded read, as is a file larger than the memory this process can still have. Callers treat None as a miss and rebuild (their atomic write then
 /// replaces whatever was there, when the directory allows it).
 pub fn read_cache_file(path: &Path) -> Option<Vec<u8>> {
     use std::io::Read;
@@ -41,7 +41,12 @@ pub fn read_cache_file(path: &Path) -> Option<Vec<u8>> {
     if !f.metadata().ok()?.is_file() {
         return None;
     }
-    let mut b = Vec::with_capacity(usize::try_from(len).ok()?);
+    // A file larger than the memory left (a corrupted, or sparse, cache file of gigabytes) is
+    // a miss too: `Vec::with_capacity` aborted the run on the failed allocation (exit 134, no
+    // error line).
+    crate::error::check_memory(len, "").ok()?;
+    let mut b = Vec::new();
+    b.try_reserve_exact(usize::try_from(len).ok()?).ok()?;
     f.by_ref().take(len).read_to_end(&mut b).ok()?;
     (b.len() as u64 == len).then_some(b)
 }

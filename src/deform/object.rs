@@ -65,11 +65,20 @@ pub struct SurfelObject {
 /// An empty slot of a surfel's MLS neighbour row ([`SurfelObject::nbr`]).
 pub const NO_NBR: u32 = u32::MAX;
 
+/// Memory an object takes per surfel at its peak, with its hierarchy and the frame's
+/// per-instance state (`/usr/bin/time -f %M`: `animate` of a mesh at 0.5M and 1.7M surfels,
+/// 1.8 and 1.6 KB; `bend` at 1.06M, 1.65 KB).
+pub const BYTES_PER_SURFEL: u64 = 2000;
+
 impl SurfelObject {
     /// Precomputes an object from its surfels and simulation nodes (reference positions and
     /// masses).
     pub fn build(mut model: SurfelModel, node_rest: Vec<Vec3>, node_mass: Vec<f32>, p: &ObjectParams) -> Result<Arc<Self>, DeformError> {
         model.validate()?;
+        // Before the neighbourhoods and hierarchies are built: a failed allocation aborts
+        // without an error line (`animate bend --detail 10` under `ulimit -v 1000000`).
+        let n = model.surfels.len() as u64;
+        crate::error::check_memory(n * BYTES_PER_SURFEL, &format!("an object of {n} surfels")).map_err(DeformError::Invalid)?;
         spatial_order(&mut model);
         if p.nodes_per_surfel == 0 || p.mls_neighbours < 3 || p.mls_neighbours > 32 || !(p.mls_support >= 1.0 && p.mls_support.is_finite())
         {

@@ -65,11 +65,29 @@ fn body_matches_header(buf: &[u8]) -> Result<(), String> {
     }
     // Per element: (bytes of one row, rows).
     let (mut declared, mut elements, mut fixed) = (0u64, Vec::<(u64, u64)>::new(), true);
+    // Names seen: ply-rs-bw keeps one element of a name and one property of a name (a second
+    // `element vertex` was dropped without a word, half the points; a second `property float
+    // x` shifted the values it read, "zero normal").
+    let (mut names, mut props) = (Vec::<String>::new(), Vec::<String>::new());
     for l in head.lines().map(str::trim) {
         let w: Vec<&str> = l.split_whitespace().collect();
+        if let (Some(&"property"), Some(name)) = (w.first(), w.last()) {
+            if w.len() >= 3 {
+                if props.iter().any(|p| p == name) {
+                    let element = names.last().map_or("", String::as_str);
+                    return Err(format!("element '{element}': property '{name}' is declared twice in the header"));
+                }
+                props.push(name.to_string());
+            }
+        }
         match w.as_slice() {
             ["element", name, count, ..] => {
                 let c = count.parse::<u64>().map_err(|_| format!("element '{name}': bad count '{count}' in the header"))?;
+                if names.iter().any(|n| n == name) {
+                    return Err(format!("element '{name}' is declared twice in the header"));
+                }
+                names.push(name.to_string());
+                props.clear();
                 declared += c;
                 elements.push((0, c));
             }

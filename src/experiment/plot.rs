@@ -31,15 +31,32 @@ const FONT_PATHS: &[&str] = &[
     "/usr/share/fonts/dejavu-sans-fonts/DejaVuSans.ttf",
 ];
 
+/// The largest font file read (DejaVuSans.ttf is 0.7 MB).
+const MAX_FONT_BYTES: u64 = 64 << 20;
+
 /// Registers the font with plotters once per process; later calls return the first outcome.
 fn ensure_font() -> Result<()> {
     static FONT: OnceLock<std::result::Result<(), String>> = OnceLock::new();
     FONT.get_or_init(|| {
-        let candidates: Vec<PathBuf> = match std::env::var_os("LODTRACE_FONT") {
-            Some(p) if !p.is_empty() => vec![PathBuf::from(p)],
-            _ => FONT_PATHS.iter().map(PathBuf::from).collect(),
+        let (candidates, from_env): (Vec<PathBuf>, bool) = match std::env::var_os("LODTRACE_FONT") {
+            Some(p) if !p.is_empty() => (vec![PathBuf::from(p)], true),
+            _ => (FONT_PATHS.iter().map(PathBuf::from).collect(), false),
         };
         for p in &candidates {
+            // Only a regular file of a font's size is read: `LODTRACE_FONT=/dev/zero` filled
+            // the memory, and a FIFO blocked the run forever (its tables and images already
+            // written).
+            let Ok(meta) = std::fs::metadata(p) else { continue };
+            if !meta.is_file() || meta.len() > MAX_FONT_BYTES {
+                if from_env {
+                    return Err(format!(
+                        "plot: LODTRACE_FONT={} is not a font file (a regular file of at most {} MB)",
+                        p.display(),
+                        MAX_FONT_BYTES >> 20
+                    ));
+                }
+                continue;
+            }
             let Ok(bytes) = std::fs::read(p) else { continue };
             // plotters keeps `&'static` font data; this is loaded once per process.
             let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());

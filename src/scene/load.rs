@@ -202,7 +202,14 @@ struct SurfaceLines<R> {
     /// reference to an element the file lacks without a word, and with it every normal of
     /// the mesh (the sweep of stop 65). `refs` = [vt, vn].
     refs: FaceRefs,
+    /// The number of a line longer than [`MAX_OBJ_LINE`], where reading stopped.
+    too_long: Option<usize>,
 }
+
+/// The longest OBJ line read (a face of 100,000 vertices takes about 1 MB). A file without
+/// line ends (a sparse or binary file named .obj) was read into one line until the memory ran
+/// out: the allocation failure aborted without an error line.
+const MAX_OBJ_LINE: usize = 64 << 20;
 
 /// Counts of `vt` and `vn` lines so far, the largest index the faces name of each (with its
 /// line), the first face line naming a relative index before the file's start, and the
@@ -287,7 +294,13 @@ impl<R: std::io::BufRead> std::io::BufRead for SurfaceLines<R> {
         if self.at >= self.line.len() {
             self.line.clear();
             self.at = 0;
-            if self.inner.read_until(b'\n', &mut self.line)? > 0 {
+            let read = std::io::Read::take(&mut self.inner, MAX_OBJ_LINE as u64 + 1).read_until(b'\n', &mut self.line)?;
+            if self.line.len() > MAX_OBJ_LINE {
+                self.too_long = Some(self.refs.line_no + 1);
+                self.line.clear();
+                return Err(std::io::Error::new(std::io::ErrorKind::InvalidData, "line too long"));
+            }
+            if read > 0 {
                 let first = self.line.iter().position(|c| !c.is_ascii_whitespace());
                 let kw = first.map(|i| &self.line[i..]).unwrap_or(&[]);
                 let is = |k: u8| kw.first() == Some(&k) && kw.get(1).is_some_and(|c| c.is_ascii_whitespace());
@@ -441,8 +454,18 @@ pub fn load_obj(path: &Path, mat: u32, default: u32) -> Result<(Mesh, Vec<Materi
         let text = std::fs::read(&full).map_err(|_| tobj::LoadError::ReadError)?;
         tobj::load_mtl_buf(&mut std::io::Cursor::new(mtl_colours_complete(&text)?))
     };
-    let mut reader = SurfaceLines { inner: std::io::BufReader::new(file), line: Vec::new(), at: 0, dropped: 0, refs: FaceRefs::default() };
+    let mut reader = SurfaceLines {
+        inner: std::io::BufReader::new(file),
+        line: Vec::new(),
+        at: 0,
+        dropped: 0,
+        refs: FaceRefs::default(),
+        too_long: None,
+    };
     let loaded = tobj::load_obj_buf(&mut reader, &opts, load_mtl);
+    if let Some(line) = reader.too_long {
+        return Err(Error::parse(path, format!("line {line} is longer than {} MB: not an OBJ text file", MAX_OBJ_LINE >> 20)));
+    }
     // Before tobj's own error, which names no line ("face normal index out of bounds").
     if let Some(m) = reader.refs.error() {
         return Err(Error::parse(path, m));
