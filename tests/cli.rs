@@ -804,6 +804,18 @@ fn stats_dash_goes_to_standard_output() {
     let o = run(&["verify", "cube", "--rays", "100", "--json", "-"]);
     assert_eq!(o.status.code(), Some(2));
     one_error_line(&String::from_utf8_lossy(&o.stderr));
+    // Where --out names a folder, `-` is refused (it made a folder named `-`, stop 81).
+    for args in [
+        &["animate", "heads", "--frames", "2", "--detail", "0.05", "--width", "16", "--height", "12", "--quiet", "--out", "-"][..],
+        &["bench", "spheres", "--width", "16", "--height", "12", "--quiet", "--methods", "whitted", "--out", "-"],
+    ] {
+        let o = run(args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        let e = String::from_utf8_lossy(&o.stderr);
+        one_error_line(&e);
+        assert!(e.contains("--out -"), "{e}");
+        assert!(!d.join("-").exists(), "{args:?} made a folder named -");
+    }
 }
 
 /// `--update` also takes the spellings `lazycache` and `cache` for `lazy-cache`; the stats

@@ -186,6 +186,10 @@ fn record_written(path: &Path, backup: Option<PathBuf>) {
 /// otherwise create a folder of that name), is refused with a usage error; a folder that
 /// cannot be created says so in one line.
 pub fn create_out_dir(dir: &Path) -> Result<()> {
+    // `-` is standard output for `--stats`; as a folder it made one named `-` (stop 81).
+    if dir.as_os_str() == "-" {
+        return Err(Error::Usage("--out -: --out names a folder here; only --stats takes - for standard output".into()));
+    }
     if dir.exists() && !dir.is_dir() {
         return Err(Error::Usage(format!("{}: exists and is not a folder (--out names a folder here)", dir.display())));
     }
