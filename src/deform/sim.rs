@@ -163,7 +163,7 @@ impl Body {
         self.x.is_empty()
     }
     /// Makes nodes kinematic: they follow the world's kinematic motion of this body, or, on a
-    /// driven body, their skinned position exactly.
+    /// driven body, their skinned position exactly; with neither they stay where they are.
     pub fn pin(&mut self, nodes: &[u32]) {
         for &j in nodes {
             self.pinned[j as usize] = Some(self.x[j as usize]);
@@ -433,6 +433,12 @@ impl World {
                     let nx = k.pivot + q * (x0 - k.pivot);
                     b.v[j] = (nx - b.x[j]) / h;
                     b.x[j] = nx;
+                    continue;
+                }
+                if b.pinned[j].is_some() {
+                    // Pinned, and no motion drives it: it stays put (the contacts treat it as
+                    // kinematic; test `pinned_nodes_without_a_driver_stay_put`).
+                    b.v[j] = Vec3::ZERO;
                     continue;
                 }
                 let mut v = b.v[j] + (goals[j] - b.x[j]) * (alpha / h) + self.gravity * h;
@@ -712,6 +718,35 @@ mod tests {
                 assert_eq!(below, 0, "{speed} m/s, clusters of {cluster_size}: {below} of {n} nodes fell through");
             }
         }
+    }
+
+    /// A pinned node of a body with neither a [`Kinematic`] motion nor a [`Skin`] stays where
+    /// it was pinned. It used to be integrated like a free node
+    /// (gravity, goals) while the contacts still treated it as kinematic (skipped by the
+    /// static colliders, infinite mass against other bodies): a body hung from two pinned
+    /// nodes fell, and the pinned nodes passed through the floor (review finding).
+    #[test]
+    fn pinned_nodes_without_a_driver_stay_put() {
+        let x = ball_nodes(Vec3::new(0.0, 0.5, 0.0), 0.3, 2);
+        let n = x.len();
+        let top: Vec<u32> = (0..n as u32).filter(|&j| x[j as usize].y > 0.75).collect();
+        assert!(!top.is_empty());
+        let mut w = World::new(1.0 / 30.0, 4);
+        let mut b = Body::new(x.clone(), vec![1.0; n], 0.05, BodyParams::default());
+        b.pin(&top);
+        w.bodies.push(b);
+        w.colliders.push(Collider::Plane { n: Vec3::Y, d: 0.0 });
+        for _ in 0..60 {
+            w.step_frame();
+        }
+        let b = &w.bodies[0];
+        for &j in &top {
+            let j = j as usize;
+            assert_eq!(b.x[j], x[j], "pinned node {j} moved");
+            assert_eq!(b.v[j], Vec3::ZERO, "pinned node {j} has a velocity");
+        }
+        // The free nodes hang from them, above the floor.
+        assert!(b.x.iter().all(|p| p.y > 0.0), "a node fell through the floor");
     }
 
     /// An animated rest shape is matched, not the fixed one: a rod of two segments, the
