@@ -20,7 +20,8 @@
 //!   `v += α (g − x)/h + h·gravity`, `v *= 1 − damping`, `x += h v`;
 //! - collisions: half-space planes (floors, the walls of a hollow box), solid boxes, and
 //!   body–body contacts between nodes (spheres of radius `radius`), resolved by projection
-//!   with restitution and friction;
+//!   with restitution, and friction against the planes and boxes (body–body contacts take
+//!   the mean restitution of the two bodies and no friction);
 //! - kinematic nodes follow a prescribed rotation, or a body follows an animated rest shape
 //!   from a skinned skeleton ([`Skin`]: `bend`'s gymnast, hands pinned to the rails);
 //! - the energy of a world without kinematic nodes is capped at its starting value
@@ -45,7 +46,8 @@ pub struct BodyParams {
     pub cluster_size: usize,
     /// Velocity damping per substep.
     pub damping: f32,
-    /// Collision restitution (0 = inelastic) and tangential friction (fraction removed).
+    /// Collision restitution (0 = inelastic) and tangential friction (fraction removed; against
+    /// the static colliders only, body–body contacts have none).
     pub restitution: f32,
     pub friction: f32,
 }
