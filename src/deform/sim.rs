@@ -20,7 +20,8 @@
 //!   `v += α (g − x)/h + h·gravity`, `v *= 1 − damping`, `x += h v`;
 //! - collisions: half-space planes (floors, the walls of a hollow box), solid boxes, and
 //!   body–body contacts between nodes (spheres of radius `radius`), resolved by projection
-//!   with restitution and friction;
+//!   with restitution, and friction against the planes and boxes (body–body contacts take
+//!   the mean restitution of the two bodies and no friction);
 //! - kinematic nodes follow a prescribed rotation, or a body follows an animated rest shape
 //!   from a skinned skeleton ([`Skin`]: `bend`'s gymnast, hands pinned to the rails);
 //! - the energy of a world without kinematic nodes is capped at its starting value
@@ -45,7 +46,8 @@ pub struct BodyParams {
     pub cluster_size: usize,
     /// Velocity damping per substep.
     pub damping: f32,
-    /// Collision restitution (0 = inelastic) and tangential friction (fraction removed).
+    /// Collision restitution (0 = inelastic) and tangential friction (fraction removed; against
+    /// the static colliders only, body–body contacts have none).
     pub restitution: f32,
     pub friction: f32,
 }
@@ -163,7 +165,7 @@ impl Body {
         self.x.is_empty()
     }
     /// Makes nodes kinematic: they follow the world's kinematic motion of this body, or, on a
-    /// driven body, their skinned position exactly.
+    /// driven body, their skinned position exactly; with neither they stay where they are.
     pub fn pin(&mut self, nodes: &[u32]) {
         for &j in nodes {
             self.pinned[j as usize] = Some(self.x[j as usize]);
@@ -435,6 +437,12 @@ impl World {
                     b.x[j] = nx;
                     continue;
                 }
+                if b.pinned[j].is_some() {
+                    // Pinned, and no motion drives it: it stays put (the contacts treat it as
+                    // kinematic; test `pinned_nodes_without_a_driver_stay_put`).
+                    b.v[j] = Vec3::ZERO;
+                    continue;
+                }
                 let mut v = b.v[j] + (goals[j] - b.x[j]) * (alpha / h) + self.gravity * h;
                 v *= 1.0 - b.params.damping;
                 b.v[j] = v;
@@ -497,6 +505,11 @@ impl World {
                 if b.pinned[j].is_some() {
                     continue;
                 }
+                // Where the node was at the start of the substep (x += v·h above), taken before
+                // any collider moves it or changes its velocity: from the floor's contact
+                // (friction) a thin post's swept test started inside or past the post (test
+                // `a_node_sliding_on_the_floor_does_not_pass_through_a_post`).
+                let p0 = b.x[j] - b.v[j] * h;
                 for c in &self.colliders {
                     let (n, pen) = match *c {
                         Collider::Plane { n, d } => (n, r - (n.dot(b.x[j]) - d)),
@@ -505,8 +518,6 @@ impl World {
                             let lo = lo - Vec3::splat(r);
                             let hi = hi + Vec3::splat(r);
                             let outside = |q: Vec3| q.cmplt(lo).any() || q.cmpgt(hi).any();
-                            // Where the node was at the start of the substep (x += v·h above).
-                            let p0 = p - b.v[j] * h;
                             if outside(p0) {
                                 // Swept: the face through which the segment p0 → p entered
                                 // the box, also when it passed right through within the
@@ -712,6 +723,59 @@ mod tests {
                 assert_eq!(below, 0, "{speed} m/s, clusters of {cluster_size}: {below} of {n} nodes fell through");
             }
         }
+    }
+
+    /// A node sliding fast along the floor into a thin post standing on it is stopped by the
+    /// post, whatever the friction: the swept box test starts from where the node was at the
+    /// start of the substep, not from its position and velocity after the floor's contact
+    /// (which moved it and cut its velocity by the friction, so that the segment started inside
+    /// or beyond the post and the node passed through: at 15 m/s with friction 0.6, as
+    /// `armadillo-ball`'s, and at 30 m/s with 0.2; review finding).
+    #[test]
+    fn a_node_sliding_on_the_floor_does_not_pass_through_a_post() {
+        for (speed, friction) in [(15.0f32, 0.6f32), (30.0, 0.2), (10.0, 0.9)] {
+            let r = 0.01;
+            let mut w = World::new(1.0 / 30.0, 4);
+            w.colliders.push(Collider::Plane { n: Vec3::Y, d: 0.0 });
+            w.colliders.push(Collider::Box { lo: Vec3::new(-0.02, 0.0, -0.5), hi: Vec3::new(0.02, 1.0, 0.5) });
+            let mut b = Body::new(vec![Vec3::new(-0.06, r, 0.0)], vec![1.0], r, BodyParams { friction, ..BodyParams::default() });
+            b.set_velocity(Vec3::new(speed, 0.0, 0.0));
+            w.bodies.push(b);
+            for _ in 0..3 {
+                w.step_frame();
+            }
+            let x = w.bodies[0].x[0];
+            assert!(x.x < 0.0, "{speed} m/s, friction {friction}: the node passed through the post to {x}");
+        }
+    }
+
+    /// A pinned node of a body with neither a [`Kinematic`] motion nor a [`Skin`] stays where
+    /// it was pinned. It used to be integrated like a free node
+    /// (gravity, goals) while the contacts still treated it as kinematic (skipped by the
+    /// static colliders, infinite mass against other bodies): a body hung from two pinned
+    /// nodes fell, and the pinned nodes passed through the floor (review finding).
+    #[test]
+    fn pinned_nodes_without_a_driver_stay_put() {
+        let x = ball_nodes(Vec3::new(0.0, 0.5, 0.0), 0.3, 2);
+        let n = x.len();
+        let top: Vec<u32> = (0..n as u32).filter(|&j| x[j as usize].y > 0.75).collect();
+        assert!(!top.is_empty());
+        let mut w = World::new(1.0 / 30.0, 4);
+        let mut b = Body::new(x.clone(), vec![1.0; n], 0.05, BodyParams::default());
+        b.pin(&top);
+        w.bodies.push(b);
+        w.colliders.push(Collider::Plane { n: Vec3::Y, d: 0.0 });
+        for _ in 0..60 {
+            w.step_frame();
+        }
+        let b = &w.bodies[0];
+        for &j in &top {
+            let j = j as usize;
+            assert_eq!(b.x[j], x[j], "pinned node {j} moved");
+            assert_eq!(b.v[j], Vec3::ZERO, "pinned node {j} has a velocity");
+        }
+        // The free nodes hang from them, above the floor.
+        assert!(b.x.iter().all(|p| p.y > 0.0), "a node fell through the floor");
     }
 
     /// An animated rest shape is matched, not the fixed one: a rod of two segments, the
