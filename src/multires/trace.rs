@@ -1707,6 +1707,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                     let h =
                         node_test_1(&lc, &tree.nodes.cx[..1], &tree.nodes.cy[..1], &tree.nodes.cz[..1], &tree.nodes.r[..1], clamp, lf, cut);
                     c.inc(Counter::node_tests);
+                    c.inc(Counter::eigen_decompositions);
                     if h.mask & 1 != 0 {
                         sc.locals.push(Local { cone: lc, scale: s, leaf: li, reach: BoxReach::cone(&lc, cut, lf) });
                         let slot = (sc.locals.len() - 1) as u32;
@@ -1759,6 +1760,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                     // round reach lets through (compact instances, wide cones).
                     let arr = |v: &Vec<f32>| -> [f32; 8] { v[f..f + 8].try_into().expect("8 slots") };
                     let h = node_test_x8(cone, &arr(&tl.cx), &arr(&tl.cy), &arr(&tl.cz), &arr(&tl.r), clamp, floor, cut);
+                    c.add(Counter::eigen_decompositions, 8);
                     m &= h.mask as u32;
                     for (t, ts) in t_near.iter_mut().zip(h.t_near) {
                         *t = t.max(ts);
@@ -3463,6 +3465,44 @@ mod tests {
         let at = [(0.0, 0.0), (1.3, -0.4), (-2.1, 2.6)];
         let spread = check_mipmap_blend(&ms, &base, hg, |s| h_root * 1.001 / s, &at);
         assert!(spread > 0.01, "the two levels' sums differ by {spread} only");
+    }
+
+    /// 8×8 unit tiles on y = 0 around the origin, each its own instance.
+    fn tiles_scene() -> Scene {
+        use crate::scene::{builtin, Target};
+        let mut scene = Scene::empty("tiles");
+        let tile = scene.add_mesh(builtin::checkerboard(8, 1.0, 0, 0));
+        for i in -4..4 {
+            for j in -4..4 {
+                scene.instance(Target::Mesh(tile), Affine3A::from_translation(Vec3::new(i as f32 + 0.5, 0.0, j as f32 + 0.5)), None);
+            }
+        }
+        scene.validate().unwrap();
+        scene
+    }
+
+    /// `eigen_decompositions` counts every decomposition the traversal solves: each one it
+    /// keeps for a node (`Scratch::eigs`) was counted. (Review finding: those of the instance
+    /// tree's sphere tests, 8 per inner slot, and of an instance root's test were not, so a
+    /// cone that stopped at the instance roots counted none.)
+    #[test]
+    fn every_kept_decomposition_is_counted() {
+        let scene = tiles_scene();
+        let ms = MultiresScene::build_in(&scene, &BuildParams::default(), None).unwrap();
+        let abort = AtomicBool::new(false);
+        for (group_points, s) in [(false, 0.02), (false, 0.3), (true, 0.3), (true, 0.01)] {
+            let tp = TraceParams { group_points, termination: Termination::Final, ..Default::default() };
+            let tr = Tracer::new(&ms, &tp, 1e-7, &abort, None);
+            let (mut sc, mut c, mut ab) = (Scratch::default(), Counters::default(), ABuffer::new(16));
+            tr.traverse(&down_cone(0.3, -0.2, s), &mut ab, Collect::Alpha, &mut sc, &mut c);
+            let kept = sc.eigs.len() as u64;
+            assert!(kept > 0);
+            assert!(
+                c.get(Counter::eigen_decompositions) >= kept,
+                "groups {group_points}, s {s}: {} counted, {kept} kept",
+                c.get(Counter::eigen_decompositions)
+            );
+        }
     }
 
     #[test]
