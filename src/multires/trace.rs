@@ -1678,8 +1678,22 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let cut = self.p.node_cut(self.tri);
         let reach = BoxReach::cone(cone, cut, floor);
         c.inc(Counter::instance_tests);
-        let Some(t_root) = tlas_box_test_1(&reach, tl, 0) else { return };
-        sc.push(Entry { t: t_root, node: 0, slot: 0, blend: 1.0, kind: K_TLAS, eig: u32::MAX });
+        let Some(mut t_root) = tlas_box_test_1(&reach, tl, 0) else { return };
+        // An inner root slot with points is a level of detail like every slot below it: its
+        // sphere test gives the decomposition that chooses it, as for the slots below (until
+        // a review finding the root had none, and its points were never used).
+        let mut root_eig = u32::MAX;
+        if tl.child[0] & LEAF == 0 && self.p.group_points && self.p.points && self.ms.groups.h[0] > 0.0 {
+            let h = node_test_1(cone, &tl.cx[..1], &tl.cy[..1], &tl.cz[..1], &tl.r[..1], clamp, floor, cut);
+            c.inc(Counter::eigen_decompositions);
+            if h.mask & 1 == 0 {
+                return;
+            }
+            t_root = t_root.max(h.t_near[0]);
+            sc.eigs.push(h.eig[0]);
+            root_eig = (sc.eigs.len() - 1) as u32;
+        }
+        sc.push(Entry { t: t_root, node: 0, slot: 0, blend: 1.0, kind: K_TLAS, eig: root_eig });
         let mut steps = 0u32;
         while let Some(e) = sc.pop() {
             let done = match self.p.termination {
@@ -3503,6 +3517,30 @@ mod tests {
                 c.get(Counter::eigen_decompositions)
             );
         }
+    }
+
+    /// The root slot of the instance tree is a slot like the others (group.rs: "the
+    /// traversal uses a slot's points exactly as an octree node's"): a cone wider than the
+    /// root slot's spacing takes its points (and, with the blend, its children's), not only
+    /// those of the slots below. (Review finding: the root entry had no decomposition, so its
+    /// points, built and stored, were never used; a cone as wide as the whole scene descended
+    /// to the eight slots below.)
+    #[test]
+    fn the_root_slot_is_a_level_of_detail() {
+        let scene = tiles_scene();
+        let ms = MultiresScene::build_in(&scene, &BuildParams::default(), None).unwrap();
+        let (tl, g) = (&ms.tlas, &ms.groups);
+        assert!(tl.child[0] & LEAF == 0 && g.h[0] > 0.0, "the root is an inner slot with points");
+        let abort = AtomicBool::new(false);
+        let tp = TraceParams { termination: Termination::Final, mipmap: false, ..Default::default() };
+        let tr = Tracer::new(&ms, &tp, 1e-7, &abort, None);
+        // λ·σ = 1.5·h_root: the root's level.
+        let s = 1.5 * g.h[0] / tp.lod_scale;
+        let (mut sc, mut c, mut ab) = (Scratch::default(), Counters::default(), ABuffer::new(16));
+        tr.traverse(&down_cone(0.0, 0.0, s), &mut ab, Collect::Alpha, &mut sc, &mut c);
+        assert_eq!(c.get(Counter::surfel_tests), g.count[0] as u64, "only the root slot's points are tested");
+        let w: f32 = ab.frags.iter().map(|f| f.w).sum();
+        assert!(w >= 0.9, "weight sum {w}");
     }
 
     #[test]
