@@ -909,7 +909,7 @@ pub fn triangle_weight_per_box(
 /// its maximum over the range sits at an end. So a sphere whose centre lies farther than
 /// cut·max e_k + r from the axis *along a_k* holds no triangle that passes: the cull is
 /// exact, not a heuristic (tested against the full test) — the paper's bounding-sphere test
-/// in the ellipse's principal axes (§4.5), applied to the triangles stored in a node. (The
+/// in the ellipse's principal axes (§4.6), applied to the triangles stored in a node. (The
 /// first version bounded the footprint by the disc of radius R_CUT·√tr Σ; the box in the
 /// principal axes is tighter wherever the footprint is anisotropic.) `floor` as in the node
 /// test; a relative slack of 1e-5 absorbs the different rounding of the two evaluations.
@@ -2089,7 +2089,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         }
     }
 
-    /// The anti-aliased ray–triangle test (§4.3): weight, barycentrics b1 b2 of the closest
+    /// The anti-aliased ray–triangle test (§4.5): weight, barycentrics b1 b2 of the closest
     /// point, depth, and the footprint's major semi-axis at the triangle, or `None` below the
     /// cut-off.
     fn triangle_hit(&self, lc: &Cone, s: f32, pw: [Vec3; 3], boxe: &Eigen2, c: &mut Counters) -> Option<(f32, f32, f32, f32, f32)> {
