@@ -430,12 +430,13 @@ pub struct ABuffer {
     pub frags: Vec<Frag>,
     pub cap: usize,
     /// Fragments [0, n_final) lie wholly in front of the traversal front.
+    /// Their compositing ([`Over`], coverage masks included).
     n_final: usize,
-    alpha_final: f32,
-    /// Fragments [0, n_begun) begin before the last traversal front `front`; `alpha_begun`
-    /// is their alpha. Valid unless `dirty` (an insertion since).
+    over_final: Over,
+    /// Fragments [0, n_begun) begin before the last traversal front `front`; `over_begun`
+    /// is their compositing. Valid unless `dirty` (an insertion since).
     n_begun: usize,
-    alpha_begun: f32,
+    over_begun: Over,
     front: f32,
     dirty: bool,
     pub merges: u64,
@@ -450,9 +451,9 @@ impl ABuffer {
             frags: Vec::with_capacity(cap.max(2) + 1),
             cap: cap.max(2),
             n_final: 0,
-            alpha_final: 0.0,
+            over_final: Over::default(),
             n_begun: 0,
-            alpha_begun: 0.0,
+            over_begun: Over::default(),
             front: f32::NEG_INFINITY,
             dirty: false,
             merges: 0,
@@ -461,9 +462,9 @@ impl ABuffer {
     pub fn clear(&mut self) {
         self.frags.clear();
         self.n_final = 0;
-        self.alpha_final = 0.0;
+        self.over_final = Over::default();
         self.n_begun = 0;
-        self.alpha_begun = 0.0;
+        self.over_begun = Over::default();
         self.front = f32::NEG_INFINITY;
         self.dirty = false;
         self.merges = 0;
@@ -526,17 +527,16 @@ impl ABuffer {
     pub fn opaque_before(&mut self, t_front: f32) -> bool {
         // Fragments may have been merged since; recompute the final prefix conservatively.
         if self.n_final > 0 {
-            self.alpha_final = 0.0;
+            self.over_final = Over::default();
             for f in &self.frags[..self.n_final] {
-                self.alpha_final += (1.0 - self.alpha_final) * f.alpha();
+                self.over_final.add_frag(f);
             }
         }
         while self.n_final < self.frags.len() && self.frags[self.n_final].z1 < t_front {
-            let a = self.frags[self.n_final].alpha();
-            self.alpha_final += (1.0 - self.alpha_final) * a;
+            self.over_final.add_frag(&self.frags[self.n_final]);
             self.n_final += 1;
         }
-        self.alpha_final >= OPAQUE
+        self.over_final.acc >= OPAQUE
     }
 
     /// The paper's early termination test (§4.4): has the alpha of the ray reached 1? Counts
@@ -550,7 +550,7 @@ impl ABuffer {
     pub fn opaque(&mut self, t_front: f32) -> bool {
         if self.dirty || t_front < self.front {
             self.n_begun = 0;
-            self.alpha_begun = 0.0;
+            self.over_begun = Over::default();
             self.dirty = false;
         }
         self.front = t_front;
@@ -563,23 +563,21 @@ impl ABuffer {
                 // silhouette, whose edge-on pieces reach deep, let the floor behind it end
                 // the cone before the object's nearer pieces were found).
                 let ([a, b], _) = f.parts();
-                let begun = if a.z0 < t_front { a.alpha() } else { b.alpha() };
-                return self.alpha_begun + (1.0 - self.alpha_begun) * begun >= OPAQUE;
+                let mut o = self.over_begun;
+                o.add(if a.z0 < t_front { &a } else { &b });
+                return o.acc >= OPAQUE;
             }
-            self.alpha_begun += (1.0 - self.alpha_begun) * f.alpha();
+            self.over_begun.add_frag(f);
             self.n_begun += 1;
         }
-        self.alpha_begun >= OPAQUE
+        self.over_begun.acc >= OPAQUE
     }
 
     /// Total alpha of all fragments, front to back ([`Over`]).
     pub fn alpha(&self) -> f32 {
         let mut o = Over::default();
         for f in &self.frags {
-            let (p, n) = f.parts();
-            for q in &p[..n] {
-                o.add(q);
-            }
+            o.add_frag(f);
         }
         o.acc
     }
@@ -614,6 +612,21 @@ impl Over {
         self.covered |= f.mask;
         self.acc += k;
         k
+    }
+    /// Adds a whole fragment: its parts ([`Frag::parts`]) in turn, as the pixel composites
+    /// them, so that early termination sees the alpha the pixel gets, the coverage masks of
+    /// the fragments in front included (until a review finding the termination tests
+    /// composited each fragment's [`Frag::alpha`] without them; test
+    /// `leaves_stacked_on_one_half_do_not_end_the_ray`).
+    #[inline]
+    pub fn add_frag(&mut self, f: &Frag) {
+        if f.other.w > 0.0 {
+            let (p, _) = f.parts();
+            self.add(&p[0]);
+            self.add(&p[1]);
+        } else {
+            self.add(f);
+        }
     }
 }
 
@@ -923,6 +936,41 @@ mod tests {
             assert_eq!(f.alpha(), o.acc, "floor mask {floor_mask:x}");
             assert_eq!(ab.alpha(), o.acc);
         }
+    }
+
+    /// `--coverage-masks`: early termination sees the alpha the pixel gets across fragments
+    /// too. Twelve leaves on the same half of the footprint, one behind the other, cover that
+    /// half: the pixel's alpha is about 0.54 (`Over`), and the ray must go on to the wall
+    /// behind. (Review finding: both termination tests composited the fragments' alphas
+    /// without their masks, 1 − 0.5¹² = 0.9998, and ended the ray there: the wall was never
+    /// reached and the background showed through the other half.)
+    #[test]
+    fn leaves_stacked_on_one_half_do_not_end_the_ray() {
+        let masked = |t: f32, w: f32, mask: u64| Frag { mask, ..smp(t, 0.1, w, Vec3::ONE) };
+        let left = 0x0000_0000_ffff_ffffu64;
+        let mut ab = ABuffer::new(16);
+        for i in 0..12 {
+            ab.insert(&pc(masked(1.0 + i as f32, 0.5, left)));
+        }
+        assert_eq!(ab.frags.len(), 12);
+        assert!(ab.alpha() < 0.6, "{}", ab.alpha());
+        assert!(!ab.opaque(20.0), "paper's rule: alpha {} only", ab.alpha());
+        assert!(!ab.opaque_before(20.0), "final rule: alpha {} only", ab.alpha());
+        // The wall behind fills the other half.
+        ab.insert(&pc(masked(15.0, 1.0, u64::MAX)));
+        assert!(ab.alpha() >= OPAQUE, "{}", ab.alpha());
+        assert!(ab.opaque(20.0));
+        assert!(ab.opaque_before(20.0));
+        // A two-mesh fragment whose second part has not begun counts its first part only,
+        // behind the same masks: still not opaque.
+        let mut ab = ABuffer::new(16);
+        for i in 0..12 {
+            ab.insert(&pc(masked(1.0 + i as f32, 0.5, left)));
+        }
+        ab.insert(&pc(Frag { key: 1, ..masked(15.0, 0.5, left) }));
+        ab.insert(&pc(Frag { key: 2, ..smp(15.3, 0.25, 1.0, Vec3::ONE) }));
+        assert_eq!(ab.frags.len(), 13);
+        assert!(!ab.opaque(15.0), "alpha {}", ab.alpha());
     }
 
     #[test]

@@ -909,7 +909,7 @@ pub fn triangle_weight_per_box(
 /// its maximum over the range sits at an end. So a sphere whose centre lies farther than
 /// cut·max e_k + r from the axis *along a_k* holds no triangle that passes: the cull is
 /// exact, not a heuristic (tested against the full test) — the paper's bounding-sphere test
-/// in the ellipse's principal axes (§4.5), applied to the triangles stored in a node. (The
+/// in the ellipse's principal axes (§4.6), applied to the triangles stored in a node. (The
 /// first version bounded the footprint by the disc of radius R_CUT·√tr Σ; the box in the
 /// principal axes is tighter wherever the footprint is anisotropic.) `floor` as in the node
 /// test; a relative slack of 1e-5 absorbs the different rounding of the two evaluations.
@@ -1678,8 +1678,22 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let cut = self.p.node_cut(self.tri);
         let reach = BoxReach::cone(cone, cut, floor);
         c.inc(Counter::instance_tests);
-        let Some(t_root) = tlas_box_test_1(&reach, tl, 0) else { return };
-        sc.push(Entry { t: t_root, node: 0, slot: 0, blend: 1.0, kind: K_TLAS, eig: u32::MAX });
+        let Some(mut t_root) = tlas_box_test_1(&reach, tl, 0) else { return };
+        // An inner root slot with points is a level of detail like every slot below it: its
+        // sphere test gives the decomposition that chooses it, as for the slots below (until
+        // a review finding the root had none, and its points were never used).
+        let mut root_eig = u32::MAX;
+        if tl.child[0] & LEAF == 0 && self.p.group_points && self.p.points && self.ms.groups.h[0] > 0.0 {
+            let h = node_test_1(cone, &tl.cx[..1], &tl.cy[..1], &tl.cz[..1], &tl.r[..1], clamp, floor, cut);
+            c.inc(Counter::eigen_decompositions);
+            if h.mask & 1 == 0 {
+                return;
+            }
+            t_root = t_root.max(h.t_near[0]);
+            sc.eigs.push(h.eig[0]);
+            root_eig = (sc.eigs.len() - 1) as u32;
+        }
+        sc.push(Entry { t: t_root, node: 0, slot: 0, blend: 1.0, kind: K_TLAS, eig: root_eig });
         let mut steps = 0u32;
         while let Some(e) = sc.pop() {
             let done = match self.p.termination {
@@ -1707,6 +1721,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                     let h =
                         node_test_1(&lc, &tree.nodes.cx[..1], &tree.nodes.cy[..1], &tree.nodes.cz[..1], &tree.nodes.r[..1], clamp, lf, cut);
                     c.inc(Counter::node_tests);
+                    c.inc(Counter::eigen_decompositions);
                     if h.mask & 1 != 0 {
                         sc.locals.push(Local { cone: lc, scale: s, leaf: li, reach: BoxReach::cone(&lc, cut, lf) });
                         let slot = (sc.locals.len() - 1) as u32;
@@ -1759,6 +1774,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                     // round reach lets through (compact instances, wide cones).
                     let arr = |v: &Vec<f32>| -> [f32; 8] { v[f..f + 8].try_into().expect("8 slots") };
                     let h = node_test_x8(cone, &arr(&tl.cx), &arr(&tl.cy), &arr(&tl.cz), &arr(&tl.r), clamp, floor, cut);
+                    c.add(Counter::eigen_decompositions, 8);
                     m &= h.mask as u32;
                     for (t, ts) in t_near.iter_mut().zip(h.t_near) {
                         *t = t.max(ts);
@@ -2073,7 +2089,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         }
     }
 
-    /// The anti-aliased ray–triangle test (§4.3): weight, barycentrics b1 b2 of the closest
+    /// The anti-aliased ray–triangle test (§4.5): weight, barycentrics b1 b2 of the closest
     /// point, depth, and the footprint's major semi-axis at the triangle, or `None` below the
     /// cut-off.
     fn triangle_hit(&self, lc: &Cone, s: f32, pw: [Vec3; 3], boxe: &Eigen2, c: &mut Counters) -> Option<(f32, f32, f32, f32, f32)> {
@@ -3463,6 +3479,68 @@ mod tests {
         let at = [(0.0, 0.0), (1.3, -0.4), (-2.1, 2.6)];
         let spread = check_mipmap_blend(&ms, &base, hg, |s| h_root * 1.001 / s, &at);
         assert!(spread > 0.01, "the two levels' sums differ by {spread} only");
+    }
+
+    /// 8×8 unit tiles on y = 0 around the origin, each its own instance.
+    fn tiles_scene() -> Scene {
+        use crate::scene::{builtin, Target};
+        let mut scene = Scene::empty("tiles");
+        let tile = scene.add_mesh(builtin::checkerboard(8, 1.0, 0, 0));
+        for i in -4..4 {
+            for j in -4..4 {
+                scene.instance(Target::Mesh(tile), Affine3A::from_translation(Vec3::new(i as f32 + 0.5, 0.0, j as f32 + 0.5)), None);
+            }
+        }
+        scene.validate().unwrap();
+        scene
+    }
+
+    /// `eigen_decompositions` counts every decomposition the traversal solves: each one it
+    /// keeps for a node (`Scratch::eigs`) was counted. (Review finding: those of the instance
+    /// tree's sphere tests, 8 per inner slot, and of an instance root's test were not, so a
+    /// cone that stopped at the instance roots counted none.)
+    #[test]
+    fn every_kept_decomposition_is_counted() {
+        let scene = tiles_scene();
+        let ms = MultiresScene::build_in(&scene, &BuildParams::default(), None).unwrap();
+        let abort = AtomicBool::new(false);
+        for (group_points, s) in [(false, 0.02), (false, 0.3), (true, 0.3), (true, 0.01)] {
+            let tp = TraceParams { group_points, termination: Termination::Final, ..Default::default() };
+            let tr = Tracer::new(&ms, &tp, 1e-7, &abort, None);
+            let (mut sc, mut c, mut ab) = (Scratch::default(), Counters::default(), ABuffer::new(16));
+            tr.traverse(&down_cone(0.3, -0.2, s), &mut ab, Collect::Alpha, &mut sc, &mut c);
+            let kept = sc.eigs.len() as u64;
+            assert!(kept > 0);
+            assert!(
+                c.get(Counter::eigen_decompositions) >= kept,
+                "groups {group_points}, s {s}: {} counted, {kept} kept",
+                c.get(Counter::eigen_decompositions)
+            );
+        }
+    }
+
+    /// The root slot of the instance tree is a slot like the others (group.rs: "the
+    /// traversal uses a slot's points exactly as an octree node's"): a cone wider than the
+    /// root slot's spacing takes its points (and, with the blend, its children's), not only
+    /// those of the slots below. (Review finding: the root entry had no decomposition, so its
+    /// points, built and stored, were never used; a cone as wide as the whole scene descended
+    /// to the eight slots below.)
+    #[test]
+    fn the_root_slot_is_a_level_of_detail() {
+        let scene = tiles_scene();
+        let ms = MultiresScene::build_in(&scene, &BuildParams::default(), None).unwrap();
+        let (tl, g) = (&ms.tlas, &ms.groups);
+        assert!(tl.child[0] & LEAF == 0 && g.h[0] > 0.0, "the root is an inner slot with points");
+        let abort = AtomicBool::new(false);
+        let tp = TraceParams { termination: Termination::Final, mipmap: false, ..Default::default() };
+        let tr = Tracer::new(&ms, &tp, 1e-7, &abort, None);
+        // λ·σ = 1.5·h_root: the root's level.
+        let s = 1.5 * g.h[0] / tp.lod_scale;
+        let (mut sc, mut c, mut ab) = (Scratch::default(), Counters::default(), ABuffer::new(16));
+        tr.traverse(&down_cone(0.0, 0.0, s), &mut ab, Collect::Alpha, &mut sc, &mut c);
+        assert_eq!(c.get(Counter::surfel_tests), g.count[0] as u64, "only the root slot's points are tested");
+        let w: f32 = ab.frags.iter().map(|f| f.w).sum();
+        assert!(w >= 0.9, "weight sum {w}");
     }
 
     #[test]
