@@ -1652,6 +1652,9 @@ fn cache_gate_closes_on_misses_and_probes() {
     }
 }
 
+/// A motion of the nodes for `degenerate_nodes_and_reflections_keep_surfels_inside`.
+type Motion<'a> = Box<dyn Fn(Vec3) -> Vec3 + 'a>;
+
 /// Cases the property test `lazy_spheres_contain_their_surfels` does not draw: degenerate
 /// simulation-node sets (one node, two, collinear, coplanar), one node per surfel,
 /// reflections, flattening, shear and collapse to a point, models at 1e-4 and 1e4 scale;
@@ -1679,7 +1682,7 @@ fn degenerate_nodes_and_reflections_keep_surfels_inside() {
                 let p = ObjectParams { nodes_per_surfel: nps, ..ObjectParams::default() };
                 let m = vec![1.0; nodes.len()];
                 let obj = SurfelObject::build(SurfelModel::single("ball", s.clone(), [1.0; 3]), nodes.clone(), m, &p).unwrap();
-                let motions: Vec<(&str, Box<dyn Fn(Vec3) -> Vec3>)> = vec![
+                let motions: Vec<(&str, Motion<'_>)> = vec![
                     ("mirror x", Box::new(|x: Vec3| Vec3::new(-x.x, x.y, x.z))),
                     ("point reflection", Box::new(|x: Vec3| -x + Vec3::ONE * scale)),
                     ("mirror and turn", Box::new(|x: Vec3| Quat::from_rotation_y(1.0) * Vec3::new(x.x, -x.y, x.z))),
@@ -1709,7 +1712,7 @@ fn degenerate_nodes_and_reflections_keep_surfels_inside() {
                         let mut ctr = Counters::default();
                         {
                             let k = 0u32;
-                            tr.begin_frame(&[def.clone()]).unwrap();
+                            tr.begin_frame(std::slice::from_ref(&def)).unwrap();
                             for (i, ray) in random_rays(bits + k, 16, c, 4.0 * scale, 1.5 * scale).iter().enumerate() {
                                 let _ = tr.intersect(ray, Some(i as u32), &mut ctr);
                                 let _ = tr.occluded(ray, &mut ctr);
