@@ -2702,6 +2702,19 @@ fn variance_threshold_without_a_second_pass_is_refused() {
     runs(&args);
 }
 
+/// Runs `lodtrace ARGS` under `ulimit -v KB` (through sh) and checks that it is refused
+/// (exit 2, one error line containing `says`) and left `unwritten` unwritten: without the
+/// check these runs aborted on a failed allocation (exit 134, a backtrace, no error line).
+fn refused_under_memory_limit(kb: u32, args: &str, says: &str, unwritten: &std::path::Path) {
+    let exe = env!("CARGO_BIN_EXE_lodtrace");
+    let o = Command::new("sh").arg("-c").arg(format!("ulimit -v {kb}; exec {exe} {args}")).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{args}: {err}");
+    one_error_line(&err);
+    assert!(err.contains(says), "{args}: {err}");
+    assert!(!unwritten.exists(), "{args}: {} written", unwritten.display());
+}
+
 /// An OBJ without line ends (here a sparse 3 GiB file of zeros, as a binary file named .obj
 /// would be) is refused once a line passes 64 MB: it was read into one line until the memory
 /// ran out, and the failed allocation aborted (exit 134, a backtrace, no error line).
@@ -2710,18 +2723,9 @@ fn obj_without_line_ends_is_refused_before_the_memory_runs_out() {
     let d = tmp("objnoeol");
     let obj = d.join("sparse.obj");
     std::fs::File::create(&obj).unwrap().set_len(3 << 30).unwrap();
-    let exe = env!("CARGO_BIN_EXE_lodtrace");
     let out = d.join("x.png");
-    let o = Command::new("sh")
-        .arg("-c")
-        .arg(format!("ulimit -v 2000000; exec {exe} render {} --width 16 --height 12 --quiet --out {}", obj.display(), out.display()))
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{err}");
-    one_error_line(&err);
-    assert!(err.contains("line 1 is longer than 64 MB"), "{err}");
-    assert!(!out.exists());
+    let args = format!("render {} --width 16 --height 12 --quiet --out {}", obj.display(), out.display());
+    refused_under_memory_limit(2_000_000, &args, "line 1 is longer than 64 MB", &out);
 }
 
 /// A surfel object larger than the memory the process may have is refused before its
@@ -2732,20 +2736,8 @@ fn obj_without_line_ends_is_refused_before_the_memory_runs_out() {
 fn surfel_objects_larger_than_the_memory_are_refused() {
     let d = tmp("surfelmem");
     let stats = d.join("s.json");
-    let exe = env!("CARGO_BIN_EXE_lodtrace");
-    let o = Command::new("sh")
-        .arg("-c")
-        .arg(format!(
-            "ulimit -v 400000; exec {exe} animate bend --frames 1 --detail 2 --width 16 --height 12 --quiet --stats {}",
-            stats.display()
-        ))
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{err}");
-    one_error_line(&err);
-    assert!(err.contains("surfels needs about"), "{err}");
-    assert!(!stats.exists());
+    let args = format!("animate bend --frames 1 --detail 2 --width 16 --height 12 --quiet --stats {}", stats.display());
+    refused_under_memory_limit(400_000, &args, "surfels needs about", &stats);
 }
 
 /// `verify --rays N` beyond the memory the process may have is refused before the rays are
@@ -2755,17 +2747,8 @@ fn surfel_objects_larger_than_the_memory_are_refused() {
 fn verify_rays_beyond_the_memory_are_refused() {
     let d = tmp("verifymem");
     let json = d.join("v.json");
-    let exe = env!("CARGO_BIN_EXE_lodtrace");
-    let o = Command::new("sh")
-        .arg("-c")
-        .arg(format!("ulimit -v 1200000; exec {exe} verify plane --rays 10000000 --json {}", json.display()))
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{err}");
-    one_error_line(&err);
-    assert!(err.contains("--rays 10000000 needs about"), "{err}");
-    assert!(!json.exists());
+    let args = format!("verify plane --rays 10000000 --json {}", json.display());
+    refused_under_memory_limit(1_200_000, &args, "--rays 10000000 needs about", &json);
 }
 
 /// A PLY header declaring an element or a property twice is refused, naming it: a second

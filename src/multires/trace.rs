@@ -3452,15 +3452,7 @@ mod tests {
     /// spacing; the 10% margin of the point weights does not cover both.
     #[test]
     fn mipmap_blends_an_instance_slot_with_its_instances() {
-        use crate::scene::{builtin, Target};
-        let mut scene = Scene::empty("tiles");
-        let tile = scene.add_mesh(builtin::checkerboard(8, 1.0, 0, 0));
-        for i in -4..4 {
-            for j in -4..4 {
-                scene.instance(Target::Mesh(tile), Affine3A::from_translation(Vec3::new(i as f32 + 0.5, 0.0, j as f32 + 0.5)), None);
-            }
-        }
-        scene.validate().unwrap();
+        let scene = tiles_scene();
         let ms = MultiresScene::build_in(&scene, &BuildParams::default(), None).unwrap();
         // The tree the test assumes: eight inner slots below the root, one spacing, their
         // children leaf instances.
