@@ -784,6 +784,29 @@ fn animate_out_none_writes_no_images() {
     assert!(left.is_empty(), "--out none left {left:?}");
 }
 
+/// `none` for an optional output means no output, as `animate --out none` does: `--stats
+/// none` (render, animate) and `bench --out none` wrote a file or folder named `none` until
+/// stop 82. `demo`, which always writes, refuses `--out none`.
+#[test]
+fn none_means_no_output() {
+    let d = tmp("nonemeansnone");
+    let run = |args: &[&str]| Command::new(env!("CARGO_BIN_EXE_lodtrace")).args(args).current_dir(&d).output().expect("run lodtrace");
+    let o = run(&["render", "spheres", "--width", "16", "--height", "12", "--quiet", "--out", "x.png", "--stats", "none"]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = run(&["animate", "heads", "--frames", "1", "--detail", "0.05", "--width", "16", "--height", "12", "--quiet", "--stats", "none"]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = run(&["bench", "spheres", "--methods", "whitted", "--width", "16", "--height", "12", "--quiet", "--out", "none"]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("whitted"), "bench --out none still prints its table");
+    let o = run(&["demo", "--quick", "--out", "none"]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("--out none"), "{err}");
+    let left: Vec<_> = std::fs::read_dir(&d).unwrap().map(|e| e.unwrap().file_name()).filter(|n| n != "x.png").collect();
+    assert!(left.is_empty(), "none made {left:?}");
+}
+
 /// `--stats -` writes the JSON to standard output, which render and animate leave to it
 /// (their summaries go to standard error), so it pipes into `jq`; until stop 80 it was a file
 /// named `-`. `verify --json -` is refused: verify's table is on standard output.
@@ -2205,6 +2228,8 @@ fn stop65_sweep_findings_are_refused() {
     for (scene, spec, says) in [
         ("plane", "distributed:fps=8:spp=4", "fps=8 exceeds spp=4"),
         ("plane", "distributed:fps=8", "fps=8 exceeds spp=1"),
+        ("plane", "distributed:vt=0", "vt has no effect at spp=1 with fps=1"),
+        ("plane", "distributed:spp=2:vt=0.1", "vt has no effect at spp=2 with fps=2"),
         ("plane", "lod:levels=0", "method spec 'lod:levels=0': --lod-levels 0 out of range"),
         // Negative and non-finite values name the range `render` states for the option the
         // key sets (until stop 75: "bad value '-1' for c" alone).
@@ -2215,7 +2240,7 @@ fn stop65_sweep_findings_are_refused() {
         ("plane", "multires:lod=inf", "--lod-scale inf out of range [0.25, 64]"),
         ("plane", "multires:budget=-1", "--time-budget -1 out of range (0, 604800] seconds"),
         ("plane", "cone:lens=-1", "--lens-scale -1 out of range (0, 16]"),
-        ("plane", "distributed:vt=nan", "--variance-threshold must be a finite number >= 0"),
+        ("plane", "distributed:spp=4:vt=nan", "--variance-threshold must be a finite number >= 0"),
         ("plane", "lod:f=nan", "--lod-f NaN out of range (1..=100"),
         ("plane", "lod:dist=-1", "--lod-distance -1 must be a positive distance"),
         ("bend", "surfel:detail=nan", "method spec 'surfel:detail=nan': detail=NaN out of range (0, 10]"),

@@ -65,7 +65,7 @@ pub struct AnimateArgs {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Statistics as JSON: per-frame times and work counts, radius ratios per level, totals
-    /// (`-`: to standard output).
+    /// (`-`: to standard output; `none`: not written).
     #[arg(long)]
     pub stats: Option<PathBuf>,
     /// Surfel and node counts relative to the paper's models (1 ≈ paper size).

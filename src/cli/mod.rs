@@ -119,7 +119,7 @@ pub struct RenderArgs {
     #[arg(long, value_parser = parse_aov)]
     pub aov: Vec<(String, PathBuf)>,
     /// Statistics as JSON: times, counters, hierarchy and per-cone-kind profile (`-`: to
-    /// standard output).
+    /// standard output; `none`: not written).
     #[arg(long)]
     pub stats: Option<PathBuf>,
     #[command(flatten)]
@@ -193,8 +193,24 @@ fn parse_aov(s: &str) -> Result<(String, PathBuf), String> {
 }
 
 /// Runs a parsed command; returns the process exit code.
+/// `none` for an optional output (`--stats none`, `bench --out none`) means no output, as
+/// `animate --out none` does (`animate::run`); until stop 82 `--stats none` and
+/// `bench --out none` wrote a file or folder named `none`.
+fn none_is_absent(p: &mut Option<PathBuf>) {
+    if p.as_deref().is_some_and(|p| p.as_os_str() == "none") {
+        *p = None;
+    }
+}
+
 pub fn run(cli: Cli) -> i32 {
-    let r = match cli.cmd {
+    let mut cmd = cli.cmd;
+    match &mut cmd {
+        Command::Render(a) => none_is_absent(&mut a.stats),
+        Command::Animate(a) => none_is_absent(&mut a.stats),
+        Command::Bench(a) => none_is_absent(&mut a.out),
+        _ => {}
+    }
+    let r = match cmd {
         Command::Render(a) => render::run(&a).map(|_| 0),
         Command::Verify(a) => verify::run(&a),
         Command::Compare(a) => compare::run(&a),

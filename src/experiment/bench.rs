@@ -59,7 +59,8 @@ pub struct BenchArgs {
     /// Reference spec for the error columns, e.g. `distributed:embree:spp=256:vt=0`.
     #[arg(long)]
     pub reference: Option<String>,
-    /// Output folder for bench.json, the plot and the images (created if missing).
+    /// Output folder for bench.json, the plot and the images (created if missing; none or
+    /// absent: the table only).
     #[arg(long)]
     pub out: Option<PathBuf>,
     #[arg(long, default_value_t = 640, value_parser = clap::value_parser!(u32).range(1..=32768))]
@@ -836,6 +837,17 @@ pub(crate) fn plan(a: &BenchArgs) -> Result<Plan> {
             return Err(Error::Usage(format!(
                 "method spec '{}': fps={} exceeds spp={} (the per-pixel maximum, which caps it): raise spp",
                 sp.text, sp.first_pass_spp, sp.spp
+            )));
+        }
+        // As `render --variance-threshold` (stop 80): the threshold picks the second pass's
+        // pixels, and a spec whose first pass takes every sample has none. Accepted without
+        // effect until stop 82.
+        if sp.text.split(':').any(|p| p.starts_with("vt=")) && sp.first_pass_spp >= sp.spp {
+            return Err(Error::Usage(format!(
+                "method spec '{}': vt has no effect at spp={} with fps={}: the first pass takes every sample, there is no second pass",
+                sp.text,
+                sp.spp,
+                sp.first_pass_spp.min(sp.spp)
             )));
         }
     }

@@ -190,6 +190,11 @@ pub fn create_out_dir(dir: &Path) -> Result<()> {
     if dir.as_os_str() == "-" {
         return Err(Error::Usage("--out -: --out names a folder here; only --stats takes - for standard output".into()));
     }
+    // `none` means no output where an output is optional (`--stats none`, `bench --out none`,
+    // `animate --out none`); a command that always writes refuses it rather than make `./none`.
+    if dir.as_os_str() == "none" {
+        return Err(Error::Usage("--out none: this command always writes its output; name a folder".into()));
+    }
     if dir.exists() && !dir.is_dir() {
         return Err(Error::Usage(format!("{}: exists and is not a folder (--out names a folder here)", dir.display())));
     }
