@@ -110,6 +110,17 @@ pub fn check_input_file(path: &std::path::Path) -> Result<()> {
     }
 }
 
+/// [`check_input_file`], and the memory a whole-file read of `path` takes: `per_byte` times
+/// the file's length (the text and what is parsed from it, measured per format at its call).
+/// A file larger than the memory aborted the run on a failed allocation (a sparse 3 GiB OFF,
+/// TOML or PLY file under `ulimit -v 2000000`: exit 134, no error line; until stop 82).
+pub fn check_input_read(path: &std::path::Path, per_byte: u64) -> Result<()> {
+    check_input_file(path)?;
+    let len = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
+    check_memory(len.saturating_mul(per_byte), &format!("reading a file of {:.1} MB", len as f64 / 1e6))
+        .map_err(|m| Error::io(path, std::io::Error::new(std::io::ErrorKind::OutOfMemory, m)))
+}
+
 /// Refuses work that would need about `bytes` of memory when this process cannot have that
 /// much: the smaller of the system's available memory (`MemAvailable`) and what the address
 /// space limit (`ulimit -v`) leaves. A failed allocation aborts without an error line; this

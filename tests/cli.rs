@@ -2753,6 +2753,32 @@ fn obj_without_line_ends_is_refused_before_the_memory_runs_out() {
     refused_under_memory_limit(2_000_000, &args, "line 1 is longer than 64 MB", &out);
 }
 
+/// Whole-file reads check the file against the memory first: a sparse 3 GiB OFF or TOML file
+/// was read whole and aborted on the failed allocation (exit 134, a backtrace, no error line),
+/// and so did a PLY file whose header declares more rows than the parse can hold (10^7 rows
+/// of six floats: a 240 MB body, about 11 GB parsed). Until stop 82.
+#[test]
+fn whole_file_reads_larger_than_the_memory_are_refused() {
+    let d = tmp("wholeread");
+    let out = d.join("x.png");
+    for name in ["sparse.off", "sparse.toml"] {
+        let f = d.join(name);
+        std::fs::File::create(&f).unwrap().set_len(3 << 30).unwrap();
+        let args = format!("render {} --width 16 --height 12 --quiet --out {}", f.display(), out.display());
+        refused_under_memory_limit(2_000_000, &args, "reading a file of 3221.2 MB needs about", &out);
+    }
+    let ply = d.join("rows.ply");
+    let rows: u64 = 10_000_000;
+    let head = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {rows}\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nend_header\n"
+    );
+    let mut f = std::fs::File::create(&ply).unwrap();
+    std::io::Write::write_all(&mut f, head.as_bytes()).unwrap();
+    f.set_len(head.len() as u64 + rows * 24).unwrap();
+    let args = format!("render {} --method surfel --width 16 --height 12 --quiet --out {}", ply.display(), out.display());
+    refused_under_memory_limit(2_000_000, &args, "parsing the 10000000 rows the header declares needs about", &out);
+}
+
 /// A surfel object larger than the memory the process may have is refused before its
 /// neighbourhoods and hierarchy are built: `animate bend --detail 2` (212k surfels) under
 /// `ulimit -v 400000` aborted on a failed allocation (exit 134, no error line), as any mesh

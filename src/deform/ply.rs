@@ -63,8 +63,8 @@ fn body_matches_header(buf: &[u8]) -> Result<(), String> {
     if body.first() == Some(&b'\n') {
         body = &body[1..];
     }
-    // Per element: (bytes of one row, rows).
-    let (mut declared, mut elements, mut fixed) = (0u64, Vec::<(u64, u64)>::new(), true);
+    // Per element: (bytes of one row, rows, properties).
+    let (mut declared, mut elements, mut fixed) = (0u64, Vec::<(u64, u64, u64)>::new(), true);
     // Names seen: ply-rs-bw keeps one element of a name and one property of a name (a second
     // `element vertex` was dropped without a word, half the points; a second `property float
     // x` shifted the values it read, "zero normal").
@@ -78,6 +78,9 @@ fn body_matches_header(buf: &[u8]) -> Result<(), String> {
                     return Err(format!("element '{element}': property '{name}' is declared twice in the header"));
                 }
                 props.push(name.to_string());
+                if let Some(e) = elements.last_mut() {
+                    e.2 += 1;
+                }
             }
         }
         match w.as_slice() {
@@ -89,7 +92,7 @@ fn body_matches_header(buf: &[u8]) -> Result<(), String> {
                 names.push(name.to_string());
                 props.clear();
                 declared += c;
-                elements.push((0, c));
+                elements.push((0, c, 0));
             }
             ["property", "list", ..] => fixed = false,
             ["property", ty, _] => {
@@ -117,18 +120,26 @@ fn body_matches_header(buf: &[u8]) -> Result<(), String> {
             return Err(format!("the header declares {declared} rows, the file holds {rows}"));
         }
     } else if fixed {
-        let want: u64 = elements.iter().map(|&(b, n)| b.saturating_mul(n)).fold(0u64, u64::saturating_add);
+        let want: u64 = elements.iter().map(|&(b, n, _)| b.saturating_mul(n)).fold(0u64, u64::saturating_add);
         if body.len() as u64 > want {
             return Err(format!("the header declares {declared} rows ({want} bytes), the body holds {} bytes", body.len()));
         }
     }
+    // ply-rs-bw parses each row into an IndexMap of its properties: about 160 bytes per
+    // property (a 64-byte entry, the index, the name's own allocation, the entries'
+    // doubling) and 128 per row (stop 82: 1M rows of six floats peaked at 1.6 GB with the
+    // surfel object built after). A header declaring more than the memory holds (10^8 rows
+    // in a 2.4 GB file) aborted the parse on a failed allocation, exit 134.
+    let parse: u64 = elements.iter().map(|&(_, n, p)| n.saturating_mul(128 + 160 * p)).fold(0u64, u64::saturating_add);
+    crate::error::check_memory(parse, &format!("parsing the {declared} rows the header declares"))?;
     Ok(())
 }
 
 /// Reads a PLY point file (ASCII or binary) into a single-collection surfel model.
 pub fn load_ply(path: &Path) -> Result<SurfelModel, DeformError> {
     let err = |msg: String| DeformError::Ply { path: path.to_path_buf(), msg };
-    crate::error::check_input_file(path).map_err(|e| err(e.to_string()))?;
+    // The whole file is read before it is parsed.
+    crate::error::check_input_read(path, 1).map_err(|e| err(e.to_string()))?;
     let f = std::fs::File::open(path).map_err(|e| err(e.to_string()))?;
     let mut r = std::io::BufReader::new(f);
     read_ply(&mut r, path)

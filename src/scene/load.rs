@@ -62,7 +62,8 @@ pub fn stem_name(path: &Path, default: &str) -> String {
 }
 
 fn read_to_string(path: &Path) -> Result<String> {
-    crate::error::check_input_file(path)?;
+    // The text, and the vertex and face arrays parsed from it (each smaller than its text).
+    crate::error::check_input_read(path, 2)?;
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let text = String::from_utf8(bytes).map_err(|e| {
         let line = line_of(e.as_bytes(), e.utf8_error().valid_up_to());
