@@ -793,7 +793,8 @@ fn none_means_no_output() {
     let run = |args: &[&str]| Command::new(env!("CARGO_BIN_EXE_lodtrace")).args(args).current_dir(&d).output().expect("run lodtrace");
     let o = run(&["render", "spheres", "--width", "16", "--height", "12", "--quiet", "--out", "x.png", "--stats", "none"]);
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
-    let o = run(&["animate", "heads", "--frames", "1", "--detail", "0.05", "--width", "16", "--height", "12", "--quiet", "--stats", "none"]);
+    let o =
+        run(&["animate", "heads", "--frames", "1", "--detail", "0.05", "--width", "16", "--height", "12", "--quiet", "--stats", "none"]);
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
     let o = run(&["bench", "spheres", "--methods", "whitted", "--width", "16", "--height", "12", "--quiet", "--out", "none"]);
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
