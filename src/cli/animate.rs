@@ -249,14 +249,17 @@ pub fn parse_mode(s: &str) -> Result<UpdateMode> {
     s.parse::<UpdateMode>().map_err(|_| Error::Usage(format!("--update {s}: naive, lazy, lazy-cache, refit or auto")))
 }
 
-pub fn run(a: &AnimateArgs) -> Result<()> {
-    // `--out none` means no images, as its help says. Until stop 80 it was taken as a
-    // folder name: the frames went to `./none`.
+/// `a` with `none` outputs absent: `--out none` means no images, as its help says (until
+/// stop 80 the frames went to `./none`), and `--stats none` no statistics (stop 82).
+pub(crate) fn none_outputs(a: &AnimateArgs) -> AnimateArgs {
     let mut a = a.clone();
-    if a.out.as_deref() == Some(std::path::Path::new("none")) {
-        a.out = None;
-    }
-    let a = &a;
+    super::none_is_absent(&mut a.out);
+    super::none_is_absent(&mut a.stats);
+    a
+}
+
+pub fn run(a: &AnimateArgs) -> Result<()> {
+    let a = &none_outputs(a);
     let stats = animate(a)?;
     if a.warm_pass {
         let warm: f64 = stats.per_frame.iter().filter_map(|r| r.warm_seconds).sum();
@@ -908,7 +911,7 @@ mod tests {
     fn the_readmes_animate_commands_pass_the_checks() {
         let mut checked = 0;
         for (cmd, a) in crate::cli::readme_commands::<AnimateArgs>("animate") {
-            if let Err(e) = check(&a) {
+            if let Err(e) = check(&none_outputs(&a)) {
                 panic!("README: {cmd}\n{e}");
             }
             checked += 1;

@@ -194,9 +194,9 @@ fn parse_aov(s: &str) -> Result<(String, PathBuf), String> {
 
 /// Runs a parsed command; returns the process exit code.
 /// `none` for an optional output (`--stats none`, `bench --out none`) means no output, as
-/// `animate --out none` does (`animate::run`); until stop 82 `--stats none` and
+/// `animate --out none` does ([`animate::none_outputs`]); until stop 82 `--stats none` and
 /// `bench --out none` wrote a file or folder named `none`.
-fn none_is_absent(p: &mut Option<PathBuf>) {
+pub(crate) fn none_is_absent(p: &mut Option<PathBuf>) {
     if p.as_deref().is_some_and(|p| p.as_os_str() == "none") {
         *p = None;
     }
@@ -206,7 +206,6 @@ pub fn run(cli: Cli) -> i32 {
     let mut cmd = cli.cmd;
     match &mut cmd {
         Command::Render(a) => none_is_absent(&mut a.stats),
-        Command::Animate(a) => none_is_absent(&mut a.stats),
         Command::Bench(a) => none_is_absent(&mut a.out),
         _ => {}
     }
