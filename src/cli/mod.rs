@@ -192,7 +192,6 @@ fn parse_aov(s: &str) -> Result<(String, PathBuf), String> {
     Ok((k.to_string(), PathBuf::from(v)))
 }
 
-/// Runs a parsed command; returns the process exit code.
 /// `none` for an optional output (`--stats none`, `bench --out none`) means no output, as
 /// `animate --out none` does ([`animate::none_outputs`]); until stop 82 `--stats none` and
 /// `bench --out none` wrote a file or folder named `none`.
@@ -202,6 +201,7 @@ pub(crate) fn none_is_absent(p: &mut Option<PathBuf>) {
     }
 }
 
+/// Runs a parsed command; returns the process exit code.
 pub fn run(cli: Cli) -> i32 {
     let mut cmd = cli.cmd;
     match &mut cmd {

@@ -128,8 +128,8 @@ fn body_matches_header(buf: &[u8]) -> Result<(), String> {
     // ply-rs-bw parses each row into an IndexMap of its properties: about 160 bytes per
     // property (a 64-byte entry, the index, the name's own allocation, the entries'
     // doubling) and 128 per row (stop 82: 1M rows of six floats peaked at 1.6 GB with the
-    // surfel object built after). A header declaring more than the memory holds (10^8 rows
-    // in a 2.4 GB file) aborted the parse on a failed allocation, exit 134.
+    // surfel object built after). A header declaring more than the memory holds (10^7 rows
+    // in a 240 MB file) aborted the parse on a failed allocation, exit 134.
     let parse: u64 = elements.iter().map(|&(_, n, p)| n.saturating_mul(128 + 160 * p)).fold(0u64, u64::saturating_add);
     crate::error::check_memory(parse, &format!("parsing the {declared} rows the header declares"))?;
     Ok(())
