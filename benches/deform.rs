@@ -102,10 +102,13 @@ fn bench(cr: &mut Criterion) {
     g.finish();
 }
 
+/// One packet's rays in struct-of-arrays form: (origins, directions), each `[axis][lane]`.
+type PacketSoa = ([[f32; 8]; 3], [[f32; 8]; 3]);
+
 /// The rays `8k .. 8k + 8` of `inp` in struct-of-arrays form (origins, directions) for
 /// packet k < `p`; the benches build each `RayPacketX8` in the timed loop, as `intersect_x8`
 /// builds one per packet.
-fn packets(inp: &Input, p: usize) -> Vec<([[f32; 8]; 3], [[f32; 8]; 3])> {
+fn packets(inp: &Input, p: usize) -> Vec<PacketSoa> {
     let soa = |v: &[Vec3]| -> [[f32; 8]; 3] { std::array::from_fn(|a| std::array::from_fn(|l| v[l][a])) };
     (0..p).map(|k| (soa(&inp.o[8 * k..8 * k + 8]), soa(&inp.d[8 * k..8 * k + 8]))).collect()
 }
@@ -143,8 +146,8 @@ fn packet_group(
     g.bench_function("x8", |b| {
         b.iter(|| {
             let mut hits = 0u32;
-            for k in 0..P {
-                let pk = RayPacketX8::new(&pks[k].0, &pks[k].1, &[0.0; 8]);
+            for (k, (o, d)) in pks.iter().enumerate() {
+                let pk = RayPacketX8::new(o, d, &[0.0; 8]);
                 for j in 0..S {
                     hits += x8(&pk, k, j);
                 }

@@ -149,7 +149,7 @@ fn memory_available() -> Option<u64> {
         let ok = unsafe { libc::getrlimit(libc::RLIMIT_AS, &mut rl) } == 0;
         if ok && rl.rlim_cur != libc::RLIM_INFINITY {
             let used = std::fs::read_to_string("/proc/self/status").ok().and_then(|t| kb(&t, "VmSize:")).unwrap_or(0);
-            Some((rl.rlim_cur as u64).saturating_sub(used))
+            Some(rl.rlim_cur.saturating_sub(used))
         } else {
             None
         }

@@ -112,7 +112,9 @@ impl Accel for Faulty {
 fn verify_catches_broken_intersectors() {
     let s = scene("spheres");
     let reference = EmbreeAccel::build_with(&s, true).unwrap();
-    let faults: [(&str, fn(Hit) -> Option<Hit>); 4] = [
+    // Each fault rewrites (or drops) a hit of the reference.
+    type Fault = fn(Hit) -> Option<Hit>;
+    let faults: [(&str, Fault); 4] = [
         ("drops every 50th triangle", |h| (h.prim % 50 != 0).then_some(h)),
         ("t off by 0.1 %", |h| Some(Hit { t: h.t * 1.001, ..h })),
         ("swapped barycentrics", |h| Some(Hit { u: h.v, v: h.u, ..h })),
@@ -311,8 +313,8 @@ fn packets_match_single_rays_with_partial_masks() {
                 k += 1;
                 let valid = (lodtrace::core::rng::pcg_hash(k) & 0xff) as u8 | 1;
                 let mut pk = [Ray::new(fr.eye, fr.f); K];
-                for l in 0..K {
-                    pk[l] = Ray::new(fr.eye, fr.pixel_center_dir(i + l as u32, j));
+                for (l, r) in pk.iter_mut().enumerate() {
+                    *r = Ray::new(fr.eye, fr.pixel_center_dir(i + l as u32, j));
                 }
                 let mut out = [None; K];
                 be.intersect8(&pk, valid, &mut out, &mut c);
@@ -559,7 +561,7 @@ impl Accel for Loose<'_> {
                     continue;
                 }
                 let tt = e2.dot(q) / det;
-                if tt >= ray.tnear && tt <= ray.tfar && best.map_or(true, |b| tt < b.t) {
+                if tt >= ray.tnear && tt <= ray.tfar && best.is_none_or(|b| tt < b.t) {
                     best = Some(Hit { t: tt, u, v, prim: t as u32, inst: li as u32 });
                 }
             }

@@ -1629,7 +1629,7 @@ fn cache_gate_closes_on_misses_and_probes() {
     let moving = run(TraceParams::default(), false);
     eprintln!("moving: {moving:?}");
     // The tracer counts frames from 1: frame index f is the tracer's frame f + 1.
-    let probe = |f: usize| (f + 1) % CACHE_PROBE as usize == 0;
+    let probe = |f: usize| (f + 1).is_multiple_of(CACHE_PROBE as usize);
     let mut open = true;
     let mut closed = 0;
     for (f, &(l, hits)) in moving.iter().enumerate() {

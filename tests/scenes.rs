@@ -577,8 +577,8 @@ fn bad_input_exits_2_with_one_error_line_and_no_output() {
 fn an_image_larger_than_the_memory_is_refused() {
     let d = scratch("memory");
     let out = d.join("big.png");
-    let cmd = format!("ulimit -v 4000000 && exec \"$0\" render plane --width 11585 --height 11585 --quiet --out \"$1\"");
-    let o = Command::new("sh").args(["-c", &cmd, env!("CARGO_BIN_EXE_lodtrace"), out.to_str().unwrap()]).output().unwrap();
+    let cmd = "ulimit -v 4000000 && exec \"$0\" render plane --width 11585 --height 11585 --quiet --out \"$1\"";
+    let o = Command::new("sh").args(["-c", cmd, env!("CARGO_BIN_EXE_lodtrace"), out.to_str().unwrap()]).output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(err.lines().count() == 1 && err.contains("needs about") && err.contains("GB of memory"), "{err}");

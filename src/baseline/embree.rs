@@ -336,9 +336,9 @@ impl Accel for EmbreeAccel {
 
     fn intersect8(&self, rays: &[Ray; K], valid: u8, out: &mut [Option<Hit>; K], _c: &mut Counters) {
         let (mut rh, mask) = packet(rays, valid);
-        for i in 0..K {
+        for (i, o) in out.iter_mut().enumerate() {
             if valid & (1 << i) != 0 {
-                out[i] = None;
+                *o = None;
             }
         }
         if mask.0.iter().all(|&m| m == 0) {
@@ -347,18 +347,18 @@ impl Accel for EmbreeAccel {
         let mut ctx = context(true);
         // SAFETY: 32-byte aligned valid mask and packet, committed scene.
         unsafe { rtcIntersect8(mask.0.as_ptr(), self.top, &mut ctx, &mut rh) };
-        for i in 0..K {
+        for (i, o) in out.iter_mut().enumerate() {
             if mask.0[i] != 0 && rh.hit.geomID[i] != INVALID_ID {
-                out[i] = Some(Hit { t: rh.ray.tfar[i], u: rh.hit.u[i], v: rh.hit.v[i], prim: rh.hit.primID[i], inst: rh.hit.instID[0][i] });
+                *o = Some(Hit { t: rh.ray.tfar[i], u: rh.hit.u[i], v: rh.hit.v[i], prim: rh.hit.primID[i], inst: rh.hit.instID[0][i] });
             }
         }
     }
 
     fn occluded8(&self, rays: &[Ray; K], valid: u8, out: &mut [bool; K], _c: &mut Counters) {
         let (mut rh, mask) = packet(rays, valid);
-        for i in 0..K {
+        for (i, o) in out.iter_mut().enumerate() {
             if valid & (1 << i) != 0 {
-                out[i] = false;
+                *o = false;
             }
         }
         if mask.0.iter().all(|&m| m == 0) {
@@ -367,9 +367,9 @@ impl Accel for EmbreeAccel {
         let mut ctx = context(false);
         // SAFETY: as above.
         unsafe { rtcOccluded8(mask.0.as_ptr(), self.top, &mut ctx, &mut rh.ray) };
-        for i in 0..K {
+        for (i, o) in out.iter_mut().enumerate() {
             if mask.0[i] != 0 {
-                out[i] = rh.ray.tfar[i] == f32::NEG_INFINITY;
+                *o = rh.ray.tfar[i] == f32::NEG_INFINITY;
             }
         }
     }

@@ -281,6 +281,8 @@ fn scatter(film: &mut Film, results: Vec<(Vec<PixelOut>, Counters)>) -> Counters
 /// [`Accel::intersect8`](super::accel::Accel::intersect8) call per K; 1: single rays), counted as primary rays and samples;
 /// `f(i, ray, hit, counters)` sees each pixel in order. Shared by the Whitted and the LOD
 /// tracer so both shoot bit-identical primary rays.
+// Called per row by both tracers: a struct of its inputs would only be unpacked again.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn primary_row(
     accel: &dyn super::accel::Accel,
     cam: &CameraFrame,
@@ -371,6 +373,8 @@ fn whitted(ctx: &TraceCtx, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Count
 }
 
 /// One distributed-ray-tracing sample of pixel (i, j) at image position (i+u, j+v).
+// Called per sample by both passes: a struct of its inputs would only be unpacked again.
+#[allow(clippy::too_many_arguments)]
 fn dist_sample(ctx: &TraceCtx, cam: &CameraFrame, i: u32, j: u32, u: f32, v: f32, smp: &mut Sampler, c: &mut Counters) -> Vec3 {
     let d = cam.dir_at(i as f32 + u, j as f32 + v);
     let (lu, lv) = smp.next2();
@@ -415,9 +419,9 @@ fn distributed(ctx: &TraceCtx, cam: &CameraFrame, opts: &RenderOpts) -> (Film, C
         })
         .collect();
     let mut counters = scatter(&mut film, pass1);
-    for k in 0..npix {
-        sums[k] = film.color[k];
-        film.color[k] = sums[k] / n1 as f32;
+    for (s, col) in sums.iter_mut().zip(film.color.iter_mut()) {
+        *s = *col;
+        *col = *s / n1 as f32;
     }
     if g == 0 {
         prog.finish();

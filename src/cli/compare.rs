@@ -403,7 +403,7 @@ mod tests {
     /// a one-pixel region read (every block cut, all its error counted as smooth).
     #[test]
     fn smooth_share_of_a_region_smaller_than_a_block_is_undefined() {
-        let fine = |x: u32, y: u32| Vec3::splat(if (x + y) % 2 == 0 { 0.6 } else { 0.4 });
+        let fine = |x: u32, y: u32| Vec3::splat(if (x + y).is_multiple_of(2) { 0.6 } else { 0.4 });
         for r in [region(3, 3, 4, 4), region(0, 0, 7, 13), region(0, 0, 21, 7)] {
             let g = figures(fine, r.clone());
             assert!(g.smooth_share.is_none(), "{r:?}: {g:?}");

@@ -24,6 +24,9 @@ impl Sampler {
         Sampler { key, dim: 0 }
     }
     /// Uniform in [0, 1).
+    // Not an `Iterator`: the sampler never ends, and `next` draws the next dimension's value
+    // (the name every sampler call site uses).
+    #[allow(clippy::should_implement_trait)]
     #[inline]
     pub fn next(&mut self) -> f32 {
         let h = pcg_hash(self.key ^ pcg_hash(self.dim.wrapping_mul(0x85eb_ca6b)));

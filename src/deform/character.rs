@@ -233,7 +233,7 @@ impl Goblin {
             .enumerate()
             .flat_map_iter(|(i, (q, m))| {
                 let mut pts = Vec::with_capacity(m);
-                q.candidates(m, ((seed as u64) << 32) | i as u64 + 1, &mut pts);
+                q.candidates(m, ((seed as u64) << 32) | (i as u64 + 1), &mut pts);
                 pts.into_iter().filter_map(|mut p| {
                     // Buried in another primitive: not on the union's surface.
                     if self.sdf(p) < -0.5 * self.k {

@@ -146,7 +146,7 @@ fn step(
     }
     let t = n.dot(a - o) / den;
     let x = o + d * t;
-    if !(t >= tnear && t <= tfar) || !x.is_finite() || (x - sc).length_squared() > sr * sr {
+    if !(t >= tnear && t <= tfar && x.is_finite()) || (x - sc).length_squared() > sr * sr {
         return Err(MlsOutcome::Rejected { iters: it });
     }
     Ok((x, t))

@@ -1451,7 +1451,7 @@ impl DeformTracer {
             return;
         }
         let (cc, rr) = if self.params.recentre_eq11 { enclosing_sphere(s1, s2) } else { (c, child_bound(c, s1.0, s1.1, s2.0, s2.1)) };
-        if !(rr < cur && rr > 0.0) || !slot.try_lock() {
+        if !(rr < cur && rr > 0.0 && slot.try_lock()) {
             return;
         }
         // Under the lock: the node must be this frame's, and the radius still larger.
@@ -3100,7 +3100,7 @@ mod tests {
         let obj = scene.objects[0].clone();
         for recentre_eq11 in [true, false] {
             let mut tr = DeformTracer::new(&scene, UpdateMode::Lazy, TraceParams { recentre_eq11, ..TraceParams::default() }).unwrap();
-            tr.begin_frame(&[obj.nodes.rest.clone()]).unwrap();
+            tr.begin_frame(std::slice::from_ref(&obj.nodes.rest)).unwrap();
             let ii = &tr.inst[0];
             let (c, r) = tr.sphere(ii, 0);
             // A child as large as 1.5 r at the node's centre: enclosing radius 1.5 r > r.
@@ -3127,7 +3127,7 @@ mod tests {
         // A bend: node positions moved smoothly, so the rest spheres no longer fit.
         let bent: Vec<Vec3> = nd.iter().map(|p| *p + Vec3::new(0.3 * p.y * p.y, 0.1 * p.x, 0.0)).collect();
         let mut tr = DeformTracer::new(&scene, UpdateMode::Lazy, TraceParams { exact_below: 256, ..TraceParams::default() }).unwrap();
-        tr.begin_frame(&[bent.clone()]).unwrap();
+        tr.begin_frame(std::slice::from_ref(&bent)).unwrap();
         let ii = &tr.inst[0];
         let topo = &ii.obj.tree.topo;
         let n = (0..topo.len()).find(|&q| topo.right[q] != LEAF && topo.count[q] > 100 && topo.count[q] <= 256).unwrap();

@@ -911,7 +911,10 @@ mod tests {
                 let mut z: Vec<f32> = (0..n).map(|_| u()).collect();
                 let mut r: Vec<f32> = (0..n).map(|_| u().abs() * 0.3).collect();
                 if case == 0 {
-                    (x.fill(c.x), y.fill(c.y), z.fill(c.z), r.fill(0.0));
+                    x.fill(c.x);
+                    y.fill(c.y);
+                    z.fill(c.z);
+                    r.fill(0.0);
                 } else if case == 1 && n > 0 {
                     x[n - 1] = 1e4;
                 }

@@ -643,10 +643,13 @@ pub fn pixel_diff(a: &Film, b: &Film) -> Vec<f32> {
         .collect()
 }
 
+/// A [`floor_diff`]: (the other back-end, the per-pixel difference).
+type FloorDiff = (String, Vec<f32>);
+
 /// The full-detail spec `fs` (film `ff`) rendered again on the other exact back-end, with
 /// the same samples, and its per-pixel difference to `ff` (see [`DiffFloor`]). None when
 /// the other back-end is not built in (no Embree) or `fs` is on neither.
-fn floor_diff(scene: &Scene, fs: &MethodSpec, ff: &Film, a: &BenchArgs) -> Result<Option<(String, Vec<f32>)>> {
+fn floor_diff(scene: &Scene, fs: &MethodSpec, ff: &Film, a: &BenchArgs) -> Result<Option<FloorDiff>> {
     let other = match fs.accel {
         AccelKind::Bvh if cfg!(feature = "embree") => AccelKind::Embree,
         AccelKind::Embree => AccelKind::Bvh,
@@ -1013,7 +1016,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
         };
         let mut first_time = None;
         // Floor differences already rendered: (full-detail spec, (other back-end, difference)).
-        let mut floors: Vec<(String, Option<(String, Vec<f32>)>)> = Vec::new();
+        let mut floors: Vec<(String, Option<FloorDiff>)> = Vec::new();
         // Best of `--repeat` renders per method, taken round the methods as for the deforming
         // sequences; each round gives a ratio of its own.
         let (bests, rounds) = best_of_rounds(

@@ -229,12 +229,15 @@ pub fn bar_chart(path: &Path, title: &str, xlabel: &str, bars: &[(String, f64)])
     })
 }
 
+/// A labelled point of a [`scatter_chart`]: `(group, label, x, y)`.
+pub type ScatterPoint = (String, String, f64, f64);
+
 /// A scatter chart of labelled points `(group, label, x, y)`: one colour per group (as named
 /// in the legend, outside the plot area, below it), each point's label beside it. For
 /// measurements that are not a curve (one point per method): joining them by lines would
 /// suggest a trade-off that is not there. Non-finite points are skipped.
-pub fn scatter_chart(path: &Path, title: &str, xlabel: &str, ylabel: &str, points: &[(String, String, f64, f64)]) -> Result<()> {
-    let pts: Vec<&(String, String, f64, f64)> = points.iter().filter(|p| p.2.is_finite() && p.3.is_finite()).collect();
+pub fn scatter_chart(path: &Path, title: &str, xlabel: &str, ylabel: &str, points: &[ScatterPoint]) -> Result<()> {
+    let pts: Vec<&ScatterPoint> = points.iter().filter(|p| p.2.is_finite() && p.3.is_finite()).collect();
     if pts.is_empty() {
         return Err(Error::Usage(format!("{}: scatter chart needs at least one finite point", path.display())));
     }
@@ -244,7 +247,7 @@ pub fn scatter_chart(path: &Path, title: &str, xlabel: &str, ylabel: &str, point
             groups.push(&p.0);
         }
     }
-    let lohi = |f: &dyn Fn(&(String, String, f64, f64)) -> f64| {
+    let lohi = |f: &dyn Fn(&ScatterPoint) -> f64| {
         (pts.iter().map(|p| f(p)).fold(f64::INFINITY, f64::min), pts.iter().map(|p| f(p)).fold(f64::NEG_INFINITY, f64::max))
     };
     let ((xl, xh), (yl, yh)) = (lohi(&|p| p.2), lohi(&|p| p.3));
@@ -476,8 +479,7 @@ pub fn line_chart_fmt(
         } else {
             draw!(builder.build_cartesian_2d(x0..x1, y0..y1).map_err(|x| e(&x))?);
         }
-        if cols > 0 {
-            let col_w = (WIDTH - 60) / cols;
+        if let Some(col_w) = (WIDTH - 60).checked_div(cols) {
             let mut k_label = 0u32;
             for (k, (name, data)) in series.iter().enumerate() {
                 if name.is_empty() {

@@ -351,7 +351,7 @@ pub fn discard_dir_on_error<T>(dir: Option<&Path>, f: impl FnOnce() -> Result<T>
     }
     // The entries stay while an enclosing scope runs (the demo's around each bench): its
     // failure undoes them too, so their backups are kept until the last scope ends.
-    let (mine, ended): (Vec<(PathBuf, Option<PathBuf>)>, Vec<(PathBuf, Option<PathBuf>)>) = match WRITTEN.lock() {
+    let (mine, ended) = match WRITTEN.lock() {
         Ok(mut w) => {
             let v = start.map(|s| w.1[s.min(w.1.len())..].to_vec()).unwrap_or_default();
             w.0 = w.0.saturating_sub(1);

@@ -210,8 +210,7 @@ fn decode_chain(b: &[u8], mesh: &Mesh, n_levels: u32) -> Option<LodChain> {
         let fin = |v: &[f32]| v.iter().all(|x| x.is_finite());
         let max_mat = mesh.mat.iter().copied().max().unwrap_or(0);
         let e = *errors.last()?;
-        if ![&m.px, &m.py, &m.pz, &m.nx, &m.ny, &m.nz].iter().all(|v| fin(v))
-            || !(e.is_finite() && e >= 0.0)
+        if !([&m.px, &m.py, &m.pz, &m.nx, &m.ny, &m.nz].iter().all(|v| fin(v)) && e.is_finite() && e >= 0.0)
             || m.mat.iter().any(|&x| x > max_mat)
         {
             return None;

@@ -332,8 +332,11 @@ pub fn decode(b: &[u8], key: u64, n_tris: usize, params: &BuildParams) -> Option
     // cone hits), ranges ordered.
     let fin = |v: &[f32]| v.iter().all(|x| x.is_finite());
     let radius = |r: f32| (r.is_finite() && r >= 0.0) || r == f32::NEG_INFINITY;
-    if !(fin(&nodes.cx) && fin(&nodes.cy) && fin(&nodes.cz) && nodes.r.iter().all(|&r| radius(r)))
-        || !nodes.grid_lo.iter().all(|p| p.is_finite())
+    if !(fin(&nodes.cx)
+        && fin(&nodes.cy)
+        && fin(&nodes.cz)
+        && nodes.r.iter().all(|&r| radius(r))
+        && nodes.grid_lo.iter().all(|p| p.is_finite()))
         || !(color_hi.is_finite() && props.iter().all(|p| p.lo.is_finite() && p.hi.is_finite() && p.lo <= p.hi && (!p.log || p.lo > 0.0)))
     {
         return None;

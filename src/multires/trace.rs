@@ -2988,6 +2988,8 @@ mod tests {
     }
 
     #[test]
+    // Lane loops: `l` indexes the x8 result, the mask bit and the scalar reference alike.
+    #[allow(clippy::needless_range_loop)]
     fn tlas_box_test_x8_matches_scalar() {
         let mut s = Sampler::new(31, 0, 0);
         let mut hits = 0;
@@ -3015,6 +3017,8 @@ mod tests {
     /// footprints of the octree nodes below are taken) reaches within the cut passes the
     /// test, and its entry depth is not beyond the point's depth. Also not vacuous.
     #[test]
+    // Lane loops: `l` indexes the slot arrays, the x8 entry depths and the mask bit alike.
+    #[allow(clippy::needless_range_loop)]
     fn tlas_box_test_is_conservative() {
         let mut s = Sampler::new(32, 0, 0);
         let (mut reached, mut culled) = (0, 0);
@@ -3072,7 +3076,7 @@ mod tests {
         let mut rv = || Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * size;
         let pw = [c + rv(), c + rv(), c + rv()];
         let clamp = [1.0 / 16.0, 0.125, 0.25, 1.0][i % 4];
-        let lf = if i % 5 == 0 { 1e-3 } else { 1e-7 };
+        let lf = if i.is_multiple_of(5) { 1e-3 } else { 1e-7 };
         let boxe = eigen_1(cone.sigma((t + (s.next() - 0.5) * 2.0).max(0.0)), clamp, lf);
         let mut m = crate::scene::Mesh::new("t");
         for p in pw {
@@ -3164,6 +3168,8 @@ mod tests {
     }
 
     #[test]
+    // Lane loops: `l` indexes the four SoA rows, the mask bit and the scalar reference alike.
+    #[allow(clippy::needless_range_loop)]
     fn triangle_prefilter_x8_matches_scalar() {
         let mut s = Sampler::new(23, 0, 0);
         let mut hits = 0;

@@ -441,6 +441,9 @@ pub fn load_obj(path: &Path, mat: u32, default: u32) -> Result<(Mesh, Vec<Materi
     crate::error::check_input_file(path)?;
     // Lines (`l`) and points (`p`) are no surface: tobj reads `l` like `f` (a polyline of 3
     // or more vertices became a filled polygon), so [`SurfaceLines`] drops them first.
+    // `..Default::default()` covers the fields tobj's `merging` and `reordering` features add,
+    // which another crate in the build may turn on.
+    #[allow(clippy::needless_update)]
     let opts = tobj::LoadOptions { triangulate: true, single_index: true, ignore_lines: true, ignore_points: true, ..Default::default() };
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();

@@ -263,7 +263,7 @@ impl Scene {
 
     fn collect(&self, g: u32, xf: Affine3A, mat: Option<u32>, depth: u32, out: &mut Vec<LeafInstance>, budget: &mut u64) -> Result<()> {
         if depth > MAX_NESTING {
-            return Err(Error::Scene(format!("instance hierarchy nests deeper than {MAX_NESTING} levels").into()));
+            return Err(Error::Scene(format!("instance hierarchy nests deeper than {MAX_NESTING} levels")));
         }
         let group = self.groups.get(g as usize).ok_or_else(|| Error::Scene(format!("group {g} does not exist")))?;
         for inst in &group.children {

@@ -308,7 +308,7 @@ impl Builder<'_> {
     }
 
     fn build(&mut self, def: FileDef) -> Result<Scene> {
-        let name = def.name.clone().unwrap_or_else(|| super::load::stem_name(&self.path, "scene"));
+        let name = def.name.clone().unwrap_or_else(|| super::load::stem_name(self.path, "scene"));
         // `bench` and `demo` name their files after the scene: "../x" wrote outside `--out`,
         // a newline split the summary line (stop 46's sweep).
         if name.is_empty() || name == "." || name == ".." || name.chars().any(|c| c == '/' || c == '\\' || c.is_control()) {
