@@ -1493,11 +1493,6 @@ struct Entry {
     kind: u8,
     /// Octree nodes: index into `Scratch::eigs` of the node test's decomposition.
     eig: u32,
-    /// Largest level-of-detail size λ·σ_min this entry may choose with (world units in the
-    /// instance tree, object units below an instance; +∞: none). The mipmap blend of an
-    /// instance-tree slot of spacing h_g reaches the level below *as chosen at its switch*
-    /// λ·σ_min = h_g, so that the blend is continuous there ([`Tracer::traverse_own`]).
-    cap: f32,
 }
 const K_TLAS: u8 = 0;
 const K_OCT: u8 = 1;
@@ -1695,7 +1690,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             sc.eigs.push(h.eig[0]);
             root_eig = (sc.eigs.len() - 1) as u32;
         }
-        sc.push(Entry { t: t_root, node: 0, slot: 0, blend: 1.0, kind: K_TLAS, eig: root_eig, cap: f32::INFINITY });
+        sc.push(Entry { t: t_root, node: 0, slot: 0, blend: 1.0, kind: K_TLAS, eig: root_eig });
         let mut steps = 0u32;
         while let Some(e) = sc.pop() {
             let done = match self.p.termination {
@@ -1729,36 +1724,34 @@ impl<'s, 'a> Tracer<'s, 'a> {
                         let slot = (sc.locals.len() - 1) as u32;
                         sc.eigs.push(h.eig[0]);
                         let eig = (sc.eigs.len() - 1) as u32;
-                        // The cap in the instance's units (object length = s · world length).
-                        sc.push(Entry { t: h.t_near[0] / s, node: 0, slot, blend: e.blend, kind: K_OCT, eig, cap: e.cap * s });
+                        sc.push(Entry { t: h.t_near[0] / s, node: 0, slot, blend: e.blend, kind: K_OCT, eig });
                     }
                     continue;
                 }
-                // Level of detail above the instances (§5.1 applied to the slot's points).
-                // The level below a slot's points in its mipmap blend is whatever the
-                // traversal chooses at the slot's switch, λ·σ_min = h_g: the entries below
-                // carry that cap. (Until stop 82 it was the child slots' or the instance
-                // roots' points alone, as in the octree, where a child has half its parent's
-                // spacing; the instance tree does not guarantee that: an instance as large as
-                // its slot has root points about twice h_g, so the blend jumped a level at
-                // its switch. Test `an_instance_slot_blends_continuously_with_coarse_roots`.)
+                // Level of detail above the instances (§5.1 applied to the slot's points). In
+                // the blend, the level below a slot's points is whatever the traversal chooses
+                // below it for this footprint: the child slots and instances are traversed as
+                // usual. In the octree that is the children's points alone (a child has half
+                // its parent's spacing, so λ·σ_min ≥ h is ≥ 2 of its spacings); the instance
+                // tree does not guarantee that spacing. Until stop 82 the level below was the
+                // child slots' or instance roots' points alone, as in the octree, and an
+                // instance as coarse as its slot jumped a level at the slot's switch (test
+                // `an_instance_slot_blends_continuously_with_coarse_roots`).
                 let g = &self.ms.groups;
                 let gi = e.node as usize;
                 let mut blend = e.blend;
-                let mut cap = e.cap;
                 if self.p.group_points && self.p.points && e.eig != u32::MAX && g.h[gi] > 0.0 {
                     let boxe = clamp_eigen(&sc.eigs[e.eig as usize], clamp);
                     let hg = g.h[gi];
-                    let lod = (self.p.lod_scale * boxe.s2).min(e.cap);
-                    if lod >= hg {
-                        let x = if self.p.mipmap { (lod / hg).log2().clamp(0.0, 1.0) } else { 1.0 };
+                    if self.p.lod_scale * boxe.s2 >= hg {
+                        let x = if self.p.mipmap { (self.p.lod_scale * boxe.s2 / hg).log2().clamp(0.0, 1.0) } else { 1.0 };
                         if x > 0.0 {
                             self.test_group(given, gi, &boxe, e.blend * x, ab, &mut sc.hits, mode, c);
                         }
                         if x >= 1.0 {
                             continue;
                         }
-                        (blend, cap) = (e.blend * (1.0 - x), hg);
+                        blend = e.blend * (1.0 - x);
                     }
                 }
                 let f = ch as usize;
@@ -1795,7 +1788,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 while m != 0 {
                     let l = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    sc.push(Entry { t: t_near[l], node: (f + l) as u32, slot: 0, blend, kind: K_TLAS, eig: eig[l], cap });
+                    sc.push(Entry { t: t_near[l], node: (f + l) as u32, slot: 0, blend, kind: K_TLAS, eig: eig[l] });
                 }
                 continue;
             }
@@ -1917,21 +1910,20 @@ impl<'s, 'a> Tracer<'s, 'a> {
             }
             return;
         }
-        // 4. Level of detail: the minor semi-axis (after the clamp) against the spacing (at
-        // most the entry's cap: below an instance-tree slot's blend, the size at its switch).
-        let lod = (self.p.lod_scale * boxe.s2).min(e.cap);
-        if self.p.points && npts > 0 && lod >= h {
-            let x = if has_children && self.p.mipmap { (lod / h).log2().clamp(0.0, 1.0) } else { 1.0 };
+        // 4. Level of detail: the minor semi-axis (after the clamp) against the spacing.
+        let smin = boxe.s2;
+        if self.p.points && npts > 0 && self.p.lod_scale * smin >= h {
+            let x = if has_children && self.p.mipmap { ((self.p.lod_scale * smin / h).log2()).clamp(0.0, 1.0) } else { 1.0 };
             if x > 0.0 {
                 self.test_points(&lc, s, li, tree, n, &boxe, e.blend * x, ab, &mut sc.hits, mode, c);
             }
             if x < 1.0 && has_children {
-                self.push_children(&lc, &reach, s, e.slot, tree, n, e.blend * (1.0 - x), K_TERMINAL, e.cap, sc, c);
+                self.push_children(&lc, &reach, s, e.slot, tree, n, e.blend * (1.0 - x), K_TERMINAL, sc, c);
             }
             return;
         }
         if has_children {
-            self.push_children(&lc, &reach, s, e.slot, tree, n, e.blend, K_OCT, e.cap, sc, c);
+            self.push_children(&lc, &reach, s, e.slot, tree, n, e.blend, K_OCT, sc, c);
         }
     }
 
@@ -1946,7 +1938,6 @@ impl<'s, 'a> Tracer<'s, 'a> {
         n: usize,
         blend: f32,
         kind: u8,
-        cap: f32,
         sc: &mut Scratch,
         c: &mut Counters,
     ) {
@@ -1976,7 +1967,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             m &= m - 1;
             sc.eigs.push(h.eig[l]);
             let eig = (sc.eigs.len() - 1) as u32;
-            sc.push(Entry { t: h.t_near[l].max(bt[l]) / s, node: (f + l) as u32, slot, blend, kind, eig, cap });
+            sc.push(Entry { t: h.t_near[l].max(bt[l]) / s, node: (f + l) as u32, slot, blend, kind, eig });
         }
     }
 
