@@ -43,6 +43,7 @@ use crate::scene::{Material, Mesh};
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 use std::collections::HashMap;
+use std::hash::BuildHasherDefault;
 
 /// A slot's grid has `GRID_FACTOR`·k voxels per side. A slot's cube is as wide as its widest
 /// side, and most slots are flat (tiles of the floor, fields of plants), so its voxels are
@@ -123,6 +124,29 @@ fn sample_list(mesh: &Mesh, mat_of: impl Fn(usize) -> u32, seed: u32) -> SampleL
     l
 }
 
+/// The voxel map's hasher. A key is a voxel index (`u32`); one multiply by 2^64/φ spreads it
+/// over the high bits, which are folded onto the low ones that pick the bucket. SipHash, the
+/// standard map's default, guards against keys chosen by an adversary, which these are not;
+/// it took about 0.9 G of the 1.4 G instructions of [`build`] on `complex` (callgrind, stop
+/// 82). The points come out the same: each voxel still sums its samples in their order, and
+/// the voxels are sorted after.
+#[derive(Default)]
+struct CellHasher(u64);
+
+impl std::hash::Hasher for CellHasher {
+    fn finish(&self) -> u64 {
+        self.0 ^ (self.0 >> 32)
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u32(b as u32);
+        }
+    }
+    fn write_u32(&mut self, v: u32) {
+        self.0 = (self.0 ^ v as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    }
+}
+
 #[derive(Clone, Copy, Default)]
 struct Acc {
     area: f32,
@@ -173,7 +197,7 @@ pub fn build(materials: &[Material], tree_meshes: &[(&Mesh, Vec<u32>)], leaves: 
             let h = side / k as f32;
             let step = side / 256.0;
             let grid_lo = (lo + hi) * 0.5 - Vec3::splat(side * 0.5);
-            let mut cells: HashMap<u32, Acc> = HashMap::new();
+            let mut cells: HashMap<u32, Acc, BuildHasherDefault<CellHasher>> = HashMap::default();
             let mut drawn = 0u64;
             for &li in &below[s] {
                 let leaf = &leaves[li as usize];
