@@ -11,7 +11,7 @@
 //! [`intersect_node`] (SSE2 on x86-64, `wide::f32x8` elsewhere). obvhs' own `intersect_ray` clamps the entry
 //! distance at a fixed 1e-4 instead of the ray's `tmin`, which loses hits closer than 1e-4
 //! ray units (found by `lodtrace verify`: origins within 1e-4 of a surface missed it).
-//! Ours also widens every slab by its rounding error ([`slab_tol`]), so that no box a ray
+//! Ours also widens every slab by its rounding error (`slab_tol`), so that no box a ray
 //! passes through is culled (rays through a box's edge were, and escaped closed meshes).
 //! The node-test ray is built by `ob_ray`, which scales the direction by a power of two
 //! (obvhs' `safe_inverse` clamps components below f32::EPSILON in absolute terms, which broke

@@ -7,7 +7,7 @@
 //! - surfels: candidates on every primitive's surface, those buried in another primitive
 //!   dropped, the rest projected onto the smooth union's zero set (Newton steps along the
 //!   distance gradient, which also gives the normal), thinned to an even spacing
-//!   ([`super::surfel::thin_to_surfels`], as for meshes);
+//!   (`surfel::thin_to_surfels`, as for meshes);
 //! - simulation nodes: a lattice inside the body plus points along every limb's axis (a
 //!   lattice as coarse as the paper's 500 nodes misses the thin shins);
 //! - the motion: the arms stay on the rails, the body swings about the shoulder axis (up to

@@ -357,7 +357,7 @@ pub struct World {
     pub cap_stats: CapStats,
 }
 
-/// What [`World::cap_energy`] did: the substeps it checked the energy in, those in which it
+/// What `World::cap_energy` did: the substeps it checked the energy in, those in which it
 /// scaled the velocities, and the kinetic energy it removed in total (the world's energy
 /// units, as [`World::energy`]). A world whose `removed` stays 0 moves as it would without
 /// the cap; the tests measure it, so that an energy bound they assert is not the cap's own.
