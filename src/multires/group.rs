@@ -16,7 +16,9 @@
 //! spread (|mean normal|) and the sampled area (`cover`, the `area` point weight of
 //! [`super::build::PointWeights`]). The traversal uses a
 //! slot's points exactly as an octree node's (§5.1): when lod_scale·σ_min ≥ h at the slot,
-//! with the mipmap blend one level down (the child slots' points, or the instance roots').
+//! with the mipmap blend one level down. The level below is what the traversal chooses below
+//! the slot for the same footprint (stop 82): a child slot or instance root need not have half
+//! the slot's spacing, as an octree child has.
 //!
 //! Deviations from the per-object build ([`super::build`]), written down here:
 //! - Samples come from a fixed random sample list per hierarchy (16 k samples, drawn in
