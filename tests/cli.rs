@@ -785,8 +785,8 @@ fn animate_out_none_writes_no_images() {
 }
 
 /// `none` for an optional output means no output, as `animate --out none` does: `--stats
-/// none` (render, animate) and `bench --out none` wrote a file or folder named `none` until
-/// stop 82. `demo`, which always writes, refuses `--out none`.
+/// none` (render, animate), `bench --out none` and `verify --json none` wrote a file or folder
+/// named `none` until stop 82. `demo`, which always writes, refuses `--out none`.
 #[test]
 fn none_means_no_output() {
     let d = tmp("nonemeansnone");
@@ -799,6 +799,8 @@ fn none_means_no_output() {
     let o = run(&["bench", "spheres", "--methods", "whitted", "--width", "16", "--height", "12", "--quiet", "--out", "none"]);
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(String::from_utf8_lossy(&o.stdout).contains("whitted"), "bench --out none still prints its table");
+    let o = run(&["verify", "plane", "--rays", "1000", "--json", "none"]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
     let o = run(&["demo", "--quick", "--out", "none"]);
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);

@@ -192,9 +192,9 @@ fn parse_aov(s: &str) -> Result<(String, PathBuf), String> {
     Ok((k.to_string(), PathBuf::from(v)))
 }
 
-/// `none` for an optional output (`--stats none`, `bench --out none`) means no output, as
-/// `animate --out none` does ([`animate::none_outputs`]); until stop 82 `--stats none` and
-/// `bench --out none` wrote a file or folder named `none`.
+/// `none` for an optional output (`--stats none`, `bench --out none`, `verify --json none`)
+/// means no output, as `animate --out none` does ([`animate::none_outputs`]); until stop 82
+/// these wrote a file or folder named `none`.
 pub(crate) fn none_is_absent(p: &mut Option<PathBuf>) {
     if p.as_deref().is_some_and(|p| p.as_os_str() == "none") {
         *p = None;
@@ -207,6 +207,7 @@ pub fn run(cli: Cli) -> i32 {
     match &mut cmd {
         Command::Render(a) => none_is_absent(&mut a.stats),
         Command::Bench(a) => none_is_absent(&mut a.out),
+        Command::Verify(a) => none_is_absent(&mut a.json),
         _ => {}
     }
     let r = match cmd {

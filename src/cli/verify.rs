@@ -17,7 +17,7 @@ pub struct VerifyArgs {
     /// Seed of the ray sets (the same seed, scene and --rays give the same rays).
     #[arg(long, default_value_t = 1)]
     pub seed: u32,
-    /// Also write the report as JSON.
+    /// Also write the report as JSON (`none`: not written).
     #[arg(long)]
     pub json: Option<PathBuf>,
 }
