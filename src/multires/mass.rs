@@ -10,8 +10,12 @@
 //! - [`gauss_tri_mass_x8`]: one triangle, its six right-triangle terms in the lanes of one
 //!   f32x8 pass (6 of 8 lanes busy), with a one-edge fast path;
 //! - [`gauss_tri_mass_8`]: eight triangles, one per lane, the six terms as six full passes
-//!   (the edge-midpoint rule for small triangles, [`SMALL_TRI`]) — the form the renderer uses (a leaf's triangles come eight at a time out of the
-//!   prefilter, [`super::trace`]).
+//!   (the edge-midpoint rule for small triangles, [`SMALL_TRI`]).
+//!
+//! The renderer takes a node's triangles in blocks of eight out of the prefilter
+//! ([`super::trace`]) and weighs a block's survivors with `gauss_tri_mass_8` when there are
+//! more than four, else one by one with `gauss_tri_mass_x8` (most blocks hand over one or
+//! two: 8–15 % fewer instructions in the rays than always eight at a time, stop 83).
 
 use super::trace::{exp_neg_x8, half_erfc};
 use glam::Vec2;

@@ -54,9 +54,9 @@ pub struct MultiresArgs {
     pub anisotropy_clamp: f32,
     /// Anisotropy limit of reflected and refracted cones and of their hits' shadow cones
     /// (default: `--anisotropy-clamp`, as the paper). Larger values trade blur in the
-    /// reflections' narrow direction for speed: on `complex` 640×480, 1 takes the frame from
-    /// 3.0× to 2.3× the octree Whitted frame, and with `--lod-scale 4` to 1.8× (BENCHMARKS.md,
-    /// stop 28).
+    /// reflections' narrow direction for speed: on `complex` 640×480, 1 with `--lod-scale 4`
+    /// takes the frame from 3.6× the octree Whitted frame to 2.1× (stop 82; 3.0× and 1.8× at
+    /// stop 28, before the review fixes to the images since; BENCHMARKS.md).
     #[arg(long)]
     pub secondary_clamp: Option<f32>,
     /// Level of detail: use a node's points when lod_scale × the footprint's minor semi-axis ≥
