@@ -2911,3 +2911,43 @@ fn a_font_that_is_not_a_regular_file_is_refused() {
         assert!(!out.exists(), "{}: the failed bench left its folder", font.display());
     }
 }
+
+/// `RAYON_NUM_THREADS` (or the deprecated `RAYON_RS_NUM_CPUS`) above the `--threads` limit is
+/// refused in one line: rayon reads it for every pool of the default `--threads 0`, so
+/// `RAYON_NUM_THREADS=100000` spawned that many threads, the hang the limit of `--threads`
+/// refuses (over a minute before the first pixel). Values within the limit, 0 and non-numbers
+/// (one thread per core, as rayon reads them) still run.
+#[test]
+fn thread_counts_from_the_environment_beyond_the_limit_are_refused() {
+    let d = tmp("rayonenv");
+    let out = d.join("x.png");
+    let args = ["render", "cube", "--width", "8", "--height", "6", "--quiet", "--out", out.to_str().unwrap()];
+    for (var, value) in [("RAYON_NUM_THREADS", "100000"), ("RAYON_RS_NUM_CPUS", "100000")] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_lodtrace"))
+            .args(args)
+            .env(var, value)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let t0 = std::time::Instant::now();
+        while child.try_wait().unwrap().is_none() {
+            if t0.elapsed().as_secs() > 30 {
+                child.kill().unwrap();
+                child.wait().unwrap();
+                panic!("{var}={value}: still running after 30 s");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{var}={value}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(&format!("{var}={value} out of range")), "{err}");
+        assert!(!out.exists(), "{var}={value}: {} written", out.display());
+    }
+    for value in ["2", "0", "many"] {
+        let o = Command::new(env!("CARGO_BIN_EXE_lodtrace")).args(args).env("RAYON_NUM_THREADS", value).output().unwrap();
+        assert_eq!(o.status.code(), Some(0), "RAYON_NUM_THREADS={value}: {}", String::from_utf8_lossy(&o.stderr));
+    }
+}
