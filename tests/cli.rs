@@ -2951,3 +2951,21 @@ fn thread_counts_from_the_environment_beyond_the_limit_are_refused() {
         assert_eq!(o.status.code(), Some(0), "RAYON_NUM_THREADS={value}: {}", String::from_utf8_lossy(&o.stderr));
     }
 }
+
+/// A PLY header ends at its `end_header` line, not at the first "end_header" in its text: a
+/// comment naming it cut the header there, and a valid file was refused ("the header declares
+/// 0 rows, the file holds 7"). Its body is still checked against the real header.
+#[test]
+fn a_ply_comment_naming_end_header_does_not_end_the_header() {
+    let d = tmp("plycomment");
+    let rows: Vec<[f32; 6]> = (0..6).map(|i| [i as f32, (i * i % 5) as f32, (i % 2) as f32, 0.0, 0.0, 1.0]).collect();
+    let text = ply_text(&rows).replacen("format ascii 1.0\n", "format ascii 1.0\ncomment written before the end_header line\n", 1);
+    let p = d.join("commented.ply");
+    std::fs::write(&p, &text).unwrap();
+    runs(&["animate", p.to_str().unwrap(), "--frames", "1", "--width", "16", "--height", "12", "--quiet", "--out", "none"]);
+    std::fs::write(&p, text + "0 0 9 0 0 1\n").unwrap();
+    refused(
+        &["animate", p.to_str().unwrap(), "--frames", "1", "--width", "16", "--height", "12", "--quiet", "--out", "none"],
+        "the header declares 6 rows, the file holds 7",
+    );
+}

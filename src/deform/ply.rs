@@ -53,16 +53,23 @@ fn plain_ply_message(msg: &str) -> String {
 /// as long as the counts say (with lists its length is not known before parsing). Counts
 /// that are not whole numbers (`-1`, 10^20) are named as such.
 fn body_matches_header(buf: &[u8]) -> Result<(), String> {
-    let Some(end) = buf.windows(10).position(|w| w == b"end_header") else { return Ok(()) };
+    // The header ends at the line that is `end_header`, not at the first `end_header` in the
+    // text: a comment naming it ("comment written before the end_header line") cut the header
+    // there, so a valid file was refused ("the header declares 0 rows, the file holds 109").
+    let (mut start, mut split) = (0, None);
+    while start < buf.len() {
+        let nl = buf[start..].iter().position(|&b| b == b'\n').map(|n| start + n);
+        let line = &buf[start..nl.unwrap_or(buf.len())];
+        if line.trim_ascii() == b"end_header" {
+            split = Some((start, nl.map_or(buf.len(), |n| n + 1)));
+            break;
+        }
+        let Some(n) = nl else { break };
+        start = n + 1;
+    }
+    let Some((end, body_start)) = split else { return Ok(()) };
     let head = String::from_utf8_lossy(&buf[..end]);
-    let mut body = &buf[end + 10..];
-    // The header's last line ends with \n (or \r\n).
-    if body.first() == Some(&b'\r') {
-        body = &body[1..];
-    }
-    if body.first() == Some(&b'\n') {
-        body = &body[1..];
-    }
+    let body = &buf[body_start..];
     // Per element: (bytes of one row, rows, properties).
     let (mut declared, mut elements, mut fixed) = (0u64, Vec::<(u64, u64, u64)>::new(), true);
     // Names seen: ply-rs-bw keeps one element of a name and one property of a name (a second
