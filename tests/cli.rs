@@ -2969,3 +2969,19 @@ fn a_ply_comment_naming_end_header_does_not_end_the_header() {
         "the header declares 6 rows, the file holds 7",
     );
 }
+
+/// `LODTRACE_EMBREE_ISA=` (empty) counts as unset, as the other `LODTRACE_*` variables do: it
+/// was passed to Embree as `isa=`, and every Embree render failed with "cannot create device
+/// (unknown error)".
+#[test]
+fn an_empty_embree_isa_counts_as_unset() {
+    let d = tmp("emptyisa");
+    let out = d.join("x.png");
+    let o = Command::new(env!("CARGO_BIN_EXE_lodtrace"))
+        .args(["render", "cube", "--width", "8", "--height", "6", "--quiet", "--out", out.to_str().unwrap()])
+        .env("LODTRACE_EMBREE_ISA", "")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.exists());
+}
