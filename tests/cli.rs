@@ -2985,3 +2985,25 @@ fn an_empty_embree_isa_counts_as_unset() {
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(out.exists());
 }
+
+/// A point file too small for f32, without radii, says so ("spans only … scale it up"): its
+/// k-NN radii were held at 1e-12, and a sphere 3e-20 across was refused for a "radius 1e-12
+/// wider than the whole model", a radius the file never gave.
+#[test]
+fn a_point_file_too_small_for_f32_says_so() {
+    let d = tmp("tinyply");
+    let rows: Vec<[f32; 6]> = (0..64)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f32 + 0.5) / 64.0;
+            let r = (1.0 - z * z).sqrt();
+            let a = i as f32 * 2.4;
+            [r * a.cos() * 1e-20, z * 1e-20, r * a.sin() * 1e-20, r * a.cos(), z, r * a.sin()]
+        })
+        .collect();
+    let p = d.join("tiny.ply");
+    std::fs::write(&p, ply_text(&rows)).unwrap();
+    refused(
+        &["animate", p.to_str().unwrap(), "--frames", "1", "--width", "16", "--height", "12", "--quiet", "--out", "none"],
+        "too small for f32",
+    );
+}

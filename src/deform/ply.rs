@@ -187,6 +187,7 @@ pub fn read_ply<R: std::io::BufRead>(r: &mut R, path: &Path) -> Result<SurfelMod
     if s.len() < 4 {
         return Err(DeformError::TooSmall(format!("{}: {} points (need at least 4)", path.display(), s.len())));
     }
+    let name = crate::scene::load::stem_name(path, "points");
     if !has_r {
         // The placeholder becomes the model's size, which passes `validate`'s checks of radii
         // against the model (neither wider than it nor a millionth of it) at any scale.
@@ -199,6 +200,11 @@ pub fn read_ply<R: std::io::BufRead>(r: &mut R, path: &Path) -> Result<SurfelMod
     // Validate positions and normals (and duplicates) before using them for radii.
     s.validate()?;
     if !has_r {
+        // A model too small for f32 says so before its k-NN radii are measured: they were
+        // held at 1e-12, and a sphere 3e-20 across was refused for a "radius 1e-12 wider than
+        // the whole model", a radius the file never gave.
+        let (lo, hi) = s.positions().iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+        super::sequences::check_extent(&name, lo, hi)?;
         let pts = s.positions();
         let kd = KdTree::new(&pts);
         let mut out = Vec::new();
@@ -207,7 +213,7 @@ pub fn read_ply<R: std::io::BufRead>(r: &mut R, path: &Path) -> Result<SurfelMod
             s.r[i] = out.last().map(|x| x.1.sqrt()).unwrap_or(1.0).max(1e-12);
         }
     }
-    let mut m = SurfelModel::single(&crate::scene::load::stem_name(path, "points"), s, [0.7, 0.7, 0.7]);
+    let mut m = SurfelModel::single(&name, s, [0.7, 0.7, 0.7]);
     m.validate()?;
     Ok(m)
 }
