@@ -3007,3 +3007,27 @@ fn a_point_file_too_small_for_f32_says_so() {
         "too small for f32",
     );
 }
+
+/// A mesh whose triangle areas underflow f32 says "scale it up" at any size where they do: a
+/// tetrahedron 1e-14 across (areas ~1e-28, their squares 0 in f32) was refused as "every
+/// triangle is degenerate or non-finite", as the message's size bound was 1e-15. A mesh of
+/// collinear triangles is still called degenerate.
+#[test]
+fn a_mesh_too_small_for_f32_areas_says_scale_it_up() {
+    let d = tmp("tinyareas");
+    let out = d.join("x.png");
+    for (e, says) in
+        [("1e-14", "every triangle has zero area in f32: the mesh spans only 1.000e-14 units; scale it up"), ("1e-20", "scale it up")]
+    {
+        let p = d.join(format!("tetra{e}.off"));
+        std::fs::write(&p, format!("OFF\n4 4 0\n0 0 0\n{e} 0 0\n0 {e} 0\n0 0 {e}\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n")).unwrap();
+        refused(&["render", p.to_str().unwrap(), "--width", "8", "--height", "6", "--quiet", "--out", out.to_str().unwrap()], says);
+    }
+    let p = d.join("line.off");
+    std::fs::write(&p, "OFF\n3 1 0\n0 0 0\n1e-14 0 0\n2e-14 0 0\n3 0 1 2\n").unwrap();
+    refused(
+        &["render", p.to_str().unwrap(), "--width", "8", "--height", "6", "--quiet", "--out", out.to_str().unwrap()],
+        "every triangle is degenerate or non-finite",
+    );
+    assert!(!out.exists());
+}
