@@ -2911,3 +2911,123 @@ fn a_font_that_is_not_a_regular_file_is_refused() {
         assert!(!out.exists(), "{}: the failed bench left its folder", font.display());
     }
 }
+
+/// `RAYON_NUM_THREADS` (or the deprecated `RAYON_RS_NUM_CPUS`) above the `--threads` limit is
+/// refused in one line: rayon reads it for every pool of the default `--threads 0`, so
+/// `RAYON_NUM_THREADS=100000` spawned that many threads, the hang the limit of `--threads`
+/// refuses (over a minute before the first pixel). Values within the limit, 0 and non-numbers
+/// (one thread per core, as rayon reads them) still run.
+#[test]
+fn thread_counts_from_the_environment_beyond_the_limit_are_refused() {
+    let d = tmp("rayonenv");
+    let out = d.join("x.png");
+    let args = ["render", "cube", "--width", "8", "--height", "6", "--quiet", "--out", out.to_str().unwrap()];
+    for (var, value) in [("RAYON_NUM_THREADS", "100000"), ("RAYON_RS_NUM_CPUS", "100000")] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_lodtrace"))
+            .args(args)
+            .env(var, value)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let t0 = std::time::Instant::now();
+        while child.try_wait().unwrap().is_none() {
+            if t0.elapsed().as_secs() > 30 {
+                child.kill().unwrap();
+                child.wait().unwrap();
+                panic!("{var}={value}: still running after 30 s");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{var}={value}: {err}");
+        one_error_line(&err);
+        assert!(err.contains(&format!("{var}={value} out of range")), "{err}");
+        assert!(!out.exists(), "{var}={value}: {} written", out.display());
+    }
+    for value in ["2", "0", "many"] {
+        let o = Command::new(env!("CARGO_BIN_EXE_lodtrace")).args(args).env("RAYON_NUM_THREADS", value).output().unwrap();
+        assert_eq!(o.status.code(), Some(0), "RAYON_NUM_THREADS={value}: {}", String::from_utf8_lossy(&o.stderr));
+    }
+}
+
+/// A PLY header ends at its `end_header` line, not at the first "end_header" in its text: a
+/// comment naming it cut the header there, and a valid file was refused ("the header declares
+/// 0 rows, the file holds 7"). Its body is still checked against the real header.
+#[test]
+fn a_ply_comment_naming_end_header_does_not_end_the_header() {
+    let d = tmp("plycomment");
+    let rows: Vec<[f32; 6]> = (0..6).map(|i| [i as f32, (i * i % 5) as f32, (i % 2) as f32, 0.0, 0.0, 1.0]).collect();
+    let text = ply_text(&rows).replacen("format ascii 1.0\n", "format ascii 1.0\ncomment written before the end_header line\n", 1);
+    let p = d.join("commented.ply");
+    std::fs::write(&p, &text).unwrap();
+    runs(&["animate", p.to_str().unwrap(), "--frames", "1", "--width", "16", "--height", "12", "--quiet", "--out", "none"]);
+    std::fs::write(&p, text + "0 0 9 0 0 1\n").unwrap();
+    refused(
+        &["animate", p.to_str().unwrap(), "--frames", "1", "--width", "16", "--height", "12", "--quiet", "--out", "none"],
+        "the header declares 6 rows, the file holds 7",
+    );
+}
+
+/// `LODTRACE_EMBREE_ISA=` (empty) counts as unset, as the other `LODTRACE_*` variables do: it
+/// was passed to Embree as `isa=`, and every Embree render failed with "cannot create device
+/// (unknown error)".
+#[test]
+fn an_empty_embree_isa_counts_as_unset() {
+    let d = tmp("emptyisa");
+    let out = d.join("x.png");
+    let o = Command::new(env!("CARGO_BIN_EXE_lodtrace"))
+        .args(["render", "cube", "--width", "8", "--height", "6", "--quiet", "--out", out.to_str().unwrap()])
+        .env("LODTRACE_EMBREE_ISA", "")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.exists());
+}
+
+/// A point file too small for f32, without radii, says so ("spans only … scale it up"): its
+/// k-NN radii were held at 1e-12, and a sphere 3e-20 across was refused for a "radius 1e-12
+/// wider than the whole model", a radius the file never gave.
+#[test]
+fn a_point_file_too_small_for_f32_says_so() {
+    let d = tmp("tinyply");
+    let rows: Vec<[f32; 6]> = (0..64)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f32 + 0.5) / 64.0;
+            let r = (1.0 - z * z).sqrt();
+            let a = i as f32 * 2.4;
+            [r * a.cos() * 1e-20, z * 1e-20, r * a.sin() * 1e-20, r * a.cos(), z, r * a.sin()]
+        })
+        .collect();
+    let p = d.join("tiny.ply");
+    std::fs::write(&p, ply_text(&rows)).unwrap();
+    refused(
+        &["animate", p.to_str().unwrap(), "--frames", "1", "--width", "16", "--height", "12", "--quiet", "--out", "none"],
+        "too small for f32",
+    );
+}
+
+/// A mesh whose triangle areas underflow f32 says "scale it up" at any size where they do: a
+/// tetrahedron 1e-14 across (areas ~1e-28, their squares 0 in f32) was refused as "every
+/// triangle is degenerate or non-finite", as the message's size bound was 1e-15. A mesh of
+/// collinear triangles is still called degenerate.
+#[test]
+fn a_mesh_too_small_for_f32_areas_says_scale_it_up() {
+    let d = tmp("tinyareas");
+    let out = d.join("x.png");
+    for (e, says) in
+        [("1e-14", "every triangle has zero area in f32: the mesh spans only 1.000e-14 units; scale it up"), ("1e-20", "scale it up")]
+    {
+        let p = d.join(format!("tetra{e}.off"));
+        std::fs::write(&p, format!("OFF\n4 4 0\n0 0 0\n{e} 0 0\n0 {e} 0\n0 0 {e}\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n")).unwrap();
+        refused(&["render", p.to_str().unwrap(), "--width", "8", "--height", "6", "--quiet", "--out", out.to_str().unwrap()], says);
+    }
+    let p = d.join("line.off");
+    std::fs::write(&p, "OFF\n3 1 0\n0 0 0\n1e-14 0 0\n2e-14 0 0\n3 0 1 2\n").unwrap();
+    refused(
+        &["render", p.to_str().unwrap(), "--width", "8", "--height", "6", "--quiet", "--out", out.to_str().unwrap()],
+        "every triangle is degenerate or non-finite",
+    );
+    assert!(!out.exists());
+}

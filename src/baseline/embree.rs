@@ -139,7 +139,9 @@ impl EmbreeAccel {
             return Err(Error::Scene("nothing to build an Embree scene over".into()));
         }
         let mut config = device_config(rayon::current_num_threads(), std::thread::available_parallelism().map_or(0, |n| n.get()));
-        if let Ok(isa) = std::env::var("LODTRACE_EMBREE_ISA") {
+        // Empty counts as unset (as `LODTRACE_CACHE` and `LODTRACE_ASSETS`): `isa=` made
+        // Embree refuse the device, "cannot create device (unknown error)".
+        if let Some(isa) = std::env::var("LODTRACE_EMBREE_ISA").ok().filter(|v| !v.is_empty()) {
             if !isa.chars().all(|c| c.is_ascii_alphanumeric() || c == '.' || c == '_') {
                 return Err(Error::Usage(format!("LODTRACE_EMBREE_ISA='{isa}' is not an ISA name")));
             }

@@ -210,7 +210,8 @@ pub fn run(cli: Cli) -> i32 {
         Command::Verify(a) => none_is_absent(&mut a.json),
         _ => {}
     }
-    let r = match cmd {
+    // Before any thread pool is made (rayon reads the variables when it builds one).
+    let r = crate::core::check_thread_env().and_then(|()| match cmd {
         Command::Render(a) => render::run(&a).map(|_| 0),
         Command::Verify(a) => verify::run(&a),
         Command::Compare(a) => compare::run(&a),
@@ -218,7 +219,7 @@ pub fn run(cli: Cli) -> i32 {
         Command::Animate(a) => animate::run(&a).map(|_| 0),
         Command::Scenes => scenes::run().map(|_| 0),
         Command::Demo(a) => crate::experiment::demo::run(&a).map(|_| 0),
-    };
+    });
     match r {
         Ok(code) => {
             crate::error::flush_warnings();

@@ -29,6 +29,27 @@ pub fn thread_pool(n: usize) -> crate::error::Result<rayon::ThreadPool> {
     rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| crate::error::Error::Usage(format!("thread pool: {e}")))
 }
 
+/// The thread-count environment variables rayon reads for a pool of "0 = all cores" (and for
+/// its global pool): `RAYON_NUM_THREADS=100000` (or the deprecated `RAYON_RS_NUM_CPUS`) made
+/// every run with the default `--threads 0` spawn that many threads, the hang the
+/// [`MAX_THREADS`] check refuses for `--threads` (over a minute before the first pixel, then
+/// killed). A whole number above [`MAX_THREADS`] is a usage error; anything else is left to
+/// rayon (0 and non-numbers mean one thread per core there).
+pub fn check_thread_env() -> crate::error::Result<()> {
+    for var in ["RAYON_NUM_THREADS", "RAYON_RS_NUM_CPUS"] {
+        let Ok(v) = std::env::var(var) else { continue };
+        // rayon parses the value as a usize; a number too large for one is ignored there.
+        if let Ok(n) = v.parse::<usize>() {
+            if n > MAX_THREADS {
+                return Err(crate::error::Error::Usage(format!(
+                    "{var}={n} out of range (at most {MAX_THREADS} threads): unset it (--threads N sets the threads of a run)"
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// The `--threads` range check of [`thread_pool`], for validating options before a run.
 pub fn check_threads(n: usize) -> crate::error::Result<()> {
     if n > MAX_THREADS {

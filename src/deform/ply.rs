@@ -53,16 +53,23 @@ fn plain_ply_message(msg: &str) -> String {
 /// as long as the counts say (with lists its length is not known before parsing). Counts
 /// that are not whole numbers (`-1`, 10^20) are named as such.
 fn body_matches_header(buf: &[u8]) -> Result<(), String> {
-    let Some(end) = buf.windows(10).position(|w| w == b"end_header") else { return Ok(()) };
+    // The header ends at the line that is `end_header`, not at the first `end_header` in the
+    // text: a comment naming it ("comment written before the end_header line") cut the header
+    // there, so a valid file was refused ("the header declares 0 rows, the file holds 109").
+    let (mut start, mut split) = (0, None);
+    while start < buf.len() {
+        let nl = buf[start..].iter().position(|&b| b == b'\n').map(|n| start + n);
+        let line = &buf[start..nl.unwrap_or(buf.len())];
+        if line.trim_ascii() == b"end_header" {
+            split = Some((start, nl.map_or(buf.len(), |n| n + 1)));
+            break;
+        }
+        let Some(n) = nl else { break };
+        start = n + 1;
+    }
+    let Some((end, body_start)) = split else { return Ok(()) };
     let head = String::from_utf8_lossy(&buf[..end]);
-    let mut body = &buf[end + 10..];
-    // The header's last line ends with \n (or \r\n).
-    if body.first() == Some(&b'\r') {
-        body = &body[1..];
-    }
-    if body.first() == Some(&b'\n') {
-        body = &body[1..];
-    }
+    let body = &buf[body_start..];
     // Per element: (bytes of one row, rows, properties).
     let (mut declared, mut elements, mut fixed) = (0u64, Vec::<(u64, u64, u64)>::new(), true);
     // Names seen: ply-rs-bw keeps one element of a name and one property of a name (a second
@@ -180,6 +187,7 @@ pub fn read_ply<R: std::io::BufRead>(r: &mut R, path: &Path) -> Result<SurfelMod
     if s.len() < 4 {
         return Err(DeformError::TooSmall(format!("{}: {} points (need at least 4)", path.display(), s.len())));
     }
+    let name = crate::scene::load::stem_name(path, "points");
     if !has_r {
         // The placeholder becomes the model's size, which passes `validate`'s checks of radii
         // against the model (neither wider than it nor a millionth of it) at any scale.
@@ -192,6 +200,11 @@ pub fn read_ply<R: std::io::BufRead>(r: &mut R, path: &Path) -> Result<SurfelMod
     // Validate positions and normals (and duplicates) before using them for radii.
     s.validate()?;
     if !has_r {
+        // A model too small for f32 says so before its k-NN radii are measured: they were
+        // held at 1e-12, and a sphere 3e-20 across was refused for a "radius 1e-12 wider than
+        // the whole model", a radius the file never gave.
+        let (lo, hi) = s.positions().iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+        super::sequences::check_extent(&name, lo, hi)?;
         let pts = s.positions();
         let kd = KdTree::new(&pts);
         let mut out = Vec::new();
@@ -200,7 +213,7 @@ pub fn read_ply<R: std::io::BufRead>(r: &mut R, path: &Path) -> Result<SurfelMod
             s.r[i] = out.last().map(|x| x.1.sqrt()).unwrap_or(1.0).max(1e-12);
         }
     }
-    let mut m = SurfelModel::single(&crate::scene::load::stem_name(path, "points"), s, [0.7, 0.7, 0.7]);
+    let mut m = SurfelModel::single(&name, s, [0.7, 0.7, 0.7]);
     m.validate()?;
     Ok(m)
 }

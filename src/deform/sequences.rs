@@ -321,6 +321,21 @@ fn placement(lo: Vec3, hi: Vec3, height: f32, base: Vec3) -> (f32, Vec3) {
     (sc, base - Vec3::new(0.5 * (lo.x + hi.x), lo.y, 0.5 * (lo.z + hi.z)) * sc)
 }
 
+/// A model spanning `lo..hi` is large enough for f32 (at least 1e-6 × (1 + its largest
+/// coordinate)). The model is rescaled later ([`placement`]), but its surfel radii and
+/// neighbourhoods are measured in its own units, where squared distances of a 1e-30-sized
+/// model underflow f32 (stop 46's sweep: NaN radius ratios and a garbage frame, exit 0).
+pub(crate) fn check_extent(name: &str, lo: Vec3, hi: Vec3) -> Result<(), DeformError> {
+    let far = lo.abs().max(hi.abs()).max_element();
+    let size = (hi - lo).max_element();
+    if !(size >= 1e-6 * (1.0 + far)) {
+        return Err(DeformError::Invalid(format!(
+            "'{name}' spans only {size:.3e} units at coordinates up to {far:.3e}: too small for f32 (at least 1e-6 × (1 + its largest coordinate)); scale it up"
+        )));
+    }
+    Ok(())
+}
+
 /// A surfel set (sampled from a mesh or read from a point file) scaled to `height`, standing
 /// on `base`, with simulation nodes clustered from its surfels.
 fn surfel_object(
@@ -335,17 +350,7 @@ fn surfel_object(
         lo = lo.min(s.pos(i));
         hi = hi.max(s.pos(i));
     }
-    let ext = hi - lo;
-    // The model is rescaled below ([`placement`]), but its surfel radii and neighbourhoods were measured in
-    // its own units, where squared distances of a 1e-30-sized model underflow f32 (stop 46's
-    // sweep: NaN radius ratios and a garbage frame, exit 0).
-    let far = lo.abs().max(hi.abs()).max_element();
-    let size = ext.max_element();
-    if !(size >= 1e-6 * (1.0 + far)) {
-        return Err(DeformError::Invalid(format!(
-            "'{name}' spans only {size:.3e} units at coordinates up to {far:.3e}: too small for f32 (at least 1e-6 × (1 + its largest coordinate)); scale it up"
-        )));
-    }
+    check_extent(name, lo, hi)?;
     let (sc, shift) = placement(lo, hi, height, base);
     for i in 0..s.len() {
         let p = s.pos(i) * sc + shift;

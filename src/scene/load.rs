@@ -357,19 +357,31 @@ fn finish_mesh(path: &Path, mut mesh: Mesh) -> Result<Mesh> {
     if mesh.tris.is_empty() {
         return Err(Error::parse(path, "no faces"));
     }
+    // Whether a triangle has an area in f64 that underflows f32's test (the squared length
+    // of the edges' cross product, ~size⁴: 0 below about 1e-11 units). Looked for only in
+    // small meshes, before the degenerate triangles are removed.
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for i in 0..mesh.vertex_count() as u32 {
+        let p = mesh.pos(i);
+        if p.is_finite() {
+            (lo, hi) = (lo.min(p), hi.max(p));
+        }
+    }
+    let size = (hi - lo).max_element(); // not the diagonal: its square underflows too
+    let underflows = size > 0.0
+        && size < 1e-9
+        && (0..mesh.tri_count()).any(|t| {
+            let [p0, p1, p2] = mesh.tri_verts(t).map(|p| p.as_dvec3());
+            p0.is_finite() && p1.is_finite() && p2.is_finite() && (p1 - p0).cross(p2 - p0).length_squared() > 0.0
+        });
     let bad = mesh.remove_degenerate();
     if mesh.tris.is_empty() {
         // Say how large the mesh is: a model a few 1e-20 across has distinct vertices but
         // triangle areas that underflow f32 (stop 57: "degenerate" alone read as a bad file).
-        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-        for i in 0..mesh.vertex_count() as u32 {
-            let p = mesh.pos(i);
-            if p.is_finite() {
-                (lo, hi) = (lo.min(p), hi.max(p));
-            }
-        }
-        let size = (hi - lo).max_element(); // not the diagonal: its square underflows too
-        let why = if size > 0.0 && size < 1e-15 {
+        // Decided by the areas in f64, not by the size alone: a tetrahedron 1e-14 across
+        // (areas ~1e-28, their squares 0 in f32) was "degenerate or non-finite" as the size
+        // bound was 1e-15.
+        let why = if underflows {
             format!("every triangle has zero area in f32: the mesh spans only {size:.3e} units; scale it up")
         } else {
             "every triangle is degenerate or non-finite".to_string()
