@@ -41,7 +41,7 @@
 //!   paper's absolute angles include the pixel's own angular size (about 0.0015 rad at 512²
 //!   and 45°), which a flat mirror passes on unchanged; at that size it never lowers the
 //!   level (LOD⁽¹⁾ > 0.99 maps to level 0), so both modes keep a flat mirror at full LOD.
-//! - Parallelism: image rows in a rayon pool; rayon's work stealing is the dynamic load
+//! - Parallelism: bands of 16 image rows in a rayon pool, each walked in 16×16 blocks; rayon's work stealing is the dynamic load
 //!   balancing of §4 (an idle worker takes half of a busy worker's remaining range).
 
 use super::chain::{level_of, LodScenes};
@@ -54,7 +54,7 @@ use crate::core::stats::{Counter, Counters};
 use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::scene::camera::CameraFrame;
-use crate::scene::LeafInstance;
+use crate::scene::{LeafInstance, Material};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -228,18 +228,52 @@ pub struct LodMaps {
     pub lod_min: Vec<f32>,
 }
 
-/// Everything a level-1 sub-tree needs from pass 1.
+/// Everything a level-1 sub-tree needs from pass 1: the distortion buffer's directions and
+/// what pass 2 would otherwise recompute from the primary hit's surface (stop 83: pass 2 ran
+/// `TraceCtx::surface` and `secondary` a second time for every primary hit, about 1 % of a
+/// full-detail frame's instructions). The values are the ones pass 1 computed, bit for bit,
+/// so pass 2 spawns exactly the rays it spawned before.
 #[derive(Clone, Copy)]
-struct Cell {
-    ray: Ray,
-    hit: Option<Hit>,
-    /// Local shading of the primary hit (ambient, lights).
+struct Cell<'a> {
+    /// The primary ray's direction (the incident rays of `--lod-net-disparity`).
+    dir: Vec3,
+    /// Local shading of the primary hit (ambient, lights); the background on a miss.
     l0: Vec3,
     /// Reflected and transmitted directions (the distortion buffer), zero when absent.
     r: Vec3,
     t: Vec3,
+    /// Origins of the reflected (`p + ng·eps`) and transmitted (`p − ng·eps`) rays.
+    p_out: Vec3,
+    p_in: Vec3,
+    /// The reflected weight (mirror plus the total-internal-reflection share); > 0 exactly
+    /// when `r` is set.
+    kr: f32,
     /// The cone selector's (d_r, d_t) for this sample (zero with the disparity selector).
     cone: (f32, f32),
+    /// The primary hit's material; `None`: no hit (or no secondary rays at `max_depth` 0).
+    mat: Option<&'a Material>,
+    /// The hit instance (entered by the transmitted ray when `front`).
+    inst: u32,
+    front: bool,
+    /// A transmitted ray exists (`t` is then non-zero, a normalised direction).
+    has_t: bool,
+}
+
+impl Cell<'_> {
+    const EMPTY: Cell<'static> = Cell {
+        dir: Vec3::Z,
+        l0: Vec3::ZERO,
+        r: Vec3::ZERO,
+        t: Vec3::ZERO,
+        p_out: Vec3::ZERO,
+        p_in: Vec3::ZERO,
+        kr: 0.0,
+        cone: (0.0, 0.0),
+        mat: None,
+        inst: 0,
+        front: false,
+        has_t: false,
+    };
 }
 
 pub struct LodTracer<'a> {
@@ -385,8 +419,8 @@ impl<'a> LodTracer<'a> {
     }
 
     /// Pass 1 for one primary ray and its hit: local shading and the distortion-buffer entry.
-    fn pass1_cell(&self, ray: Ray, hit: Option<Hit>, c: &mut Counters) -> Cell {
-        let mut cell = Cell { ray, hit, l0: self.ctxs[0].scene.background, r: Vec3::ZERO, t: Vec3::ZERO, cone: (0.0, 0.0) };
+    fn pass1_cell(&self, ray: Ray, hit: Option<Hit>, c: &mut Counters) -> Cell<'a> {
+        let mut cell = Cell { dir: ray.dir, l0: self.ctxs[0].scene.background, ..Cell::EMPTY };
         let Some(h) = hit else { return cell };
         let lv = self.level(&self.root_state());
         let ctx = &self.ctxs[lv as usize];
@@ -400,10 +434,15 @@ impl<'a> LodTracer<'a> {
         let sec = secondary(&s, v);
         if let Some(t) = sec.refract {
             cell.t = t;
+            cell.has_t = true;
+            cell.p_in = s.p - s.ng * s.eps;
         }
         if sec.reflect_w > 0.0 {
             cell.r = sec.mirror;
+            cell.kr = sec.reflect_w;
+            cell.p_out = p_out;
         }
+        (cell.mat, cell.inst, cell.front) = (Some(s.mat), h.inst, s.front);
         if self.p.selector == Selector::Cone {
             cell.cone = self.cone_disparity(ctx, &ray, &h, &s, cell.r != Vec3::ZERO, cell.t != Vec3::ZERO);
         }
@@ -445,19 +484,13 @@ impl<'a> LodTracer<'a> {
         (dr.clamp(0.0, 1.0), dt.clamp(0.0, 1.0))
     }
 
-    /// Pass 2 for one primary sample: the level-1 sub-trees at the LODs from the disparities.
+    /// Pass 2 for one primary sample: the level-1 sub-trees at the LODs from the disparities,
+    /// spawned from what pass 1 left in the cell.
     fn pass2_cell(&self, cell: &Cell, d_r: f32, d_t: f32, c: &mut Counters) -> (Vec3, f32, f32) {
         let root = self.root_state();
-        let Some(h) = cell.hit else { return (cell.l0, 1.0, 1.0) };
-        if self.max_depth == 0 {
-            return (cell.l0, 1.0, 1.0);
-        }
+        // No hit, or `max_depth` 0 (pass 1 then leaves `mat` empty).
+        let Some(mat) = cell.mat else { return (cell.l0, 1.0, 1.0) };
         let lv = self.level(&root);
-        let ctx = &self.ctxs[lv as usize];
-        let s = ctx.surface(&cell.ray, &h);
-        let v = -cell.ray.dir;
-        let eps = s.eps;
-        let sec = secondary(&s, v);
         let mut l = cell.l0;
         let lod1 = |d: f32| match self.p.force {
             Some(x) => x,
@@ -466,24 +499,24 @@ impl<'a> LodTracer<'a> {
         let (mut lr, mut lt) = (1.0, 1.0);
         // The primary hit's children too (`--lod-selective-level 0`; stop 80: pass 2 spawned
         // them without the rule, so level 0 rendered what level 1 renders).
-        let kt = s.mat.transmit * luminance(s.mat.color);
-        let (do_t, do_r) = self.selective(0, lv, &root, sec.refract.is_some(), sec.reflect_w > 0.0, sec.reflect_w, kt, c);
-        if let Some(t) = sec.refract.filter(|_| do_t) {
+        let kt = mat.transmit * luminance(mat.color);
+        let (do_t, do_r) = self.selective(0, lv, &root, cell.has_t, cell.kr > 0.0, cell.kr, kt, c);
+        if do_t {
             let mut inside = Inside::default();
-            if s.front {
-                inside.enter(h.inst, lv);
+            if cell.front {
+                inside.enter(cell.inst, lv);
             }
             let st = RayState { lod: lod1(d_t), k: kt, d: d_t, inside };
             lt = st.lod;
             c.inc(Counter::rays_refract);
-            let x = self.radiance(&Ray::new(s.p - s.ng * eps, t), 1, &st, c);
-            l += x * s.mat.color * s.mat.transmit;
+            let x = self.radiance(&Ray::new(cell.p_in, cell.t), 1, &st, c);
+            l += x * mat.color * mat.transmit;
         }
         if do_r {
-            let st = RayState { lod: lod1(d_r), k: sec.reflect_w, d: d_r, inside: Inside::default() };
+            let st = RayState { lod: lod1(d_r), k: cell.kr, d: d_r, inside: Inside::default() };
             lr = st.lod;
             c.inc(Counter::rays_reflect);
-            l += self.radiance(&Ray::new(s.p + s.ng * eps, sec.mirror), 1, &st, c) * sec.reflect_w;
+            l += self.radiance(&Ray::new(cell.p_out, cell.r), 1, &st, c) * cell.kr;
         }
         (l, lr, lt)
     }
@@ -536,10 +569,11 @@ pub fn render(tr: &mut LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> Resul
     Ok(LodRender { out, maps, pass1_seconds: p1 })
 }
 
-/// Both passes run over image rows in parallel (rayon's work stealing balances them), each
-/// row writing its own slice of the distortion buffer and of the film: no scatter step.
-/// (Tiles with a per-tile result list and a scatter cost 22 % over Whitted on `reflector`,
-/// 512², 4 spp; rows brought that down to the figure in the README.) Every sample index has
+/// Both passes run over bands of 16 image rows in parallel (rayon's work stealing balances
+/// them), each band writing its own slice of the distortion buffer and of the film: no
+/// scatter step. (Tiles with a per-tile result list and a scatter cost 22 % over Whitted on
+/// `reflector`, 512², 4 spp; rows brought that down to the figure in the README; stop 83: a
+/// band is walked in 16×16 blocks, Whitted's tile order, without a scatter.) Every sample index has
 /// its own distortion buffer, so the two passes run once per sample index over one buffer of
 /// one cell per pixel: memory stays that of the film at any `--spp` (a buffer of all samples
 /// took 100 bytes per sample, 420 MB at 8×8 and 65536 spp, and aborted where Whitted ran).
@@ -547,14 +581,24 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
     let (w, h, spp) = (opts.width, opts.height, opts.spp);
     let wu = w as usize;
     let npix = (w * h) as usize;
-    let prog = Progress::new(2 * h as u64 * spp as u64, &opts.label, opts.quiet);
+    // Both passes visit the image in bands of BAND rows (one parallel task each), and a band
+    // in blocks of TILE columns, block after block: the Whitted tracer's 16×16 tiles, whose
+    // rays touch fewer BVH nodes between neighbours than a row of the whole width does (stop
+    // 83; one task per row, as until then, cost cache misses: the same instructions ran up
+    // to 10 % slower than Whitted's). The band is a contiguous slice of the buffer, the film
+    // and the maps, so each task still writes its own slices, with no scatter step. TILE is
+    // a multiple of the packet width K = 8, so `primary_row` forms the same packets.
+    const BAND: usize = crate::baseline::render::TILE as usize;
+    const _: () = assert!(BAND.is_multiple_of(crate::baseline::accel::K));
+    let band = BAND * wu;
+    let blocks = || (0..w).step_by(BAND).map(move |x0| (x0, (x0 + BAND as u32).min(w)));
+    let prog = Progress::new(2 * h.div_ceil(BAND as u32) as u64 * spp as u64, &opts.label, opts.quiet);
     let ctx0 = &tr.ctxs[tr.level(&tr.root_state()) as usize];
     let merge = |mut a: Counters, b: Counters| {
         a.merge(&b);
         a
     };
-    let empty = Cell { ray: Ray::new(Vec3::ZERO, Vec3::Z), hit: None, l0: Vec3::ZERO, r: Vec3::ZERO, t: Vec3::ZERO, cone: (0.0, 0.0) };
-    let mut buf = vec![empty; npix];
+    let mut buf = vec![Cell::EMPTY; npix];
     let mut film = Film::new(w, h);
     // Sums over the samples (averaged at the end, in sample order as before).
     let mut maps = LodMaps {
@@ -572,35 +616,40 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
         // Pass 1: level-0 rays (packets of K at one sample per pixel, as the Whitted tracer).
         let t0 = Instant::now();
         let c1 = buf
-            .par_chunks_mut(wu)
-            .zip(film.depth.par_chunks_mut(wu))
-            .zip(film.normal.par_chunks_mut(wu))
+            .par_chunks_mut(band)
+            .zip(film.depth.par_chunks_mut(band))
+            .zip(film.normal.par_chunks_mut(band))
             .enumerate()
-            .map(|(j, ((cells, depth), normal))| {
-                let j = j as u32;
+            .map(|(b, ((cells, depth), normal))| {
                 let mut c = Counters::default();
-                if spp == 1 {
-                    primary_row(ctx0.accel, cam, j, 0, w, opts.packet, &mut c, |i, ray, hit, c| {
-                        let i = i as usize;
-                        cells[i] = tr.pass1_cell(*ray, hit.copied(), c);
-                        if opts.aov {
-                            (depth[i], normal[i]) = match hit {
-                                Some(hh) => (hh.t, ctx0.surface(ray, hh).ns),
-                                None => (f32::INFINITY, Vec3::ZERO),
-                            };
+                let j0 = (b * BAND) as u32;
+                for (x0, x1) in blocks() {
+                    for jj in 0..(cells.len() / wu) as u32 {
+                        let (j, row) = (j0 + jj, jj as usize * wu);
+                        if spp == 1 {
+                            primary_row(ctx0.accel, cam, j, x0, x1, opts.packet, &mut c, |i, ray, hit, c| {
+                                let i = row + i as usize;
+                                cells[i] = tr.pass1_cell(*ray, hit.copied(), c);
+                                if opts.aov {
+                                    (depth[i], normal[i]) = match hit {
+                                        Some(hh) => (hh.t, ctx0.surface(ray, hh).ns),
+                                        None => (f32::INFINITY, Vec3::ZERO),
+                                    };
+                                }
+                            });
+                        } else {
+                            for i in x0..x1 {
+                                let mut smp = Sampler::new(opts.seed, j * w + i, s);
+                                let (u, v) = smp.next2();
+                                let ray = Ray::new(cam.eye, cam.dir_at(i as f32 + u, j as f32 + v));
+                                c.inc(Counter::rays_primary);
+                                c.inc(Counter::samples);
+                                let hit = ctx0.accel.intersect1(&ray, &mut c);
+                                cells[row + i as usize] = tr.pass1_cell(ray, hit, &mut c);
+                            }
+                            // Depth and normal AOVs: `aov_probes`, after the timed render.
                         }
-                    });
-                } else {
-                    for i in 0..w {
-                        let mut smp = Sampler::new(opts.seed, j * w + i, s);
-                        let (u, v) = smp.next2();
-                        let ray = Ray::new(cam.eye, cam.dir_at(i as f32 + u, j as f32 + v));
-                        c.inc(Counter::rays_primary);
-                        c.inc(Counter::samples);
-                        let hit = ctx0.accel.intersect1(&ray, &mut c);
-                        cells[i as usize] = tr.pass1_cell(ray, hit, &mut c);
                     }
-                    // Depth and normal AOVs: `aov_probes`, after the timed render.
                 }
                 prog.tick();
                 c
@@ -638,7 +687,7 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
                 let (oh, ov) = (hn.map(|n| dir(&buf[n])), vn.map(|n| dir(&buf[n])));
                 if net {
                     // Minus the divergence the incident rays already had, per axis.
-                    net_disparity(dir(cell), oh, ov, cell.ray.dir, hn.map(|n| buf[n].ray.dir), vn.map(|n| buf[n].ray.dir))
+                    net_disparity(dir(cell), oh, ov, cell.dir, hn.map(|n| buf[n].dir), vn.map(|n| buf[n].dir))
                 } else {
                     disparity(dir(cell), oh, ov)
                 }
@@ -647,25 +696,30 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
         };
         let c2 = film
             .color
-            .par_chunks_mut(wu)
-            .zip(maps.d_r.par_chunks_mut(wu))
-            .zip(maps.d_t.par_chunks_mut(wu))
-            .zip(maps.lod_r.par_chunks_mut(wu))
-            .zip(maps.lod_t.par_chunks_mut(wu))
-            .zip(maps.lod_min.par_chunks_mut(wu))
+            .par_chunks_mut(band)
+            .zip(maps.d_r.par_chunks_mut(band))
+            .zip(maps.d_t.par_chunks_mut(band))
+            .zip(maps.lod_r.par_chunks_mut(band))
+            .zip(maps.lod_t.par_chunks_mut(band))
+            .zip(maps.lod_min.par_chunks_mut(band))
             .enumerate()
-            .map(|(j, (((((color, dr_row), dt_row), lr_row), lt_row), min_row))| {
+            .map(|(b, (((((color, dr_row), dt_row), lr_row), lt_row), min_row))| {
                 let mut c = Counters::default();
-                for i in 0..wu {
-                    let k = j * wu + i;
-                    let (dr, dt) = disparity_at(k);
-                    let (col, lr, lt) = tr.pass2_cell(&buf[k], dr, dt, &mut c);
-                    color[i] += col;
-                    dr_row[i] += dr;
-                    dt_row[i] += dt;
-                    lr_row[i] += lr;
-                    lt_row[i] += lt;
-                    min_row[i] = min_row[i].min(lr).min(lt);
+                let k0 = b * band;
+                for (x0, x1) in blocks() {
+                    for row in (0..color.len()).step_by(wu) {
+                        for i in row + x0 as usize..row + x1 as usize {
+                            let k = k0 + i;
+                            let (dr, dt) = disparity_at(k);
+                            let (col, lr, lt) = tr.pass2_cell(&buf[k], dr, dt, &mut c);
+                            color[i] += col;
+                            dr_row[i] += dr;
+                            dt_row[i] += dt;
+                            lr_row[i] += lr;
+                            lt_row[i] += lt;
+                            min_row[i] = min_row[i].min(lr).min(lt);
+                        }
+                    }
                 }
                 prog.tick();
                 c
