@@ -576,7 +576,7 @@ pub fn render(tr: &mut LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> Resul
 /// band is walked in 16×16 blocks, Whitted's tile order, without a scatter.) Every sample
 /// index has its own distortion buffer (a plane of one cell per pixel). When all `spp`
 /// planes fit in [`ALL_PLANES_BUDGET`], one round fills them all and a pixel's samples are
-/// traced back to back, as the Whitted tracer does (stop 84); otherwise the two passes run
+/// traced back to back, as the Whitted tracer does (stop 83); otherwise the two passes run
 /// once per sample index over a single plane, so memory stays that of the film at any
 /// `--spp` (a buffer of all samples took 100 bytes per sample, 420 MB at 8×8 and 65536 spp,
 /// and aborted where Whitted ran).
@@ -766,7 +766,7 @@ fn two_pass(tr: &LodTracer, cam: &CameraFrame, opts: &RenderOpts) -> (Film, Coun
 /// aborted) stays on one plane. Beyond it the passes go one sample index at a time over one
 /// plane, as large as the film's colour. Within it a pixel's samples and their secondary rays
 /// run back to back and touch the same BVH nodes (the jittered samples of one pixel are more
-/// coherent than neighbouring pixels, all the more after bumpy glass): stop 84, `chessboard`
+/// coherent than neighbouring pixels, all the more after bumpy glass): stop 83, `chessboard`
 /// 512², 4 spp, one thread, the LOD frame went from 5.49–5.69 s to 5.12–5.27 s (−6.7 % on the
 /// means of four interleaved runs each; `force=1` −5.2 %; Whitted 5.45–5.83 s), with the
 /// same image, maps and counters.
