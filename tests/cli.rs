@@ -2962,12 +2962,14 @@ fn a_ply_comment_naming_end_header_does_not_end_the_header() {
     let text = ply_text(&rows).replacen("format ascii 1.0\n", "format ascii 1.0\ncomment written before the end_header line\n", 1);
     let p = d.join("commented.ply");
     std::fs::write(&p, &text).unwrap();
-    runs(&["animate", p.to_str().unwrap(), "--frames", "1", "--width", "16", "--height", "12", "--quiet", "--out", "none"]);
+    runs(&one_frame_animate(&p));
     std::fs::write(&p, text + "0 0 9 0 0 1\n").unwrap();
-    refused(
-        &["animate", p.to_str().unwrap(), "--frames", "1", "--width", "16", "--height", "12", "--quiet", "--out", "none"],
-        "the header declares 6 rows, the file holds 7",
-    );
+    refused(&one_frame_animate(&p), "the header declares 6 rows, the file holds 7");
+}
+
+/// `animate FILE` for one small frame, no output: the point-file tests' command.
+fn one_frame_animate(p: &std::path::Path) -> Vec<&str> {
+    vec!["animate", p.to_str().unwrap(), "--frames", "1", "--width", "16", "--height", "12", "--quiet", "--out", "none"]
 }
 
 /// `LODTRACE_EMBREE_ISA=` (empty) counts as unset, as the other `LODTRACE_*` variables do: it
@@ -3002,10 +3004,7 @@ fn a_point_file_too_small_for_f32_says_so() {
         .collect();
     let p = d.join("tiny.ply");
     std::fs::write(&p, ply_text(&rows)).unwrap();
-    refused(
-        &["animate", p.to_str().unwrap(), "--frames", "1", "--width", "16", "--height", "12", "--quiet", "--out", "none"],
-        "too small for f32",
-    );
+    refused(&one_frame_animate(&p), "too small for f32");
 }
 
 /// A mesh whose triangle areas underflow f32 says "scale it up" at any size where they do: a
