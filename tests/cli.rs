@@ -22,6 +22,23 @@ fn one_error_line(stderr: &str) {
     assert!(lines[0].starts_with("lodtrace: error:"), "{stderr:?}");
 }
 
+/// Runs `cmd` (stderr captured, stdout dropped) and returns its output, killing it and
+/// failing the test (naming `what`) if it is still running after 30 s: for inputs that once
+/// hung.
+fn output_within_30s(mut cmd: Command, what: &str) -> std::process::Output {
+    let mut child = cmd.stdout(std::process::Stdio::null()).stderr(std::process::Stdio::piped()).spawn().unwrap();
+    let t0 = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if t0.elapsed().as_secs() > 30 {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            panic!("{what}: still running after 30 s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    child.wait_with_output().unwrap()
+}
+
 /// `lodtrace ARGS` is refused: exit 2 and one error line that names `says`.
 fn refused(args: &[&str], says: &str) {
     let (code, _, err) = lodtrace(args);
@@ -2883,27 +2900,14 @@ fn a_font_that_is_not_a_regular_file_is_refused() {
         let out = d.join("b");
         // Under a memory limit: the old read of /dev/zero took all there was.
         let exe = env!("CARGO_BIN_EXE_lodtrace");
-        let mut child = Command::new("sh")
-            .arg("-c")
+        let mut cmd = Command::new("sh");
+        cmd.arg("-c")
             .arg(format!(
                 "ulimit -v 2000000; exec {exe} bench plane --methods whitted --width 8 --height 6 --quiet --out {}",
                 out.display()
             ))
-            .env("LODTRACE_FONT", font)
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        let t0 = std::time::Instant::now();
-        while child.try_wait().unwrap().is_none() {
-            if t0.elapsed().as_secs() > 30 {
-                child.kill().unwrap();
-                child.wait().unwrap();
-                panic!("{}: still running after 30 s", font.display());
-            }
-            std::thread::sleep(std::time::Duration::from_millis(50));
-        }
-        let o = child.wait_with_output().unwrap();
+            .env("LODTRACE_FONT", font);
+        let o = output_within_30s(cmd, &font.display().to_string());
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{}: {err}", font.display());
         one_error_line(&err);
@@ -2923,23 +2927,9 @@ fn thread_counts_from_the_environment_beyond_the_limit_are_refused() {
     let out = d.join("x.png");
     let args = ["render", "cube", "--width", "8", "--height", "6", "--quiet", "--out", out.to_str().unwrap()];
     for (var, value) in [("RAYON_NUM_THREADS", "100000"), ("RAYON_RS_NUM_CPUS", "100000")] {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_lodtrace"))
-            .args(args)
-            .env(var, value)
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        let t0 = std::time::Instant::now();
-        while child.try_wait().unwrap().is_none() {
-            if t0.elapsed().as_secs() > 30 {
-                child.kill().unwrap();
-                child.wait().unwrap();
-                panic!("{var}={value}: still running after 30 s");
-            }
-            std::thread::sleep(std::time::Duration::from_millis(50));
-        }
-        let o = child.wait_with_output().unwrap();
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_lodtrace"));
+        cmd.args(args).env(var, value);
+        let o = output_within_30s(cmd, &format!("{var}={value}"));
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{var}={value}: {err}");
         one_error_line(&err);
