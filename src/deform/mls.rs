@@ -184,12 +184,13 @@ impl MlsNbr {
     /// Adds a neighbour (at most [`MAX_NBR`]).
     #[inline]
     pub fn push(&mut self, p: Vec3, n: Vec3) {
-        assert!(self.len < MAX_NBR, "MLS neighbourhood full");
-        for a in 0..3 {
-            self.p[a][self.len] = p[a];
-            self.n[a][self.len] = n[a];
-        }
-        self.len += 1;
+        let i = self.len;
+        assert!(i < MAX_NBR, "MLS neighbourhood full");
+        // Component by component: a loop over `p[a]` went through glam's checked index,
+        // about 25 instructions a neighbour against 8 (16 neighbours per MLS run).
+        [self.p[0][i], self.p[1][i], self.p[2][i]] = p.to_array();
+        [self.n[0][i], self.n[1][i], self.n[2][i]] = n.to_array();
+        self.len = i + 1;
     }
     pub fn len(&self) -> usize {
         self.len

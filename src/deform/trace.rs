@@ -1072,10 +1072,21 @@ impl DeformTracer {
         if ii.surf.slot[s].stamp.load(Acquire) == self.frame {
             load(&ii.surf, s)
         } else {
-            let d = deform_surfel(&ii.obj, &ii.field, s);
-            let (n, r) = store_surfel(&ii.surf, s, &d, self.frame);
+            let (d, n, r) = self.deform_store(ii, s);
             fresh(&d, n, r)
         }
+    }
+
+    /// The lazy path of [`surfel_as`](Self::surfel_as): surfel `s` deformed (Eq. 1) and
+    /// stored, with its normal and leaf radius. Out of line: the MLS neighbourhood gathers
+    /// sixteen surfels through `surfel_as`, nearly all of them current, and this body
+    /// inlined into each gather step cost more than the call does when it is needed.
+    #[cold]
+    #[inline(never)]
+    fn deform_store(&self, ii: &Instance, s: usize) -> (DeformedSurfel, Vec3, f32) {
+        let d = deform_surfel(&ii.obj, &ii.field, s);
+        let (n, r) = store_surfel(&ii.surf, s, &d, self.frame);
+        (d, n, r)
     }
 
     #[inline]
