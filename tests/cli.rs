@@ -5,7 +5,12 @@ use std::path::PathBuf;
 use std::process::Command;
 
 fn lodtrace(args: &[&str]) -> (i32, String, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_lodtrace")).args(args).output().expect("run lodtrace");
+    lodtrace_env(args, &[])
+}
+
+/// [`lodtrace`] with arguments that need not be UTF-8, and the environment variables `env` set.
+fn lodtrace_env<S: AsRef<std::ffi::OsStr>>(args: &[S], env: &[(&str, &str)]) -> (i32, String, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_lodtrace")).args(args).envs(env.iter().copied()).output().expect("run lodtrace");
     (o.status.code().unwrap_or(-1), String::from_utf8_lossy(&o.stdout).into(), String::from_utf8_lossy(&o.stderr).into())
 }
 
@@ -41,10 +46,15 @@ fn output_within_30s(mut cmd: Command, what: &str) -> std::process::Output {
 
 /// `lodtrace ARGS` is refused: exit 2 and one error line that names `says`.
 fn refused(args: &[&str], says: &str) {
-    let (code, _, err) = lodtrace(args);
-    assert_eq!(code, 2, "{args:?}: {err}");
+    refused_env(args, &[], says)
+}
+
+/// [`refused`] with [`lodtrace_env`]'s arguments and environment.
+fn refused_env<S: AsRef<std::ffi::OsStr> + std::fmt::Debug>(args: &[S], env: &[(&str, &str)], says: &str) {
+    let (code, _, err) = lodtrace_env(args, env);
+    assert_eq!(code, 2, "{args:?} {env:?}: {err}");
     one_error_line(&err);
-    assert!(err.contains(says), "{args:?}: {err}");
+    assert!(err.contains(says), "{args:?} {env:?}: {err}");
 }
 
 /// `lodtrace ARGS` runs (exit 0), the counterpart of [`refused`].
@@ -3019,4 +3029,33 @@ fn a_mesh_too_small_for_f32_areas_says_scale_it_up() {
         "every triangle is degenerate or non-finite",
     );
     assert!(!out.exists());
+}
+
+/// `bench --out DIR` checks its outputs and the plots' font before the first render: a
+/// folder where `DIR/bench.json`, a plot or an image goes, and `LODTRACE_FONT` naming no
+/// file, were refused only when written, after every render (the renders' status lines
+/// came first). Nothing is rendered, and a folder the run would create is not left behind.
+#[test]
+fn bench_outputs_and_font_are_checked_before_rendering() {
+    let d = tmp("bench-precheck");
+    let (out, fresh) = (d.join("b"), d.join("f"));
+    // Not --quiet: a render would print its status line before the error.
+    let bench = |scene: &str, methods: &str, out: &std::path::Path| -> Vec<String> {
+        let mut v = vec!["bench", scene, "--methods", methods, "--width", "8", "--height", "6", "--out", out.to_str().unwrap()];
+        if !methods.starts_with("surfel") {
+            v.extend_from_slice(&["--reference", "distributed:bvh:spp=4:vt=0"]);
+        }
+        v.into_iter().map(String::from).collect()
+    };
+    for name in ["bench.json", "bench.md", "bench-time.png", "bench-error.png", "plane-whitted_bvh.png", "plane-whitted_bvh-flip.png"] {
+        std::fs::create_dir_all(out.join(name)).unwrap();
+        refused_env(&bench("plane", "whitted:bvh", &out)[..], &[], &format!("{name}: is a folder"));
+        assert_eq!(std::fs::read_dir(&out).unwrap().count(), 1, "{name}: the bench wrote files");
+        std::fs::remove_dir(out.join(name)).unwrap();
+    }
+    let no_font = [("LODTRACE_FONT", "/nonexistent/font.ttf")];
+    for (scene, methods) in [("plane", "whitted:bvh"), ("heads", "surfel:frames=1:detail=0.03")] {
+        refused_env(&bench(scene, methods, &fresh)[..], &no_font, "no font found (tried /nonexistent/font.ttf)");
+        assert!(!fresh.exists(), "{scene}: the failed bench left its folder");
+    }
 }

@@ -67,14 +67,9 @@ pub fn check_out_path(p: &Path) -> Result<()> {
         }
         return Err(Error::Usage(format!("{}: output folder does not exist", p.display())));
     }
-    if p.is_dir() {
-        return Err(Error::Usage(format!("{}: is a folder", p.display())));
-    }
     // Outputs are written to a temporary file and renamed over the target: that would
     // replace a device or pipe (`/dev/full`) with a plain file.
-    if p.exists() && !p.is_file() {
-        return Err(Error::Usage(format!("{}: not a regular file", p.display())));
-    }
+    io::check_not_special(p)?;
     io::check_writable_dir(dir)
 }
 

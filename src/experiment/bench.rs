@@ -956,21 +956,80 @@ pub(crate) fn plan(a: &BenchArgs) -> Result<Plan> {
     Ok(Plan { specs, reference, sweeps, regions, sweep_max_spp, surfel_sizes: None, scenes })
 }
 
-fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
-    let Plan { specs, reference, sweeps, regions, sweep_max_spp, surfel_sizes, scenes } = plan(a)?;
-    if let Some(sizes) = surfel_sizes {
-        if let Some(out) = &a.out {
-            crate::film::io::create_out_dir(out)?;
-            crate::film::io::check_writable_dir(out)?;
+/// The files a bench run may write in its output folder (names inside it, `WxH/` for the
+/// sizes of `--sizes`): the report, the plots, and each row's, the reference's and every
+/// sweep point's images, including those only some methods write (cost, LOD maps). Checked
+/// before the first render ([`crate::film::io::check_out_files`]).
+fn output_names(a: &BenchArgs, plan: &Plan) -> Vec<String> {
+    let mut names: Vec<String> = ["bench.json", "bench.md", "bench-time.png"].map(String::from).into();
+    if let Some(sizes) = &plan.surfel_sizes {
+        names.extend(["radius-ratio.png", "speedup-vs-size.png"].map(String::from));
+        let seqs: Vec<String> = a.scenes.iter().map(|s| crate::scene::load::stem_name(Path::new(s), s)).collect();
+        for &(w, h) in sizes {
+            let dir = if a.sizes.is_some() { format!("{w}x{h}/") } else { String::new() };
+            for seq in &seqs {
+                names.push(format!("{dir}{seq}-frame-times.png"));
+                names.push(format!("{dir}{seq}-sphere-tests.png"));
+                names.extend(plan.specs.iter().map(|s| format!("{dir}{seq}-{}.png", s.slug())));
+            }
         }
+        return names;
+    }
+    let reference = plan.reference.as_ref();
+    if reference.is_some() {
+        names.push("bench-error.png".into());
+    }
+    for scene in &plan.scenes {
+        let s = &scene.name;
+        if let Some(r) = reference {
+            names.push(format!("{s}-reference-{}.png", r.slug()));
+        }
+        if !plan.sweeps.is_empty() {
+            names.push(format!("{s}-equal-time.png"));
+        }
+        let mut rows: Vec<(String, Method)> = plan.specs.iter().map(|m| (m.slug(), m.method)).collect();
+        for sw in &plan.sweeps {
+            let mut spp = 1u32;
+            while spp <= plan.sweep_max_spp {
+                rows.push((MethodSpec::slug_of(&format!("{}:spp={spp}", sw.text)), sw.method));
+                spp *= 2;
+            }
+        }
+        for (slug, m) in rows {
+            names.push(format!("{s}-{slug}.png"));
+            if reference.is_some() {
+                names.push(format!("{s}-{slug}-flip.png"));
+            }
+            names.push(format!("{s}-{slug}-cost.png"));
+            if m == Method::Lod {
+                names.extend(["diff", "disparity-r", "disparity-t"].map(|k| format!("{s}-{slug}-{k}.png")));
+            }
+        }
+    }
+    names
+}
+
+fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
+    let plan = plan(a)?;
+    if let Some(out) = &a.out {
+        // The plots need a font, and no output may be a folder: say so before the renders,
+        // not after them (the font was loaded, and the outputs written, only at the end).
+        super::plot::check_font()?;
+        crate::film::io::create_out_dir(out)?;
+        crate::film::io::check_writable_dir(out)?;
+        if let (Some(sizes), true) = (&plan.surfel_sizes, a.sizes.is_some()) {
+            for &(w, h) in sizes {
+                crate::film::io::create_out_dir(&out.join(format!("{w}x{h}")))?;
+            }
+        }
+        crate::film::io::check_out_files(out, &output_names(a, &plan))?;
+    }
+    let Plan { specs, reference, sweeps, regions, sweep_max_spp, surfel_sizes, scenes } = plan;
+    if let Some(sizes) = surfel_sizes {
         let mut deform = Vec::new();
         for &(w, h) in &sizes {
             let dir = match (&a.out, a.sizes.is_some()) {
-                (Some(out), true) => {
-                    let d = out.join(format!("{w}x{h}"));
-                    crate::film::io::create_out_dir(&d)?;
-                    Some(d)
-                }
+                (Some(out), true) => Some(out.join(format!("{w}x{h}"))),
                 (out, _) => out.clone(),
             };
             if a.sizes.is_some() && !a.quiet {
@@ -997,10 +1056,6 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             }
         }
         return Ok(report);
-    }
-    if let Some(out) = &a.out {
-        crate::film::io::create_out_dir(out)?;
-        crate::film::io::check_writable_dir(out)?;
     }
     let mut rows = Vec::new();
     for scene in &scenes {
