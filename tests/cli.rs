@@ -3059,3 +3059,20 @@ fn bench_outputs_and_font_are_checked_before_rendering() {
         assert!(!fresh.exists(), "{scene}: the failed bench left its folder");
     }
 }
+
+/// A scene, mesh or sequence argument whose name is not UTF-8 is refused in one line that
+/// names it (clap's "invalid UTF-8 was detected in one or more arguments" named nothing).
+#[test]
+fn a_scene_file_name_that_is_not_utf8_is_named() {
+    use std::os::unix::ffi::OsStrExt;
+    let d = tmp("not-utf8");
+    let mesh = d.join(std::ffi::OsStr::from_bytes(b"m\xff.off"));
+    std::fs::write(&mesh, "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n").unwrap();
+    let png = d.join("x.png");
+    for sub in ["render", "verify", "bench", "animate"] {
+        let args = [std::ffi::OsStr::new(sub), mesh.as_os_str(), "--out".as_ref(), png.as_os_str()];
+        let args = if sub == "verify" { &args[..2] } else { &args[..] };
+        refused_env(args, &[], "m\\xFF.off\": not valid UTF-8");
+    }
+    assert!(!png.exists());
+}
