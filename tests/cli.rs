@@ -559,32 +559,36 @@ fn render_profiles_cone_kinds_and_pixels() {
 
 /// `--no-shadows` (a diagnostic): every light counts as visible. With it the image is
 /// nowhere darker and somewhere brighter (the spheres' shadows on the floor), for the
-/// conventional and the cone tracer; `--method surfel` refuses it.
+/// conventional, the cone and the surfel tracer (which `render` refused it for), and the
+/// stats count no shadow rays.
 #[test]
 fn render_no_shadows_lights_everything() {
     let d = tmp("no-shadows");
-    for method in ["whitted", "multires"] {
-        let img = |extra: &[&str], name: &str| {
-            let p = d.join(format!("{method}-{name}.exr"));
-            let mut args = vec!["render", "spheres", "--method", method, "--width", "48", "--height", "48", "--quiet"];
-            if method == "whitted" {
-                args.extend_from_slice(&["--accel", "bvh"]);
-            }
-            args.extend_from_slice(extra);
-            args.extend_from_slice(&["--out", p.to_str().unwrap()]);
-            let (code, _, err) = lodtrace(&args);
-            assert_eq!(code, 0, "{err}");
-            lodtrace::film::io::read_image_linear(&p).unwrap().2
-        };
-        let (on, off) = (img(&[], "on"), img(&["--no-shadows"], "off"));
+    // One render's linear image and its shadow rays (stats), shadows on (no `extra`) or off.
+    let render = |scene: &str, method: &str, extra: &[&str]| {
+        let name = format!("{method}-{}", extra.len());
+        let (p, js) = (d.join(format!("{name}.exr")), d.join(format!("{name}.json")));
+        let mut args = vec!["render", scene, "--method", method, "--width", "48", "--height", "48", "--quiet"];
+        if method == "whitted" {
+            args.extend_from_slice(&["--accel", "bvh"]);
+        }
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", p.to_str().unwrap(), "--stats", js.to_str().unwrap()]);
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 0, "{err}");
+        let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&js).unwrap()).unwrap();
+        (lodtrace::film::io::read_image_linear(&p).unwrap().2, stats["counters"]["rays_shadow"].as_u64().unwrap_or(0))
+    };
+    // The surfel tracer as well: `animate --no-shadows` had it, `render` refused it.
+    for (scene, method) in [("spheres", "whitted"), ("spheres", "multires"), ("heads", "surfel")] {
+        let ((on, shadow_rays), (off, no_shadow_rays)) = (render(scene, method, &[]), render(scene, method, &["--no-shadows"]));
         let darker = on.iter().zip(&off).filter(|(a, b)| b.max_element() < a.max_element() - 1e-3).count();
         let brighter = on.iter().zip(&off).filter(|(a, b)| b.max_element() > a.max_element() + 0.02).count();
         assert!(darker == 0 && brighter > 20, "{method}: {darker} pixels darker, {brighter} brighter without shadows");
+        if method != "multires" {
+            assert!(shadow_rays > 0 && no_shadow_rays == 0, "{method}: {shadow_rays} shadow rays, {no_shadow_rays} without shadows");
+        }
     }
-    let (code, _, err) =
-        lodtrace(&["render", "spheres", "--method", "surfel", "--no-shadows", "--quiet", "--out", d.join("s.png").to_str().unwrap()]);
-    assert_eq!(code, 2);
-    one_error_line(&err);
 }
 
 /// `--out NAME.exr` writes the beauty image as linear float EXR (the same render as the PNG,

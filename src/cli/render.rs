@@ -254,9 +254,6 @@ pub(crate) fn check(a: &RenderArgs) -> Result<PathBuf> {
         return Err(Error::Usage("--debug-pixel explains a cone: --method multires or cone".into()));
     }
     if a.method == crate::cli::Method::Surfel {
-        if a.no_shadows {
-            return Err(Error::Usage("--no-shadows is not available for --method surfel".into()));
-        }
         return Ok(out);
     }
     if a.debug_pixel.is_some() {
@@ -382,6 +379,8 @@ fn render_surfel(a: &RenderArgs, out: &Path) -> Result<()> {
         stats: a.stats.clone(),
         threads: a.threads,
         packet: a.packet,
+        // As `animate --no-shadows` (once refused here, though the tracer had it).
+        no_shadows: a.no_shadows,
         quiet: a.quiet,
         ..super::animate::AnimateArgs::new(&a.scene)
     };
