@@ -461,14 +461,35 @@ pub fn load_obj(path: &Path, mat: u32, default: u32) -> Result<(Mesh, Vec<Materi
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     // tobj's own `load_obj` opens an `mtllib` path as given: `/dev/zero` filled the memory and
     // a FIFO blocked forever. Only a regular file of sane size is read.
-    let load_mtl = |p: &Path| -> tobj::MTLLoadResult {
-        let full = dir.join(p);
-        crate::error::check_input_file(&full).map_err(|_| tobj::LoadError::OpenFileFailed)?;
-        if std::fs::metadata(&full).map_or(true, |m| m.len() > MAX_MTL_BYTES) {
+    let load_one = |full: &Path| -> tobj::MTLLoadResult {
+        crate::error::check_input_file(full).map_err(|_| tobj::LoadError::OpenFileFailed)?;
+        if std::fs::metadata(full).map_or(true, |m| m.len() > MAX_MTL_BYTES) {
             return Err(tobj::LoadError::ReadError);
         }
-        let text = std::fs::read(&full).map_err(|_| tobj::LoadError::ReadError)?;
+        let text = std::fs::read(full).map_err(|_| tobj::LoadError::ReadError)?;
         tobj::load_mtl_buf(&mut std::io::Cursor::new(mtl_colours_complete(&text)?))
+    };
+    // tobj passes the rest of an `mtllib` line as one name (a name may hold spaces), but the
+    // format allows several libraries on one line (`mtllib a.mtl b.mtl`, once read as the
+    // one missing file "a.mtl b.mtl"). A file of the whole name is read as one;
+    // otherwise each name, in order, each through the guards above, a later definition of a
+    // material name winning as across several `mtllib` lines.
+    let load_mtl = |p: &Path| -> tobj::MTLLoadResult {
+        let whole = dir.join(p);
+        let names: Vec<&str> = p.to_str().map(|s| s.split_whitespace().collect()).unwrap_or_default();
+        if whole.is_file() || names.len() < 2 {
+            return load_one(&whole);
+        }
+        let (mut mats, mut map) = load_one(&dir.join(names[0]))?;
+        for n in &names[1..] {
+            let (more, more_map) = load_one(&dir.join(n))?;
+            let offset = mats.len();
+            mats.extend(more);
+            for (k, i) in more_map {
+                map.insert(k, i + offset);
+            }
+        }
+        Ok((mats, map))
     };
     let mut reader = SurfaceLines {
         inner: std::io::BufReader::new(file),
@@ -693,6 +714,41 @@ mod tests {
         std::fs::write(&p, "\u{feff}OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n").unwrap();
         let m = load_off(&p, 0).unwrap();
         assert_eq!(m.vertex_count(), 3);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A fresh scratch folder for one test of this module.
+    fn scratch(name: &str) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("lodtrace-load-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    /// `mtllib a.mtl b.mtl`: each library is loaded (the line was read as one file name and
+    /// no material loaded); a name that is one file with a space still loads as one.
+    #[test]
+    fn mtllib_with_several_files_loads_each() {
+        let dir = scratch("mtllib");
+        std::fs::write(dir.join("a.mtl"), "newmtl red\nKd 1 0 0\n").unwrap();
+        std::fs::write(dir.join("b.mtl"), "newmtl green\nKd 0 1 0\n").unwrap();
+        std::fs::write(dir.join("c d.mtl"), "newmtl blue\nKd 0 0 1\n").unwrap();
+        let geo = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nusemtl red\nf 1 2 3\nusemtl green\nf 2 4 3\n";
+        let p = dir.join("two.obj");
+        std::fs::write(&p, format!("mtllib a.mtl b.mtl\n{geo}")).unwrap();
+        let (m, mats) = load_obj(&p, 1, 0).unwrap();
+        assert_eq!(mats.len(), 2);
+        assert_eq!(m.mat, [1, 2], "each face its own library's material");
+        assert_eq!((mats[0].name.as_str(), mats[0].color, mats[1].name.as_str(), mats[1].color), ("red", Vec3::X, "green", Vec3::Y));
+        std::fs::write(&p, "mtllib c d.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl blue\nf 1 2 3\n").unwrap();
+        let (_, mats) = load_obj(&p, 1, 0).unwrap();
+        assert_eq!(mats.len(), 1);
+        assert_eq!(mats[0].color, Vec3::Z);
+        // Each file passes the input guards: `/dev/zero` is not read (the geometry loads,
+        // without the line's materials, with a warning).
+        std::fs::write(&p, format!("mtllib a.mtl /dev/zero\n{geo}")).unwrap();
+        let (m, mats) = load_obj(&p, 1, 0).unwrap();
+        assert!(mats.is_empty() && m.mat == [0, 0], "{:?}", m.mat);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
