@@ -3080,3 +3080,18 @@ fn a_scene_file_name_that_is_not_utf8_is_named() {
     }
     assert!(!png.exists());
 }
+
+/// `demo --out DIR` checks every job's outputs before its first job renders: a folder where
+/// a job's `bench.json` goes, or a file where a job's folder goes, was met only when that
+/// job started (its status line, and the jobs before it, came first).
+#[test]
+fn demo_outputs_are_checked_before_the_first_job() {
+    let d = tmp("demo-precheck");
+    let out = d.join("demo");
+    let demo = ["demo", "--quick", "--out", out.to_str().unwrap()];
+    std::fs::create_dir_all(out.join("spheres/bench.json")).unwrap();
+    refused(&demo, "spheres/bench.json: is a folder");
+    std::fs::remove_dir_all(out.join("spheres")).unwrap();
+    std::fs::write(out.join("spheres"), "").unwrap();
+    refused(&demo, "spheres: exists and is not a folder");
+}

@@ -827,6 +827,25 @@ pub(crate) struct Plan {
 /// Checks every argument of a bench run and loads its scenes, before anything is rendered or
 /// written (the demo's test checks its own runs' arguments with it).
 pub(crate) fn plan(a: &BenchArgs) -> Result<Plan> {
+    let mut plan = plan_options(a)?;
+    if plan.surfel_sizes.is_some() {
+        return Ok(plan);
+    }
+    let scenes: Vec<Scene> = a.scenes.iter().map(|s| crate::scene::load::load_scene(s)).collect::<Result<_>>()?;
+    for (i, s) in scenes.iter().enumerate() {
+        if let Some(t) = scenes[..i].iter().position(|t| t.name == s.name) {
+            return Err(Error::Usage(format!(
+                "scenes '{}' and '{}' are both named '{}': their outputs would overwrite each other",
+                a.scenes[t], a.scenes[i], s.name
+            )));
+        }
+    }
+    plan.scenes = scenes;
+    Ok(plan)
+}
+
+/// [`plan`] without loading the scenes (`scenes` is empty): every option checked.
+fn plan_options(a: &BenchArgs) -> Result<Plan> {
     let specs = parse_list(&a.methods)?;
     let mut reference = a.reference.as_deref().map(MethodSpec::parse).transpose()?;
     if let Some(r) = &mut reference {
@@ -944,23 +963,15 @@ pub(crate) fn plan(a: &BenchArgs) -> Result<Plan> {
             s.lod.params().map_err(named)?;
         }
     }
-    let scenes: Vec<Scene> = a.scenes.iter().map(|s| crate::scene::load::load_scene(s)).collect::<Result<_>>()?;
-    for (i, s) in scenes.iter().enumerate() {
-        if let Some(t) = scenes[..i].iter().position(|t| t.name == s.name) {
-            return Err(Error::Usage(format!(
-                "scenes '{}' and '{}' are both named '{}': their outputs would overwrite each other",
-                a.scenes[t], a.scenes[i], s.name
-            )));
-        }
-    }
-    Ok(Plan { specs, reference, sweeps, regions, sweep_max_spp, surfel_sizes: None, scenes })
+    Ok(Plan { specs, reference, sweeps, regions, sweep_max_spp, surfel_sizes: None, scenes: Vec::new() })
 }
 
 /// The files a bench run may write in its output folder (names inside it, `WxH/` for the
 /// sizes of `--sizes`): the report, the plots, and each row's, the reference's and every
 /// sweep point's images, including those only some methods write (cost, LOD maps). Checked
-/// before the first render ([`crate::film::io::check_out_files`]).
-fn output_names(a: &BenchArgs, plan: &Plan) -> Vec<String> {
+/// before the first render ([`crate::film::io::check_out_files`]), `scenes` the triangle
+/// scenes' names.
+fn output_names(a: &BenchArgs, plan: &Plan, scenes: &[String]) -> Vec<String> {
     let mut names: Vec<String> = ["bench.json", "bench.md", "bench-time.png"].map(String::from).into();
     if let Some(sizes) = &plan.surfel_sizes {
         names.extend(["radius-ratio.png", "speedup-vs-size.png"].map(String::from));
@@ -979,8 +990,7 @@ fn output_names(a: &BenchArgs, plan: &Plan) -> Vec<String> {
     if reference.is_some() {
         names.push("bench-error.png".into());
     }
-    for scene in &plan.scenes {
-        let s = &scene.name;
+    for s in scenes {
         if let Some(r) = reference {
             names.push(format!("{s}-reference-{}.png", r.slug()));
         }
@@ -1009,6 +1019,12 @@ fn output_names(a: &BenchArgs, plan: &Plan) -> Vec<String> {
     names
 }
 
+/// [`output_names`] of a bench run whose scenes are not loaded yet, named `scenes` (the
+/// demo checks every job's outputs before its first job renders).
+pub(crate) fn output_names_unloaded(a: &BenchArgs, scenes: &[String]) -> Result<Vec<String>> {
+    Ok(output_names(a, &plan_options(a)?, scenes))
+}
+
 fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
     let plan = plan(a)?;
     if let Some(out) = &a.out {
@@ -1022,7 +1038,8 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                 crate::film::io::create_out_dir(&out.join(format!("{w}x{h}")))?;
             }
         }
-        crate::film::io::check_out_files(out, &output_names(a, &plan))?;
+        let scenes: Vec<String> = plan.scenes.iter().map(|s| s.name.clone()).collect();
+        crate::film::io::check_out_files(out, &output_names(a, &plan, &scenes))?;
     }
     let Plan { specs, reference, sweeps, regions, sweep_max_spp, surfel_sizes, scenes } = plan;
     if let Some(sizes) = surfel_sizes {
