@@ -11,9 +11,21 @@ fn main() {
     }
     #[cfg(unix)]
     interrupts();
-    let cli = match lodtrace::cli::Cli::try_parse_from(join_negative_values(std::env::args_os().collect())) {
+    let args: Vec<std::ffi::OsString> = std::env::args_os().collect();
+    let cli = match lodtrace::cli::Cli::try_parse_from(join_negative_values(args.clone())) {
         Ok(c) => c,
         Err(e) => match e.kind() {
+            ErrorKind::InvalidUtf8 => {
+                // Scene, mesh and sequence arguments are text (built-in names or file names):
+                // clap's "invalid UTF-8 was detected in one or more arguments" named neither
+                // the argument nor what to do. Output paths take any name.
+                let bad = args.iter().skip(1).find(|a| a.to_str().is_none()).map(|a| format!("{a:?}")).unwrap_or_default();
+                lodtrace::status!(
+                    "lodtrace: error: argument {}: not valid UTF-8; a scene, mesh or sequence file name (or an option's text) must be UTF-8: rename the file or link it under a UTF-8 name",
+                    lodtrace::error::one_line(&bad)
+                );
+                std::process::exit(2);
+            }
             ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
                 // `e.exit()` ignores a failed write (`--help > /dev/full` exited 0).
                 use std::io::Write as _;

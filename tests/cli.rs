@@ -5,7 +5,12 @@ use std::path::PathBuf;
 use std::process::Command;
 
 fn lodtrace(args: &[&str]) -> (i32, String, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_lodtrace")).args(args).output().expect("run lodtrace");
+    lodtrace_env(args, &[])
+}
+
+/// [`lodtrace`] with arguments that need not be UTF-8, and the environment variables `env` set.
+fn lodtrace_env<S: AsRef<std::ffi::OsStr>>(args: &[S], env: &[(&str, &str)]) -> (i32, String, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_lodtrace")).args(args).envs(env.iter().copied()).output().expect("run lodtrace");
     (o.status.code().unwrap_or(-1), String::from_utf8_lossy(&o.stdout).into(), String::from_utf8_lossy(&o.stderr).into())
 }
 
@@ -41,10 +46,15 @@ fn output_within_30s(mut cmd: Command, what: &str) -> std::process::Output {
 
 /// `lodtrace ARGS` is refused: exit 2 and one error line that names `says`.
 fn refused(args: &[&str], says: &str) {
-    let (code, _, err) = lodtrace(args);
-    assert_eq!(code, 2, "{args:?}: {err}");
+    refused_env(args, &[], says)
+}
+
+/// [`refused`] with [`lodtrace_env`]'s arguments and environment.
+fn refused_env<S: AsRef<std::ffi::OsStr> + std::fmt::Debug>(args: &[S], env: &[(&str, &str)], says: &str) {
+    let (code, _, err) = lodtrace_env(args, env);
+    assert_eq!(code, 2, "{args:?} {env:?}: {err}");
     one_error_line(&err);
-    assert!(err.contains(says), "{args:?}: {err}");
+    assert!(err.contains(says), "{args:?} {env:?}: {err}");
 }
 
 /// `lodtrace ARGS` runs (exit 0), the counterpart of [`refused`].
@@ -549,32 +559,36 @@ fn render_profiles_cone_kinds_and_pixels() {
 
 /// `--no-shadows` (a diagnostic): every light counts as visible. With it the image is
 /// nowhere darker and somewhere brighter (the spheres' shadows on the floor), for the
-/// conventional and the cone tracer; `--method surfel` refuses it.
+/// conventional, the cone and the surfel tracer (which `render` refused it for), and the
+/// stats count no shadow rays.
 #[test]
 fn render_no_shadows_lights_everything() {
     let d = tmp("no-shadows");
-    for method in ["whitted", "multires"] {
-        let img = |extra: &[&str], name: &str| {
-            let p = d.join(format!("{method}-{name}.exr"));
-            let mut args = vec!["render", "spheres", "--method", method, "--width", "48", "--height", "48", "--quiet"];
-            if method == "whitted" {
-                args.extend_from_slice(&["--accel", "bvh"]);
-            }
-            args.extend_from_slice(extra);
-            args.extend_from_slice(&["--out", p.to_str().unwrap()]);
-            let (code, _, err) = lodtrace(&args);
-            assert_eq!(code, 0, "{err}");
-            lodtrace::film::io::read_image_linear(&p).unwrap().2
-        };
-        let (on, off) = (img(&[], "on"), img(&["--no-shadows"], "off"));
+    // One render's linear image and its shadow rays (stats), shadows on (no `extra`) or off.
+    let render = |scene: &str, method: &str, extra: &[&str]| {
+        let name = format!("{method}-{}", extra.len());
+        let (p, js) = (d.join(format!("{name}.exr")), d.join(format!("{name}.json")));
+        let mut args = vec!["render", scene, "--method", method, "--width", "48", "--height", "48", "--quiet"];
+        if method == "whitted" {
+            args.extend_from_slice(&["--accel", "bvh"]);
+        }
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", p.to_str().unwrap(), "--stats", js.to_str().unwrap()]);
+        let (code, _, err) = lodtrace(&args);
+        assert_eq!(code, 0, "{err}");
+        let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&js).unwrap()).unwrap();
+        (lodtrace::film::io::read_image_linear(&p).unwrap().2, stats["counters"]["rays_shadow"].as_u64().unwrap_or(0))
+    };
+    // The surfel tracer as well: `animate --no-shadows` had it, `render` refused it.
+    for (scene, method) in [("spheres", "whitted"), ("spheres", "multires"), ("heads", "surfel")] {
+        let ((on, shadow_rays), (off, no_shadow_rays)) = (render(scene, method, &[]), render(scene, method, &["--no-shadows"]));
         let darker = on.iter().zip(&off).filter(|(a, b)| b.max_element() < a.max_element() - 1e-3).count();
         let brighter = on.iter().zip(&off).filter(|(a, b)| b.max_element() > a.max_element() + 0.02).count();
         assert!(darker == 0 && brighter > 20, "{method}: {darker} pixels darker, {brighter} brighter without shadows");
+        if method != "multires" {
+            assert!(shadow_rays > 0 && no_shadow_rays == 0, "{method}: {shadow_rays} shadow rays, {no_shadow_rays} without shadows");
+        }
     }
-    let (code, _, err) =
-        lodtrace(&["render", "spheres", "--method", "surfel", "--no-shadows", "--quiet", "--out", d.join("s.png").to_str().unwrap()]);
-    assert_eq!(code, 2);
-    one_error_line(&err);
 }
 
 /// `--out NAME.exr` writes the beauty image as linear float EXR (the same render as the PNG,
@@ -3019,4 +3033,65 @@ fn a_mesh_too_small_for_f32_areas_says_scale_it_up() {
         "every triangle is degenerate or non-finite",
     );
     assert!(!out.exists());
+}
+
+/// `bench --out DIR` checks its outputs and the plots' font before the first render: a
+/// folder where `DIR/bench.json`, a plot or an image goes, and `LODTRACE_FONT` naming no
+/// file, were refused only when written, after every render (the renders' status lines
+/// came first). Nothing is rendered, and a folder the run would create is not left behind.
+#[test]
+fn bench_outputs_and_font_are_checked_before_rendering() {
+    let d = tmp("bench-precheck");
+    let (out, fresh) = (d.join("b"), d.join("f"));
+    // Not --quiet: a render would print its status line before the error.
+    let bench = |scene: &str, methods: &str, out: &std::path::Path| -> Vec<String> {
+        let mut v = vec!["bench", scene, "--methods", methods, "--width", "8", "--height", "6", "--out", out.to_str().unwrap()];
+        if !methods.starts_with("surfel") {
+            v.extend_from_slice(&["--reference", "distributed:bvh:spp=4:vt=0"]);
+        }
+        v.into_iter().map(String::from).collect()
+    };
+    for name in ["bench.json", "bench.md", "bench-time.png", "bench-error.png", "plane-whitted_bvh.png", "plane-whitted_bvh-flip.png"] {
+        std::fs::create_dir_all(out.join(name)).unwrap();
+        refused_env(&bench("plane", "whitted:bvh", &out)[..], &[], &format!("{name}: is a folder"));
+        assert_eq!(std::fs::read_dir(&out).unwrap().count(), 1, "{name}: the bench wrote files");
+        std::fs::remove_dir(out.join(name)).unwrap();
+    }
+    let no_font = [("LODTRACE_FONT", "/nonexistent/font.ttf")];
+    for (scene, methods) in [("plane", "whitted:bvh"), ("heads", "surfel:frames=1:detail=0.03")] {
+        refused_env(&bench(scene, methods, &fresh)[..], &no_font, "no font found (tried /nonexistent/font.ttf)");
+        assert!(!fresh.exists(), "{scene}: the failed bench left its folder");
+    }
+}
+
+/// A scene, mesh or sequence argument whose name is not UTF-8 is refused in one line that
+/// names it (clap's "invalid UTF-8 was detected in one or more arguments" named nothing).
+#[test]
+fn a_scene_file_name_that_is_not_utf8_is_named() {
+    use std::os::unix::ffi::OsStrExt;
+    let d = tmp("not-utf8");
+    let mesh = d.join(std::ffi::OsStr::from_bytes(b"m\xff.off"));
+    std::fs::write(&mesh, "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n").unwrap();
+    let png = d.join("x.png");
+    for sub in ["render", "verify", "bench", "animate"] {
+        let args = [std::ffi::OsStr::new(sub), mesh.as_os_str(), "--out".as_ref(), png.as_os_str()];
+        let args = if sub == "verify" { &args[..2] } else { &args[..] };
+        refused_env(args, &[], "m\\xFF.off\": not valid UTF-8");
+    }
+    assert!(!png.exists());
+}
+
+/// `demo --out DIR` checks every job's outputs before its first job renders: a folder where
+/// a job's `bench.json` goes, or a file where a job's folder goes, was met only when that
+/// job started (its status line, and the jobs before it, came first).
+#[test]
+fn demo_outputs_are_checked_before_the_first_job() {
+    let d = tmp("demo-precheck");
+    let out = d.join("demo");
+    let demo = ["demo", "--quick", "--out", out.to_str().unwrap()];
+    std::fs::create_dir_all(out.join("spheres/bench.json")).unwrap();
+    refused(&demo, "spheres/bench.json: is a folder");
+    std::fs::remove_dir_all(out.join("spheres")).unwrap();
+    std::fs::write(out.join("spheres"), "").unwrap();
+    refused(&demo, "spheres: exists and is not a folder");
 }

@@ -143,7 +143,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub max_depth: Option<u32>,
     /// Every light counts as visible: no shadow rays or cones (a diagnostic, to split shading
-    /// from visibility; whitted, distributed, lod, multires and cone).
+    /// from visibility; every method: whitted, distributed, lod, multires, cone and surfel).
     #[arg(long)]
     pub no_shadows: bool,
     /// No progress bar.

@@ -67,14 +67,9 @@ pub fn check_out_path(p: &Path) -> Result<()> {
         }
         return Err(Error::Usage(format!("{}: output folder does not exist", p.display())));
     }
-    if p.is_dir() {
-        return Err(Error::Usage(format!("{}: is a folder", p.display())));
-    }
     // Outputs are written to a temporary file and renamed over the target: that would
     // replace a device or pipe (`/dev/full`) with a plain file.
-    if p.exists() && !p.is_file() {
-        return Err(Error::Usage(format!("{}: not a regular file", p.display())));
-    }
+    io::check_not_special(p)?;
     io::check_writable_dir(dir)
 }
 
@@ -259,9 +254,6 @@ pub(crate) fn check(a: &RenderArgs) -> Result<PathBuf> {
         return Err(Error::Usage("--debug-pixel explains a cone: --method multires or cone".into()));
     }
     if a.method == crate::cli::Method::Surfel {
-        if a.no_shadows {
-            return Err(Error::Usage("--no-shadows is not available for --method surfel".into()));
-        }
         return Ok(out);
     }
     if a.debug_pixel.is_some() {
@@ -387,6 +379,8 @@ fn render_surfel(a: &RenderArgs, out: &Path) -> Result<()> {
         stats: a.stats.clone(),
         threads: a.threads,
         packet: a.packet,
+        // As `animate --no-shadows` (once refused here, though the tracer had it).
+        no_shadows: a.no_shadows,
         quiet: a.quiet,
         ..super::animate::AnimateArgs::new(&a.scene)
     };

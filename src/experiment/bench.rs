@@ -827,6 +827,25 @@ pub(crate) struct Plan {
 /// Checks every argument of a bench run and loads its scenes, before anything is rendered or
 /// written (the demo's test checks its own runs' arguments with it).
 pub(crate) fn plan(a: &BenchArgs) -> Result<Plan> {
+    let mut plan = plan_options(a)?;
+    if plan.surfel_sizes.is_some() {
+        return Ok(plan);
+    }
+    let scenes: Vec<Scene> = a.scenes.iter().map(|s| crate::scene::load::load_scene(s)).collect::<Result<_>>()?;
+    for (i, s) in scenes.iter().enumerate() {
+        if let Some(t) = scenes[..i].iter().position(|t| t.name == s.name) {
+            return Err(Error::Usage(format!(
+                "scenes '{}' and '{}' are both named '{}': their outputs would overwrite each other",
+                a.scenes[t], a.scenes[i], s.name
+            )));
+        }
+    }
+    plan.scenes = scenes;
+    Ok(plan)
+}
+
+/// [`plan`] without loading the scenes (`scenes` is empty): every option checked.
+fn plan_options(a: &BenchArgs) -> Result<Plan> {
     let specs = parse_list(&a.methods)?;
     let mut reference = a.reference.as_deref().map(MethodSpec::parse).transpose()?;
     if let Some(r) = &mut reference {
@@ -944,33 +963,90 @@ pub(crate) fn plan(a: &BenchArgs) -> Result<Plan> {
             s.lod.params().map_err(named)?;
         }
     }
-    let scenes: Vec<Scene> = a.scenes.iter().map(|s| crate::scene::load::load_scene(s)).collect::<Result<_>>()?;
-    for (i, s) in scenes.iter().enumerate() {
-        if let Some(t) = scenes[..i].iter().position(|t| t.name == s.name) {
-            return Err(Error::Usage(format!(
-                "scenes '{}' and '{}' are both named '{}': their outputs would overwrite each other",
-                a.scenes[t], a.scenes[i], s.name
-            )));
+    Ok(Plan { specs, reference, sweeps, regions, sweep_max_spp, surfel_sizes: None, scenes: Vec::new() })
+}
+
+/// The files a bench run may write in its output folder (names inside it, `WxH/` for the
+/// sizes of `--sizes`): the report, the plots, and each row's, the reference's and every
+/// sweep point's images, including those only some methods write (cost, LOD maps). Checked
+/// before the first render ([`crate::film::io::check_out_files`]), `scenes` the triangle
+/// scenes' names.
+fn output_names(a: &BenchArgs, plan: &Plan, scenes: &[String]) -> Vec<String> {
+    let mut names: Vec<String> = ["bench.json", "bench.md", "bench-time.png"].map(String::from).into();
+    if let Some(sizes) = &plan.surfel_sizes {
+        names.extend(["radius-ratio.png", "speedup-vs-size.png"].map(String::from));
+        let seqs: Vec<String> = a.scenes.iter().map(|s| crate::scene::load::stem_name(Path::new(s), s)).collect();
+        for &(w, h) in sizes {
+            let dir = if a.sizes.is_some() { format!("{w}x{h}/") } else { String::new() };
+            for seq in &seqs {
+                names.push(format!("{dir}{seq}-frame-times.png"));
+                names.push(format!("{dir}{seq}-sphere-tests.png"));
+                names.extend(plan.specs.iter().map(|s| format!("{dir}{seq}-{}.png", s.slug())));
+            }
+        }
+        return names;
+    }
+    let reference = plan.reference.as_ref();
+    if reference.is_some() {
+        names.push("bench-error.png".into());
+    }
+    for s in scenes {
+        if let Some(r) = reference {
+            names.push(format!("{s}-reference-{}.png", r.slug()));
+        }
+        if !plan.sweeps.is_empty() {
+            names.push(format!("{s}-equal-time.png"));
+        }
+        let mut rows: Vec<(String, Method)> = plan.specs.iter().map(|m| (m.slug(), m.method)).collect();
+        for sw in &plan.sweeps {
+            let mut spp = 1u32;
+            while spp <= plan.sweep_max_spp {
+                rows.push((MethodSpec::slug_of(&format!("{}:spp={spp}", sw.text)), sw.method));
+                spp *= 2;
+            }
+        }
+        for (slug, m) in rows {
+            names.push(format!("{s}-{slug}.png"));
+            if reference.is_some() {
+                names.push(format!("{s}-{slug}-flip.png"));
+            }
+            names.push(format!("{s}-{slug}-cost.png"));
+            if m == Method::Lod {
+                names.extend(["diff", "disparity-r", "disparity-t"].map(|k| format!("{s}-{slug}-{k}.png")));
+            }
         }
     }
-    Ok(Plan { specs, reference, sweeps, regions, sweep_max_spp, surfel_sizes: None, scenes })
+    names
+}
+
+/// [`output_names`] of a bench run whose scenes are not loaded yet, named `scenes` (the
+/// demo checks every job's outputs before its first job renders).
+pub(crate) fn output_names_unloaded(a: &BenchArgs, scenes: &[String]) -> Result<Vec<String>> {
+    Ok(output_names(a, &plan_options(a)?, scenes))
 }
 
 fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
-    let Plan { specs, reference, sweeps, regions, sweep_max_spp, surfel_sizes, scenes } = plan(a)?;
-    if let Some(sizes) = surfel_sizes {
-        if let Some(out) = &a.out {
-            crate::film::io::create_out_dir(out)?;
-            crate::film::io::check_writable_dir(out)?;
+    let plan = plan(a)?;
+    if let Some(out) = &a.out {
+        // The plots need a font, and no output may be a folder: say so before the renders,
+        // not after them (the font was loaded, and the outputs written, only at the end).
+        super::plot::check_font()?;
+        crate::film::io::create_out_dir(out)?;
+        crate::film::io::check_writable_dir(out)?;
+        if let (Some(sizes), true) = (&plan.surfel_sizes, a.sizes.is_some()) {
+            for &(w, h) in sizes {
+                crate::film::io::create_out_dir(&out.join(format!("{w}x{h}")))?;
+            }
         }
+        let scenes: Vec<String> = plan.scenes.iter().map(|s| s.name.clone()).collect();
+        crate::film::io::check_out_files(out, &output_names(a, &plan, &scenes))?;
+    }
+    let Plan { specs, reference, sweeps, regions, sweep_max_spp, surfel_sizes, scenes } = plan;
+    if let Some(sizes) = surfel_sizes {
         let mut deform = Vec::new();
         for &(w, h) in &sizes {
             let dir = match (&a.out, a.sizes.is_some()) {
-                (Some(out), true) => {
-                    let d = out.join(format!("{w}x{h}"));
-                    crate::film::io::create_out_dir(&d)?;
-                    Some(d)
-                }
+                (Some(out), true) => Some(out.join(format!("{w}x{h}"))),
                 (out, _) => out.clone(),
             };
             if a.sizes.is_some() && !a.quiet {
@@ -997,10 +1073,6 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             }
         }
         return Ok(report);
-    }
-    if let Some(out) = &a.out {
-        crate::film::io::create_out_dir(out)?;
-        crate::film::io::check_writable_dir(out)?;
     }
     let mut rows = Vec::new();
     for scene in &scenes {

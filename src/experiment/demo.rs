@@ -130,6 +130,22 @@ fn run_in(a: &DemoArgs) -> Result<()> {
     super::plot::check_font()?;
     crate::film::io::create_out_dir(&a.out)?;
     crate::film::io::check_writable_dir(&a.out)?;
+    // Every job's outputs, and the page's, before the first job renders: a folder where
+    // `OUT/complex/bench.json` goes was met only at that job, after the jobs before it.
+    let mut names = vec!["targets.md".to_string(), "index.html".to_string()];
+    for job in jobs(a.quick) {
+        let dir = a.out.join(job.scene);
+        if dir.exists() && !dir.is_dir() {
+            return Err(Error::Usage(format!(
+                "{}: exists and is not a folder (the demo writes its {} outputs there)",
+                dir.display(),
+                job.scene
+            )));
+        }
+        let outputs = bench::output_names_unloaded(&bench_args(a, &job), &[job.scene.to_string()])?;
+        names.extend(outputs.into_iter().map(|n| format!("{}/{n}", job.scene)));
+    }
+    crate::film::io::check_out_files(&a.out, &names)?;
     let mut sections = Vec::new();
     // What could not run here (meshes missing): named on the page, not only on stderr.
     let mut skipped = Vec::new();

@@ -235,6 +235,24 @@ pub fn check_writable_dir(dir: &Path) -> Result<()> {
     }
 }
 
+/// Refuses an output path that exists as something other than a regular file: a folder
+/// (the rename of the finished file over it fails, after all the work), a device or a pipe
+/// (the rename would replace it with a plain file).
+pub fn check_not_special(p: &Path) -> Result<()> {
+    match std::fs::metadata(p) {
+        Ok(m) if m.is_dir() => Err(Error::Usage(format!("{}: is a folder", p.display()))),
+        Ok(m) if !m.is_file() => Err(Error::Usage(format!("{}: not a regular file", p.display()))),
+        _ => Ok(()),
+    }
+}
+
+/// [`check_not_special`] for the files `names` a run will write in its output folder `dir`,
+/// before any rendering (`bench --out DIR` with a folder `DIR/bench.json` was refused only
+/// when the report was written, after every render).
+pub fn check_out_files(dir: &Path, names: &[String]) -> Result<()> {
+    names.iter().try_for_each(|n| check_not_special(&dir.join(n)))
+}
+
 /// A path with its folder resolved, for comparing paths ([`check_distinct`]); an existing
 /// file is resolved whole, so that a symbolic link and its target compare equal (`compare
 /// a.png alink.png --diff a.png`).

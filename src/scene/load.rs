@@ -82,11 +82,15 @@ fn line_of(bytes: &[u8], at: usize) -> usize {
 }
 
 /// Object File Format: a header `OFF` (or with the prefixes `C`, `N`, `ST`, `4`: colours,
-/// normals, texture coordinates, homogeneous positions), counts `nv nf ne`, one vertex per
-/// line, then one face per line `n i0 i1 ...` (polygons are fan-triangulated). With `N` the
-/// three values after a vertex's position are its normal (normalised; used for shading
-/// like an OBJ file's); colours and texture coordinates after them, and a face's colour
-/// after its indices, are skipped. Values past those the header declares on a vertex line
+/// normals, texture coordinates, homogeneous positions; `ST` first, the others in any order,
+/// each at most once, so `4NOFF` and `N4OFF` alike; `nOFF`, of any dimension, is refused),
+/// counts `nv nf ne`, one vertex per
+/// line, then one face per line `n i0 i1 ...` (polygons are fan-triangulated). With `4` a
+/// position is `x y z w`, the point (x/w, y/w, z/w); a `w` of 0 (a point at infinity) or not
+/// finite is refused naming its line. With `N` the
+/// three values after a vertex's position (its `x y z w` with `4`) are its normal (normalised;
+/// used for shading like an OBJ file's); colours and texture coordinates after them, and a
+/// face's colour after its indices, are skipped. Values past those the header declares on a vertex line
 /// of a plain `OFF` (or `4OFF`, `NOFF`) are skipped with one warning. Comments (`#`) and
 /// blank lines are ignored; a missing header is accepted.
 pub fn load_off(path: &Path, mat: u32) -> Result<Mesh> {
@@ -105,8 +109,9 @@ pub fn load_off(path: &Path, mat: u32) -> Result<Mesh> {
     if let Some(kw) = toks.first().copied().filter(|t| t.ends_with("OFF")) {
         let prefix = kw.trim_end_matches("OFF");
         let flags = prefix.strip_prefix("ST").unwrap_or(prefix);
-        if !flags.chars().all(|c| matches!(c, 'C' | 'N' | '4')) {
-            return Err(bad(line, format!("unsupported OFF header '{kw}' (OFF with the prefixes ST, C, N, 4)")));
+        let twice = flags.char_indices().any(|(i, c)| flags[..i].contains(c));
+        if !flags.chars().all(|c| matches!(c, 'C' | 'N' | '4')) || twice {
+            return Err(bad(line, format!("unsupported OFF header '{kw}' (OFF with the prefixes ST, C, N, 4, each at most once)")));
         }
         homogeneous = flags.contains('4');
         normals = flags.contains('N');
@@ -144,6 +149,9 @@ pub fn load_off(path: &Path, mat: u32) -> Result<Mesh> {
             *c = s.parse::<f32>().map_err(|_| bad(line, format!("bad coordinate '{s}'")))?;
         }
         let p = Vec3::new(v[0], v[1], v[2]);
+        if homogeneous && (v[3] == 0.0 || !v[3].is_finite()) {
+            return Err(bad(line, format!("vertex {k} has w = {} (4OFF: the point is x/w, y/w, z/w; w must be finite and not 0)", t[3])));
+        }
         mesh.push_vertex(if homogeneous { p / v[3] } else { p });
         if normals {
             // A zero or non-finite normal is left as read: `finish_mesh` then computes
@@ -461,14 +469,35 @@ pub fn load_obj(path: &Path, mat: u32, default: u32) -> Result<(Mesh, Vec<Materi
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     // tobj's own `load_obj` opens an `mtllib` path as given: `/dev/zero` filled the memory and
     // a FIFO blocked forever. Only a regular file of sane size is read.
-    let load_mtl = |p: &Path| -> tobj::MTLLoadResult {
-        let full = dir.join(p);
-        crate::error::check_input_file(&full).map_err(|_| tobj::LoadError::OpenFileFailed)?;
-        if std::fs::metadata(&full).map_or(true, |m| m.len() > MAX_MTL_BYTES) {
+    let load_one = |full: &Path| -> tobj::MTLLoadResult {
+        crate::error::check_input_file(full).map_err(|_| tobj::LoadError::OpenFileFailed)?;
+        if std::fs::metadata(full).map_or(true, |m| m.len() > MAX_MTL_BYTES) {
             return Err(tobj::LoadError::ReadError);
         }
-        let text = std::fs::read(&full).map_err(|_| tobj::LoadError::ReadError)?;
+        let text = std::fs::read(full).map_err(|_| tobj::LoadError::ReadError)?;
         tobj::load_mtl_buf(&mut std::io::Cursor::new(mtl_colours_complete(&text)?))
+    };
+    // tobj passes the rest of an `mtllib` line as one name (a name may hold spaces), but the
+    // format allows several libraries on one line (`mtllib a.mtl b.mtl`, once read as the
+    // one missing file "a.mtl b.mtl"). A file of the whole name is read as one;
+    // otherwise each name, in order, each through the guards above, a later definition of a
+    // material name winning as across several `mtllib` lines.
+    let load_mtl = |p: &Path| -> tobj::MTLLoadResult {
+        let whole = dir.join(p);
+        let names: Vec<&str> = p.to_str().map(|s| s.split_whitespace().collect()).unwrap_or_default();
+        if whole.is_file() || names.len() < 2 {
+            return load_one(&whole);
+        }
+        let (mut mats, mut map) = load_one(&dir.join(names[0]))?;
+        for n in &names[1..] {
+            let (more, more_map) = load_one(&dir.join(n))?;
+            let offset = mats.len();
+            mats.extend(more);
+            for (k, i) in more_map {
+                map.insert(k, i + offset);
+            }
+        }
+        Ok((mats, map))
     };
     let mut reader = SurfaceLines {
         inner: std::io::BufReader::new(file),
@@ -693,6 +722,67 @@ mod tests {
         std::fs::write(&p, "\u{feff}OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n").unwrap();
         let m = load_off(&p, 0).unwrap();
         assert_eq!(m.vertex_count(), 3);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A fresh scratch folder for one test of this module.
+    fn scratch(name: &str) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("lodtrace-load-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    /// `4OFF`: positions are homogeneous, (x/w, y/w, z/w), with the `N` prefix in either
+    /// order; a `w` of 0 or not finite is refused naming its line (it was loaded as a point at
+    /// infinity and the file then refused as "every triangle is degenerate or non-finite"); a
+    /// prefix given twice is refused.
+    #[test]
+    fn homogeneous_off_vertices_are_divided_by_w() {
+        let dir = scratch("4off");
+        let p = dir.join("h.off");
+        for head in ["4OFF", "4NOFF", "N4OFF"] {
+            let n = if head.contains('N') { " 0 0 1" } else { "" };
+            std::fs::write(&p, format!("{head}\n3 1 0\n0 0 0 2{n}\n4 0 0 2{n}\n0 4 0 -4{n}\n3 0 1 2\n")).unwrap();
+            let m = load_off(&p, 0).unwrap();
+            let v: Vec<Vec3> = (0..3).map(|i| m.pos(i)).collect();
+            assert_eq!(v, [Vec3::ZERO, Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, -1.0, 0.0)], "{head}");
+        }
+        for w in ["0", "-0", "inf", "nan"] {
+            std::fs::write(&p, format!("4OFF\n3 1 0\n0 0 0 1\n1 0 0 {w}\n0 1 0 1\n3 0 1 2\n")).unwrap();
+            let e = load_off(&p, 0).unwrap_err().to_string();
+            assert!(e.contains("line 4: vertex 1 has w = "), "w = {w}: {e}");
+        }
+        std::fs::write(&p, "44OFF\n3 1 0\n0 0 0 1\n1 0 0 1\n0 1 0 1\n3 0 1 2\n").unwrap();
+        let e = load_off(&p, 0).unwrap_err().to_string();
+        assert!(e.contains("unsupported OFF header '44OFF'"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// `mtllib a.mtl b.mtl`: each library is loaded (the line was read as one file name and
+    /// no material loaded); a name that is one file with a space still loads as one.
+    #[test]
+    fn mtllib_with_several_files_loads_each() {
+        let dir = scratch("mtllib");
+        std::fs::write(dir.join("a.mtl"), "newmtl red\nKd 1 0 0\n").unwrap();
+        std::fs::write(dir.join("b.mtl"), "newmtl green\nKd 0 1 0\n").unwrap();
+        std::fs::write(dir.join("c d.mtl"), "newmtl blue\nKd 0 0 1\n").unwrap();
+        let geo = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nusemtl red\nf 1 2 3\nusemtl green\nf 2 4 3\n";
+        let p = dir.join("two.obj");
+        std::fs::write(&p, format!("mtllib a.mtl b.mtl\n{geo}")).unwrap();
+        let (m, mats) = load_obj(&p, 1, 0).unwrap();
+        assert_eq!(mats.len(), 2);
+        assert_eq!(m.mat, [1, 2], "each face its own library's material");
+        assert_eq!((mats[0].name.as_str(), mats[0].color, mats[1].name.as_str(), mats[1].color), ("red", Vec3::X, "green", Vec3::Y));
+        std::fs::write(&p, "mtllib c d.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl blue\nf 1 2 3\n").unwrap();
+        let (_, mats) = load_obj(&p, 1, 0).unwrap();
+        assert_eq!(mats.len(), 1);
+        assert_eq!(mats[0].color, Vec3::Z);
+        // Each file passes the input guards: `/dev/zero` is not read (the geometry loads,
+        // without the line's materials, with a warning).
+        std::fs::write(&p, format!("mtllib a.mtl /dev/zero\n{geo}")).unwrap();
+        let (m, mats) = load_obj(&p, 1, 0).unwrap();
+        assert!(mats.is_empty() && m.mat == [0, 0], "{:?}", m.mat);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
