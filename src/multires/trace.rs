@@ -613,6 +613,12 @@ impl<'a> MultiresScene<'a> {
 
 // ---------------------------------------------------------------------------------------
 // Kernels (scalar references beside the packet versions).
+//
+// `fast_max`/`fast_min` (one `vmaxps`/`vminps`) stand for `wide`'s `max`/`min` where the
+// second operand is a constant that is never NaN (0, a cut, a footprint floor): `max` only
+// differs by returning the first operand when the second is NaN, and pays a compare and a
+// blend per call for it (about 0.7 % of the rays' instructions on `complex`). The lanes
+// are bit-identical either way.
 
 /// Result of testing one cone against up to 8 spheres: the passing lanes and their depths.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -716,14 +722,16 @@ pub fn box_test_1(rc: &BoxReach, b: &Bounds, l: usize) -> Option<f32> {
 }
 
 /// Volumes `f .. f + 8` in one f32x8 step: the mask of passing ones and their entry depths
-/// (as [`box_test_1`]).
-#[inline]
+/// (as [`box_test_1`]). Inlined into its two callers (the instance tree's and the octrees'
+/// traversal steps): called, it had its [`Bounds`] built on the stack from the tree's ten
+/// slices every time, 20 of its 160 instructions.
+#[inline(always)]
 pub fn boxes_x8(rc: &BoxReach, b: &Bounds, f: usize) -> (u32, [f32; 8]) {
     let ld = |v: &[f32]| f32x8::from(<[f32; 8]>::try_from(&v[f..f + 8]).expect("8 volumes"));
     let sp = f32x8::splat;
     let (cx, cy, cz, r) = (ld(b.c[0]) - sp(rc.org.x), ld(b.c[1]) - sp(rc.org.y), ld(b.c[2]) - sp(rc.org.z), ld(b.c[3]));
-    let t_far = (cx.mul_add(sp(rc.dir.x), cy.mul_add(sp(rc.dir.y), cz * sp(rc.dir.z))) + r * sp(rc.dir.length())).max(sp(0.0));
-    let m = t_far.mul_add(sp(rc.b), sp(rc.a)).max(sp(rc.floor));
+    let t_far = (cx.mul_add(sp(rc.dir.x), cy.mul_add(sp(rc.dir.y), cz * sp(rc.dir.z))) + r * sp(rc.dir.length())).fast_max(sp(0.0));
+    let m = t_far.mul_add(sp(rc.b), sp(rc.a)).fast_max(sp(rc.floor));
     let (mut tn, mut tf) = (sp(rc.tmin.max(0.0)), sp(rc.tmax));
     for k in 0..3 {
         let (o, inv) = (sp(rc.org[k]), sp(rc.inv_dir[k]));
@@ -759,11 +767,15 @@ pub fn tlas_box_test_1(rc: &BoxReach, tl: &Tlas, l: usize) -> Option<f32> {
 }
 
 /// [`boxes_x8`] on slots `f .. f + 8` of the instance tree.
+#[inline(always)]
 pub fn tlas_box_test_x8(rc: &BoxReach, tl: &Tlas, f: usize) -> (u32, [f32; 8]) {
     boxes_x8(rc, &tl.volumes(), f)
 }
 
-/// Scalar reference of the node test (§4.6).
+/// Scalar reference of the node test (§4.6); the traversal's test of one sphere (an
+/// instance's root, the instance tree's root). Inlined there, where only lane 0 is read, so
+/// the eight-lane result is not filled in memory for one sphere.
+#[inline]
 #[allow(clippy::too_many_arguments)]
 pub fn node_test_1(cone: &Cone, cx: &[f32], cy: &[f32], cz: &[f32], r: &[f32], clamp: f32, floor: f32, cut: f32) -> NodeHits {
     let mut out = NodeHits { mask: 0, t_near: [f32::INFINITY; 8], t_centre: [0.0; 8], eig: [NO_EIG; 8] };
@@ -806,9 +818,9 @@ pub fn node_test_x8(cone: &Cone, cx: &[f32; 8], cy: &[f32; 8], cz: &[f32; 8], r:
     let t = dot(cone.dir);
     let zero = f32x8::splat(0.0);
     let tmin = f32x8::splat(cone.tmin);
-    let t_lo = (t - rv).max(tmin).max(zero);
-    let t_hi = (t + rv).max(zero);
-    let tc = t.max(zero);
+    let t_lo = (t - rv).max(tmin).fast_max(zero);
+    let t_hi = (t + rv).fast_max(zero);
+    let tc = t.fast_max(zero);
     let sig = |tt: f32x8| cone.sigma_x8(tt);
     let (sa, sb, sc) = sig(tc);
     let e = eigen_x8(sa, sb, sc, 1.0e-9, floor);
@@ -819,8 +831,8 @@ pub fn node_test_x8(cone: &Cone, cx: &[f32; 8], cy: &[f32; 8], cz: &[f32; 8], r:
     let e1 = along(la, lb, lc, e.cos, e.sin).max(along(ha, hb, hc, e.cos, e.sin)) + iso;
     let e2 = along(la, lb, lc, -e.sin, e.cos).max(along(ha, hb, hc, -e.sin, e.cos)) + iso;
     let fl = f32x8::splat(floor);
-    let x1 = e1.max(zero).sqrt().max(fl);
-    let x2 = e2.max(zero).sqrt().max(fl);
+    let x1 = e1.fast_max(zero).sqrt().fast_max(fl);
+    let x2 = e2.fast_max(zero).sqrt().fast_max(fl);
     let a = e.cos * x + e.sin * y;
     let b = e.cos * y - e.sin * x;
     let rc = f32x8::splat(cut);
@@ -963,8 +975,8 @@ pub fn tri_bound_x8(
     let (x, y, t) = (dot(cone.u), dot(cone.v), dot(cone.dir));
     let zero = f32x8::splat(0.0);
     let tmin = f32x8::splat(cone.tmin);
-    let lo = (t - rv).max(tmin).max(zero);
-    let hi = (t + rv).max(tmin).max(zero);
+    let lo = (t - rv).max(tmin).fast_max(zero);
+    let hi = (t + rv).max(tmin).fast_max(zero);
     let (co, sn) = (boxe.cos, boxe.sin);
     // a₁ᵀΣa₁ = A·a + B·b + C·c with scalar weights of the box's axes, likewise a₂.
     let (w1a, w1b, w1c) = (f32x8::splat(co * co), f32x8::splat(2.0 * co * sn), f32x8::splat(sn * sn));
@@ -976,8 +988,8 @@ pub fn tri_bound_x8(
     let l2 = la * w2a + lb * w2b + lc * w2c;
     let h2 = ha * w2a + hb * w2b + hc * w2c;
     let fl = f32x8::splat(floor);
-    let e1 = l1.max(h1).max(zero).sqrt().max(fl);
-    let e2 = l2.max(h2).max(zero).sqrt().max(f32x8::splat(clamp) * e1).max(fl);
+    let e1 = l1.max(h1).fast_max(zero).sqrt().fast_max(fl);
+    let e2 = l2.max(h2).fast_max(zero).sqrt().max(f32x8::splat(clamp) * e1).fast_max(fl);
     let a = f32x8::splat(co) * x + f32x8::splat(sn) * y;
     let b = f32x8::splat(co) * y - f32x8::splat(sn) * x;
     let (rc, sl) = (f32x8::splat(cut), f32x8::splat(TRI_BOUND_SLACK));
@@ -1051,10 +1063,10 @@ pub fn tri_footprint_x8_lanes(lc: &Cone, tris: &TriSoa, k: usize, boxe: &Eigen2,
     let num = d[0][0] * ng[0] + d[0][1] * ng[1] + d[0][2] * ng[2];
     let t_plane = plane.bitselect(num / den, (tlo + thi) * sp(0.5));
     let t_ref = t_plane.is_finite().bitselect(t_plane.max(tlo).min(thi), tlo);
-    let (sa, sb, sc) = lc.sigma_x8(t_ref.max(sp(lc.tmin)).max(sp(0.0)));
+    let (sa, sb, sc) = lc.sigma_x8(t_ref.max(sp(lc.tmin)).fast_max(sp(0.0)));
     let zero = sp(0.0);
-    let e1 = (sa * sp(co * co) + sb * sp(2.0 * co * sn) + sc * sp(sn * sn)).max(zero).sqrt().max(sp(lf));
-    let e2 = (sa * sp(sn * sn) - sb * sp(2.0 * co * sn) + sc * sp(co * co)).max(zero).sqrt().max(sp(clamp) * e1).max(sp(lf));
+    let e1 = (sa * sp(co * co) + sb * sp(2.0 * co * sn) + sc * sp(sn * sn)).fast_max(zero).sqrt().fast_max(sp(lf));
+    let e2 = (sa * sp(sn * sn) - sb * sp(2.0 * co * sn) + sc * sp(co * co)).fast_max(zero).sqrt().max(sp(clamp) * e1).fast_max(sp(lf));
     let (i1, i2) = (sp(1.0) / e1, sp(1.0) / e2);
     let q = |j: usize| (dot(&d[j], a1) * i1, dot(&d[j], a2) * i2);
     let (q0, q1, q2) = (q(0), q(1), q(2));
@@ -1216,7 +1228,7 @@ pub fn point_w_ref(cone: &Cone, blk: &PointBlock, boxe: Option<&Eigen2>, clamp: 
 /// branches) is not needed.
 #[inline(always)]
 pub fn exp_neg_x8(q: f32x8) -> f32x8 {
-    let x = -q.max(f32x8::splat(0.0)).min(f32x8::splat(80.0));
+    let x = -q.fast_max(f32x8::splat(0.0)).fast_min(f32x8::splat(80.0));
     let r = (x * f32x8::splat(std::f32::consts::LOG2_E)).round();
     let f = x - r * f32x8::splat(0.693_359_4) - r * f32x8::splat(-2.121_944_4e-4);
     // Estrin's scheme with fused multiply-adds: a dependency chain of 4 instead of 6 steps.
@@ -1282,7 +1294,7 @@ pub fn point_w_x8(cone: &Cone, blk: &PointBlock, boxe: Option<&Eigen2>, clamp: f
         let x = f32x8::from_i32x8(v & lo) * k - one;
         let y = f32x8::from_i32x8((v >> 16) & lo) * k - one;
         let z = one - x.abs() - y.abs();
-        let t = (-z).max(zero);
+        let t = (-z).fast_max(zero);
         let xx = x.simd_ge(zero).bitselect(x - t, x + t);
         let yy = y.simd_ge(zero).bitselect(y - t, y + t);
         let dot = xx.mul_add(f32x8::splat(d.x), yy.mul_add(f32x8::splat(d.y), z * f32x8::splat(d.z)));
@@ -1351,7 +1363,7 @@ pub fn point_w_x8(cone: &Cone, blk: &PointBlock, boxe: Option<&Eigen2>, clamp: f
             while i < n {
                 let g = (load(blk.qx, i), load(blk.qy, i), load(blk.qz, i));
                 let (x, y, t) = (lin(blk.x0, blk.ax, g), lin(blk.y0, blk.ay, g), lin(blk.t0, blk.at, g));
-                let (sa, sb, sc) = cone.sigma_x8(t.max(zero));
+                let (sa, sb, sc) = cone.sigma_x8(t.fast_max(zero));
                 let e = eigen_x8(sa, sb, sc, clamp, floor);
                 let a = e.cos * x + e.sin * y;
                 let b = e.cos * y - e.sin * x;
@@ -1491,6 +1503,15 @@ pub(crate) fn closest_to_origin(a: glam::Vec2, b: glam::Vec2, c: glam::Vec2) -> 
     }
 }
 
+/// The material properties of a point's code, as [`MatRanges::decode`] gives them. Not
+/// inlined: the traversal decodes only when a hit's code differs from the last one's
+/// (`Tracer::weigh_points`), and inlined, the loop-invariant logarithms of the log-coded
+/// range were hoisted out of the hit loop, 14 `logf` calls for every point block.
+#[inline(never)]
+fn decode_props(ranges: &MatRanges, code: [u8; 7]) -> [f32; 7] {
+    std::array::from_fn(|i| ranges.props[i].decode(code[i]))
+}
+
 // ---------------------------------------------------------------------------------------
 // Traversal
 
@@ -1529,6 +1550,8 @@ pub struct Scratch {
     locals: Vec<Local>,
     eigs: Vec<Eigen2>,
     hits: PointHits,
+    /// The triangle prefilter's projection of the current block ([`tri_footprint_x8_lanes`]).
+    lanes: TriLanes,
 }
 
 impl Scratch {
@@ -1555,6 +1578,7 @@ impl Default for Scratch {
             locals: Vec::with_capacity(64),
             eigs: Vec::with_capacity(1024),
             hits: PointHits::default(),
+            lanes: TriLanes::default(),
         }
     }
 }
@@ -1702,6 +1726,10 @@ impl<'s, 'a> Tracer<'s, 'a> {
             root_eig = (sc.eigs.len() - 1) as u32;
         }
         sc.push(Entry { t: t_root, node: 0, slot: 0, blend: 1.0, kind: K_TLAS, eig: root_eig });
+        // The instances' local cones, out of `sc` while the loop runs, so `visit` reads its
+        // node's cone by reference beside the scratch it writes (copying the 156-byte
+        // `Local` out of `sc` was 20 instructions per node).
+        let mut locals = std::mem::take(&mut sc.locals);
         let mut steps = 0u32;
         while let Some(e) = sc.pop() {
             let done = match self.p.termination {
@@ -1731,8 +1759,8 @@ impl<'s, 'a> Tracer<'s, 'a> {
                     c.inc(Counter::node_tests);
                     c.inc(Counter::eigen_decompositions);
                     if h.mask & 1 != 0 {
-                        sc.locals.push(Local { cone: lc, scale: s, leaf: li, reach: BoxReach::cone(&lc, cut, lf) });
-                        let slot = (sc.locals.len() - 1) as u32;
+                        locals.push(Local { cone: lc, scale: s, leaf: li, reach: BoxReach::cone(&lc, cut, lf) });
+                        let slot = (locals.len() - 1) as u32;
                         sc.eigs.push(h.eig[0]);
                         let eig = (sc.eigs.len() - 1) as u32;
                         sc.push(Entry { t: h.t_near[0] / s, node: 0, slot, blend: e.blend, kind: K_OCT, eig });
@@ -1803,8 +1831,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 }
                 continue;
             }
-            self.visit(e, ab, mode, sc, c);
+            self.visit(e, &locals, ab, mode, sc, c);
         }
+        sc.locals = locals;
     }
 
     /// Whether the run is over its `--time-budget` (or aborted); sets the abort flag when
@@ -1824,11 +1853,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
     }
 
     /// One octree node (§5.1 steps 1–5).
-    fn visit(&self, e: Entry, ab: &mut ABuffer, mode: Collect, sc: &mut Scratch, c: &mut Counters) {
-        let (lc, s, li, reach) = {
-            let l = &sc.locals[e.slot as usize];
-            (l.cone, l.scale, l.leaf, l.reach)
-        };
+    fn visit(&self, e: Entry, locals: &[Local], ab: &mut ABuffer, mode: Collect, sc: &mut Scratch, c: &mut Counters) {
+        let l = &locals[e.slot as usize];
+        let (lc, s, li, reach) = (&l.cone, l.scale, l.leaf, &l.reach);
         let leaf = &self.ms.leaves[li as usize];
         let tree = &self.ms.trees[leaf.tree as usize];
         let n = e.node as usize;
@@ -1848,24 +1875,25 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 c.add(Counter::triangle_tests, tcount as u64);
                 for (j, &tri) in tree.tri_index[ts..ts + tcount].iter().enumerate() {
                     let pw = tris.verts[ts + j];
-                    if let Some(hit) = self.triangle_hit(&lc, s, pw, &boxe, c) {
-                        self.emit_triangle(&lc, s, li, tri, pw, hit, e.blend, ab, mode);
+                    if let Some(hit) = self.triangle_hit(lc, s, pw, &boxe, c) {
+                        self.emit_triangle(lc, s, li, tri, pw, hit, e.blend, ab, mode);
                     }
                 }
             } else {
                 let lf = self.floor * s;
-                // The projected lanes of the current block (valid where `m` has bits).
-                let mut lanes = TriLanes::default();
+                // The projected lanes of the current block (valid where `m` has bits), kept in
+                // the scratch: zeroing 320 bytes for every node with triangles is avoided.
+                let lanes = &mut sc.lanes;
                 for k in (ts..ts + tcount).step_by(8) {
                     let arr = |v: &Vec<f32>| -> [f32; 8] { v[k..k + 8].try_into().expect("padded to 8") };
                     let rem = (ts + tcount - k).min(8);
                     let cut = self.tri.cut();
-                    let mut m = tri_bound_x8(&lc, &arr(&tris.cx), &arr(&tris.cy), &arr(&tris.cz), &arr(&tris.r), &boxe, clamp, lf, cut)
+                    let mut m = tri_bound_x8(lc, &arr(&tris.cx), &arr(&tris.cy), &arr(&tris.cz), &arr(&tris.r), &boxe, clamp, lf, cut)
                         as u32
                         & ((1u32 << rem) - 1);
                     c.add(Counter::triangle_bound_tests, rem as u64);
                     if m != 0 {
-                        m &= tri_footprint_x8_lanes(&lc, tris, k, &boxe, clamp, lf, cut, &mut lanes) as u32;
+                        m &= tri_footprint_x8_lanes(lc, tris, k, &boxe, clamp, lf, cut, lanes) as u32;
                     }
                     if self.tri == TriWeight::Mass {
                         // The exact mass of the block's survivors, after the quick reject
@@ -1896,7 +1924,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                                 let w = w * (1.0 / MASS_IN_CUT);
                                 if w > 0.0 {
                                     let hit = (w, b1, b2, t, size);
-                                    self.emit_triangle(&lc, s, li, tree.tri_index[j], tris.verts[j], hit, e.blend, ab, mode);
+                                    self.emit_triangle(lc, s, li, tree.tri_index[j], tris.verts[j], hit, e.blend, ab, mode);
                                 }
                             }
                         }
@@ -1911,7 +1939,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
                         let (q, tv, size) = lanes.get(l);
                         if let Some((w, b1, b2)) = weight_2d(q, self.tri) {
                             let hit = (w, b1, b2, tv[0] * (1.0 - b1 - b2) + tv[1] * b1 + tv[2] * b2, size);
-                            self.emit_triangle(&lc, s, li, tree.tri_index[j], tris.verts[j], hit, e.blend, ab, mode);
+                            self.emit_triangle(lc, s, li, tree.tri_index[j], tris.verts[j], hit, e.blend, ab, mode);
                         }
                     }
                 }
@@ -1922,7 +1950,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let npts = nodes.pt_count[n] as usize;
         if e.kind == K_TERMINAL {
             if npts > 0 {
-                self.test_points(&lc, s, li, tree, n, &boxe, e.blend, ab, &mut sc.hits, mode, c);
+                self.test_points(lc, s, li, tree, n, &boxe, e.blend, ab, &mut sc.hits, mode, c);
             }
             return;
         }
@@ -1931,15 +1959,15 @@ impl<'s, 'a> Tracer<'s, 'a> {
         if self.p.points && npts > 0 && self.p.lod_scale * smin >= h {
             let x = if has_children && self.p.mipmap { ((self.p.lod_scale * smin / h).log2()).clamp(0.0, 1.0) } else { 1.0 };
             if x > 0.0 {
-                self.test_points(&lc, s, li, tree, n, &boxe, e.blend * x, ab, &mut sc.hits, mode, c);
+                self.test_points(lc, s, li, tree, n, &boxe, e.blend * x, ab, &mut sc.hits, mode, c);
             }
             if x < 1.0 && has_children {
-                self.push_children(&lc, &reach, s, e.slot, tree, n, e.blend * (1.0 - x), K_TERMINAL, sc, c);
+                self.push_children(lc, reach, s, e.slot, tree, n, e.blend * (1.0 - x), K_TERMINAL, sc, c);
             }
             return;
         }
         if has_children {
-            self.push_children(&lc, &reach, s, e.slot, tree, n, e.blend, K_OCT, sc, c);
+            self.push_children(lc, reach, s, e.slot, tree, n, e.blend, K_OCT, sc, c);
         }
     }
 
@@ -2067,6 +2095,10 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let share = POINT_MARGIN * h * h / (std::f32::consts::PI * MASS_IN_CUT);
         point_w_x8(cone, blk, if exact { None } else { Some(boxe) }, self.clamp, self.floor * s, blend * share, hits);
         let dz = self.p.depth_tol * h * inv_s;
+        // The last material code decoded and its properties: the points of a block mostly
+        // share one (a mesh of one material; on `complex` 71 % of the shaded hits reuse it),
+        // and the seven decodes were 60 of a hit's 230 instructions.
+        let mut last: Option<([u8; 7], [f32; 7])> = None;
         for k in 0..hits.len {
             let (j, t, w) = (start + hits.idx[k] as usize, hits.t[k], hits.w[k]);
             // The sign is the point's facing: > 0 away from the cone's origin.
@@ -2081,9 +2113,18 @@ impl<'s, 'a> Tracer<'s, 'a> {
             let f = &mut p.g;
             f.wb = wb;
             if mode == Collect::Shade {
-                let m = ranges.decode(pts.rgb[j], pts.mat[j]);
-                f.col = m.color * w;
-                f.props = m.p.map(|v| v * w);
+                let code = pts.mat[j];
+                let props = match last {
+                    Some((c, p)) if c == code => p,
+                    _ => {
+                        let p = decode_props(ranges, code);
+                        last = Some((code, p));
+                        p
+                    }
+                };
+                let rgb = pts.rgb[j].map(|q| quant::decode_color(q, ranges.color_hi));
+                f.col = Vec3::from_array(rgb) * w;
+                f.props = props.map(|v| v * w);
                 // The point's normal spread (|mean normal| < 1) carries into the fragment.
                 let spread = if self.p.normal_spread { quant::decode_unit(pts.nlen[j]) } else { 1.0 };
                 let nrm = quant::oct_decode(pts.normal[j]);
