@@ -2432,8 +2432,10 @@ impl DeformTracer {
                         stack.push((r as u32, nr, (lv + 1) | UNTESTED, m));
                     }
                 };
+            // The root (tested in `root_hits_x8`) as a tested entry, so `expand` has one call
+            // site and is inlined into the loop.
             stack.clear();
-            expand(stack, 0, topo.count[0], 0, m, dc, ctr);
+            stack.push((0, topo.count[0], 0, m));
             while let Some((n, c, lv, m)) = stack.pop() {
                 let mut m = m & !done;
                 if m == 0 {
