@@ -2845,8 +2845,14 @@ fn own_last(roots: &mut Vec<(f32, usize, u8, f32x8)>, tnear: f32x8) {
 /// Smallest entry over the lanes of `m` (m ≠ 0).
 #[inline]
 fn hmin(e: f32x8, m: u8) -> f32 {
-    let e = e.to_array();
-    lanes(m).map(|i| e[i]).fold(f32::INFINITY, f32::min)
+    // Branch-free: the lanes outside m set to +∞, then a min over all eight (no lane of m
+    // is NaN: the sphere tests report a lane only when its entry compared ≤ tfar).
+    const BIT: [u32; 8] = [1, 2, 4, 8, 16, 32, 64, 128];
+    let bit = u32x8::from(BIT);
+    let sel: f32x8 = wide::bytemuck::cast((u32x8::splat(m as u32) & bit).simd_eq(bit));
+    let v = sel.bitselect(e, f32x8::splat(f32::INFINITY)).to_array();
+    let h = [v[0].min(v[4]), v[1].min(v[5]), v[2].min(v[6]), v[3].min(v[7])];
+    h[0].min(h[2]).min(h[1].min(h[3]))
 }
 
 /// How far ahead [`DeformTracer::refit_subtree`] prefetches the surfel and node slots it
