@@ -156,26 +156,33 @@ impl TopTree {
     /// in this tree and its roots). Both tests are conservative, so the candidates hold
     /// every instance a lane reaches; at a rim they may differ from [`Self::candidates_1`]'s.
     pub fn candidates_x8(&self, pk: &RayPacketX8, mask: u8, tfar: f32x8, mut visit: impl FnMut(u32, u8)) -> u64 {
-        if self.single() {
-            self.order.iter().for_each(|&k| visit(k, mask));
-            return 0;
-        }
+        // A single leaf (`flat`) is not tested. It goes through the loop all the same, so
+        // that `visit` has one call site and is inlined.
+        let single = self.single();
         let mut tests = 0;
-        let mut stack = [(0u32, 0u8); 64];
+        // Median splits down to `TOP_LEAF` instances: depth < 31 for any u32 count, and a
+        // depth-first stack holds at most depth + 1 entries.
+        let mut stack = [(0u32, 0u8); 32];
         stack[0] = (0, mask);
         let mut sp = 1;
         while sp > 0 {
             sp -= 1;
             let (n, m) = stack[sp];
             let n = n as usize;
-            tests += m.count_ones() as u64;
-            let m = m & pk.test_any(self.c[n], self.r[n], tfar);
+            let m = if single {
+                m
+            } else {
+                tests += m.count_ones() as u64;
+                m & pk.test_any(self.c[n], self.r[n], tfar)
+            };
             if m == 0 {
                 continue;
             }
             if self.right[n] == LEAF {
                 let f = self.first[n] as usize;
-                self.order[f..f + self.count[n] as usize].iter().for_each(|&k| visit(k, m));
+                for &k in &self.order[f..f + self.count[n] as usize] {
+                    visit(k, m);
+                }
             } else {
                 stack[sp] = (self.right[n], m);
                 stack[sp + 1] = (n as u32 + 1, m);

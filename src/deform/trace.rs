@@ -1247,7 +1247,7 @@ impl DeformTracer {
                 let mut m = 0;
                 for (j, &s) in chunk.iter().enumerate() {
                     if let Some(&a) = perm.get(base + j + PREFETCH_AHEAD) {
-                        prefetch(&ii.surf.slot[a as usize]);
+                        prefetch_at(&ii.surf.slot, a as usize);
                         prefetch_surfel_inputs(&ii.obj, a as usize);
                     }
                     let s = s as usize;
@@ -1281,8 +1281,8 @@ impl DeformTracer {
             // child before its parent.
             for q in (n..n + m).rev() {
                 if q >= n + PREFETCH_AHEAD {
-                    prefetch(&ii.nodes.slot[q - PREFETCH_AHEAD]);
-                    prefetch(&ii.ball[q - PREFETCH_AHEAD]);
+                    prefetch_at(&ii.nodes.slot, q - PREFETCH_AHEAD);
+                    prefetch_at(&ii.ball, q - PREFETCH_AHEAD);
                 }
                 let (a, k) = (topo.start[q] as usize - s0, topo.count[q] as usize);
                 let b = if topo.right[q] == LEAF {
@@ -1367,9 +1367,9 @@ impl DeformTracer {
             return;
         }
         if leaf {
-            prefetch(&ii.surf.slot[ii.obj.tree.topo.surfel[n] as usize]);
+            prefetch_at(&ii.surf.slot, ii.obj.tree.topo.surfel[n] as usize);
         } else {
-            prefetch(&ii.nodes.slot[n]);
+            prefetch_at(&ii.nodes.slot, n);
         }
     }
 
@@ -1407,7 +1407,7 @@ impl DeformTracer {
     #[inline(always)]
     fn prefetch_far_ball(&self, ii: &Instance, n: usize, c: u32, m: u8) {
         if m != 0 && c > 1 {
-            prefetch_read(&ii.ball[Topology::split(n, c).0]);
+            prefetch_read_at(&ii.ball, Topology::split(n, c).0);
         }
     }
 
@@ -1419,13 +1419,13 @@ impl DeformTracer {
     #[inline(always)]
     fn prefetch_leaf(&self, ii: &Instance, n: usize) {
         let (obj, s) = (&*ii.obj, self.topo(ii).surfel[n] as usize);
-        prefetch_read(&ii.surf.slot[s]);
+        prefetch_read_at(&ii.surf.slot, s);
         let row = s * obj.nk;
-        prefetch_read(&obj.nbr[row]);
-        prefetch_read(&obj.nbr[row + obj.nk - 1]);
-        prefetch_read(&obj.h[s]);
+        prefetch_read_at(&obj.nbr, row);
+        prefetch_read_at(&obj.nbr, row + obj.nk - 1);
+        prefetch_read_at(&obj.h, s);
         if ii.clipped {
-            prefetch_read(&obj.coll[s]);
+            prefetch_read_at(&obj.coll, s);
         }
     }
 
@@ -1585,7 +1585,7 @@ impl DeformTracer {
             let c = obj.coll[s] as usize;
             let np = obj.clip_partners[c].len();
             if np > 0 {
-                prefetch_read(&obj.clip_nb[obj.clip_base[c] + (s - obj.model.collections[c].start as usize) * np]);
+                prefetch_read_at(&obj.clip_nb, obj.clip_base[c] + (s - obj.model.collections[c].start as usize) * np);
             }
         }
         let ds = self.surfel(ii, s);
@@ -1681,7 +1681,7 @@ impl DeformTracer {
         // All the neighbours' slots are requested before the first is read: the loop below
         // branches on each stamp (and may deform), which kept its loads from overlapping.
         for &q in nbr.iter().take_while(|&&q| q != NO_NBR) {
-            prefetch(&ii.surf.slot[q as usize]);
+            prefetch_at(&ii.surf.slot, q as usize);
         }
         for q in nbr.iter().take_while(|&&q| q != NO_NBR) {
             let (p, n) = self.surfel_pn(ii, *q as usize);
@@ -1734,7 +1734,7 @@ impl DeformTracer {
         // neighbours': the test below branches on each).
         for slot in 0..np {
             for q in obj.clip_pair(s, slot) {
-                prefetch_read(&ii.surf.slot[q as usize]);
+                prefetch_read_at(&ii.surf.slot, q as usize);
             }
         }
         (0..np).any(|slot| {
@@ -1871,16 +1871,16 @@ impl DeformTracer {
         for &x in &v {
             if let Some((ii, n)) = node(x) {
                 let topo = &ii.obj.tree.topo;
-                prefetch(&topo.right[n]);
-                prefetch(&topo.surfel[n]);
+                prefetch_at(&topo.right, n);
+                prefetch_at(&topo.surfel, n);
             }
         }
         for &x in &v {
             if let Some((ii, n)) = node(x) {
                 // A leaf (the default cache holds leaves) keeps its sphere with its surfel.
                 match ii.obj.tree.topo.surfel[n] {
-                    u32::MAX => prefetch(&ii.nodes.slot[n]),
-                    s => prefetch(&ii.surf.slot[s as usize]),
+                    u32::MAX => prefetch_at(&ii.nodes.slot, n),
+                    s => prefetch_at(&ii.surf.slot, s as usize),
                 }
             }
         }
@@ -2432,8 +2432,10 @@ impl DeformTracer {
                         stack.push((r as u32, nr, (lv + 1) | UNTESTED, m));
                     }
                 };
+            // The root (tested in `root_hits_x8`) as a tested entry, so `expand` has one call
+            // site and is inlined into the loop.
             stack.clear();
-            expand(stack, 0, topo.count[0], 0, m, dc, ctr);
+            stack.push((0, topo.count[0], 0, m));
             while let Some((n, c, lv, m)) = stack.pop() {
                 let mut m = m & !done;
                 if m == 0 {
@@ -2843,34 +2845,48 @@ fn own_last(roots: &mut Vec<(f32, usize, u8, f32x8)>, tnear: f32x8) {
 /// Smallest entry over the lanes of `m` (m ≠ 0).
 #[inline]
 fn hmin(e: f32x8, m: u8) -> f32 {
-    let e = e.to_array();
-    lanes(m).map(|i| e[i]).fold(f32::INFINITY, f32::min)
+    // Branch-free: the lanes outside m set to +∞, then a min over all eight (no lane of m
+    // is NaN: the sphere tests report a lane only when its entry compared ≤ tfar).
+    const BIT: [u32; 8] = [1, 2, 4, 8, 16, 32, 64, 128];
+    let bit = u32x8::from(BIT);
+    let sel: f32x8 = wide::bytemuck::cast((u32x8::splat(m as u32) & bit).simd_eq(bit));
+    let v = sel.bitselect(e, f32x8::splat(f32::INFINITY)).to_array();
+    let h = [v[0].min(v[4]), v[1].min(v[5]), v[2].min(v[6]), v[3].min(v[7])];
+    h[0].min(h[2]).min(h[1].min(h[3]))
 }
 
 /// How far ahead [`DeformTracer::refit_subtree`] prefetches the surfel and node slots it
 /// will write (in elements).
 const PREFETCH_AHEAD: usize = 8;
 
-/// Asks for the cache line of `x` ahead of a write to it (a hint; no effect elsewhere than
+/// Asks for the cache line of `x` ahead of a read of it (a hint; no effect elsewhere than
 /// x86-64).
-#[inline(always)]
-fn prefetch<T>(x: &T) {
-    prefetch_hint::<true, T>(x)
-}
-
-/// Asks for the cache line of `x` ahead of a read of it (a hint, as [`prefetch`]).
 #[inline(always)]
 fn prefetch_read<T>(x: &T) {
     prefetch_hint::<false, T>(x)
 }
 
+/// Asks for the cache line of `s[i]` ahead of a write to it (a hint, as [`prefetch_read`]),
+/// without a bounds check: a prefetch of any address is harmless, and each check was a
+/// compare and a branch on the traversals' paths.
 #[inline(always)]
-fn prefetch_hint<const WRITE: bool, T>(x: &T) {
+fn prefetch_at<T>(s: &[T], i: usize) {
+    prefetch_hint::<true, T>(s.as_ptr().wrapping_add(i))
+}
+
+/// [`prefetch_read`] of `s[i]`, without a bounds check (as [`prefetch_at`]).
+#[inline(always)]
+fn prefetch_read_at<T>(s: &[T], i: usize) {
+    prefetch_hint::<false, T>(s.as_ptr().wrapping_add(i))
+}
+
+#[inline(always)]
+fn prefetch_hint<const WRITE: bool, T>(x: *const T) {
     #[cfg(target_arch = "x86_64")]
     {
         use std::arch::x86_64::{_mm_prefetch, _MM_HINT_ET0, _MM_HINT_T0};
-        let p = x as *const T as *const i8;
-        // SAFETY: a prefetch is a hint and never faults; `x` is a valid reference anyway.
+        let p = x as *const i8;
+        // SAFETY: a prefetch is a hint and never faults, whatever the address.
         unsafe {
             if WRITE {
                 _mm_prefetch::<_MM_HINT_ET0>(p)
@@ -2890,16 +2906,16 @@ fn prefetch_hint<const WRITE: bool, T>(x: &T) {
 #[inline(always)]
 fn prefetch_surfel_inputs(obj: &SurfelObject, s: usize) {
     let k = obj.weights.k;
-    prefetch_read(&obj.pos[s]);
-    prefetch_read(&obj.axes[s]);
+    prefetch_read_at(&obj.pos, s);
+    prefetch_read_at(&obj.axes, s);
     if k == 0 {
         return;
     }
     // A row of k = 16 entries is one line's worth but rarely line-aligned: ask for both ends.
-    prefetch_read(&obj.weights.idx[s * k]);
-    prefetch_read(&obj.weights.idx[s * k + k - 1]);
-    prefetch_read(&obj.weights.w[s * k]);
-    prefetch_read(&obj.weights.w[s * k + k - 1]);
+    prefetch_read_at(&obj.weights.idx, s * k);
+    prefetch_read_at(&obj.weights.idx, s * k + k - 1);
+    prefetch_read_at(&obj.weights.w, s * k);
+    prefetch_read_at(&obj.weights.w, s * k + k - 1);
 }
 
 #[inline]

@@ -553,6 +553,8 @@ pub struct RayPacketX8 {
     d: [f32x8; 3],
     a: f32x8,
     inv: f32x8,
+    /// max |d_i| per lane, for [`Self::test_any`]'s slack (once per packet, not per test).
+    dm: f32x8,
     tnear: f32x8,
 }
 
@@ -562,7 +564,8 @@ impl RayPacketX8 {
         let o = [f32x8::from(o[0]), f32x8::from(o[1]), f32x8::from(o[2])];
         let d = [f32x8::from(d[0]), f32x8::from(d[1]), f32x8::from(d[2])];
         let a = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-        Self { o, d, a, inv: f32x8::splat(1.0) / a, tnear: f32x8::from(*tnear) }
+        let dm = d[0].abs().max(d[1].abs()).max(d[2].abs());
+        Self { o, d, a, inv: f32x8::splat(1.0) / a, dm, tnear: f32x8::from(*tnear) }
     }
 
     /// The sphere (c, r) against all eight rays, each with its own `tfar`: hit mask and entry
@@ -593,7 +596,16 @@ impl RayPacketX8 {
     /// `any_kernel`): a sphere the segment truly meets is never missed.
     #[inline(always)]
     pub fn test_any(&self, c: Vec3, r: f32, tfar: f32x8) -> u8 {
-        any_kernel(self.o, self.d, self.inv, [f32x8::splat(c.x), f32x8::splat(c.y), f32x8::splat(c.z)], f32x8::splat(r), self.tnear, tfar)
+        any_kernel(
+            self.o,
+            self.d,
+            self.inv,
+            self.dm,
+            [f32x8::splat(c.x), f32x8::splat(c.y), f32x8::splat(c.z)],
+            f32x8::splat(r),
+            self.tnear,
+            tfar,
+        )
     }
 }
 
@@ -648,17 +660,22 @@ fn kernel_pre(o: [f32x8; 3], d: [f32x8; 3], a: f32x8, inv: f32x8, c: [f32x8; 3],
     let cx = ocy * d[2] - ocz * d[1];
     let cy = ocz * d[0] - ocx * d[2];
     let cz = ocx * d[1] - ocy * d[0];
-    let m = ocx.abs().max(ocy.abs()).max(ocz.abs());
+    // `fast_max` as in `any_kernel`: a NaN in c − o makes the cross product, so disc, NaN and
+    // the lane a miss whatever m is, and without one the two maxima agree.
+    let m = ocx.abs().fast_max(ocy.abs()).fast_max(ocz.abs());
     let tol = f32x8::splat(CONS_TOL);
     let re = r + tol * (f32x8::splat(SQRT3_UP) * m);
     let disc = (a * (re * re)) * f32x8::splat(1.0 + CONS_TOL) - (cx * cx + cy * cy + cz * cz);
     let zero = f32x8::splat(0.0);
-    let sq = disc.max(zero).sqrt();
+    // `fast_max` here and for the entry: `max_m256` returns its second operand when either is
+    // NaN, so a NaN disc still gives 0, and the entry equals `max` wherever tnear is not NaN
+    // (every lane of a traversal's packet; a lane whose tnear is NaN misses).
+    let sq = disc.fast_max(zero).sqrt();
     let slack = tol * (b.abs() + sq);
     let t0 = (b - sq - slack) * inv;
     let t1 = (b + sq + slack) * inv;
     let hit = disc.simd_ge(zero) & t1.simd_ge(tnear) & t0.simd_le(tfar);
-    (hit.to_bitmask() as u8, t0.max(tnear))
+    (hit.to_bitmask() as u8, t0.fast_max(tnear))
 }
 
 /// The any-hit sphere test: the segment's point nearest `c` is at tc = clamp(b/a, tnear,
@@ -673,13 +690,18 @@ fn kernel_pre(o: [f32x8; 3], d: [f32x8; 3], a: f32x8, inv: f32x8, c: [f32x8; 3],
 /// slacks differ, so at a rim one may report a sphere the other does not; both are
 /// conservative, which is all a traversal needs. A NaN lane (an invalid ray) compares false.
 #[inline(always)]
-fn any_kernel(o: [f32x8; 3], d: [f32x8; 3], inv: f32x8, c: [f32x8; 3], r: f32x8, tnear: f32x8, tfar: f32x8) -> u8 {
+#[allow(clippy::too_many_arguments)]
+fn any_kernel(o: [f32x8; 3], d: [f32x8; 3], inv: f32x8, dm: f32x8, c: [f32x8; 3], r: f32x8, tnear: f32x8, tfar: f32x8) -> u8 {
     let (ocx, ocy, ocz) = (c[0] - o[0], c[1] - o[1], c[2] - o[2]);
     let b = ocx * d[0] + ocy * d[1] + ocz * d[2];
-    let tc = (b * inv).max(tnear).min(tfar);
+    // `fast_max`/`fast_min` (one instruction each): they return their second operand when
+    // either is NaN, so tc equals the clamp with `max`/`min` wherever tnear and tfar are not
+    // NaN (every lane of a traversal's packet; a lane whose tnear is NaN misses).
+    let tc = (b * inv).fast_max(tnear).fast_min(tfar);
     let (qx, qy, qz) = (ocx - d[0] * tc, ocy - d[1] * tc, ocz - d[2] * tc);
-    let m = ocx.abs().max(ocy.abs()).max(ocz.abs());
-    let dm = d[0].abs().max(d[1].abs()).max(d[2].abs());
+    // `fast_max` (one instruction, no NaN fix-up): a NaN in c − o makes q NaN and the lane a
+    // miss whatever m is, and without one the two maxima agree.
+    let m = ocx.abs().fast_max(ocy.abs()).fast_max(ocz.abs());
     let re = r + f32x8::splat(CONS_TOL * 0.25 * SQRT3_UP) * (m + tc.abs() * dm);
     let hit = (qx * qx + qy * qy + qz * qz).simd_le((re * re) * f32x8::splat(1.0 + CONS_TOL)) & tc.simd_ge(tnear);
     hit.to_bitmask() as u8
