@@ -537,6 +537,14 @@ impl DeformCounters {
     fn tests_at(&mut self, level: u8, n: u64) {
         self.level_tests[(level as usize).min(LEVELS - 1)] += n;
     }
+    /// [`tests_at`](Self::tests_at) of a level the caller clamped below [`LEVELS`] already
+    /// (the packet traversals, whose stacks carry clamped levels).
+    #[inline(always)]
+    fn tests_below(&mut self, level: u8, n: u64) {
+        const { assert!(LEVELS.is_power_of_two() && LEVELS <= COMPLETE as usize) };
+        debug_assert!((level as usize) < LEVELS);
+        self.level_tests[level as usize & (LEVELS - 1)] += n;
+    }
     /// Mean MLS iterations of converged hits and rejections together.
     pub fn mean_mls_iterations(&self) -> f64 {
         self.mls_iterations as f64 / (self.mls_runs.max(1)) as f64
@@ -2318,12 +2326,12 @@ impl DeformTracer {
             let (l, (r, c1, c2)) = (n + 1, Topology::split(n, c));
             let (leaf1, leaf2) = (c1 == 1, c2 == 1);
             let (s1, s2, compact) = self.child_spheres(ii, nv, n, c, known);
-            // The children's level; past 62 they share the counters' last level anyway
-            // (`LEVELS`).
-            let lv = lv.min(COMPLETE - 2) + 1;
+            // The children's level; past LEVELS − 1 they share the counters' last level
+            // anyway.
+            let lv = lv.min(LEVELS as u8 - 2) + 1;
             let cnt = 2 * m.count_ones() as u64;
             dc.sphere_tests += cnt;
-            dc.tests_at(lv, cnt);
+            dc.tests_below(lv, cnt);
             ctr.add(Counter::node_tests, cnt);
             let (m1, e1) = pk.test(s1.0, s1.1, tb);
             let (m2, e2) = pk.test(s2.0, s2.1, tb);
@@ -2461,8 +2469,8 @@ impl DeformTracer {
             let (l, (r, nl, nr)) = (n + 1, Topology::split(n, c));
             let (leaf_l, leaf_r) = (nl == 1, nr == 1);
             let known = lv & COMPLETE != 0;
-            // Levels past 62 share the counters' last level anyway (`LEVELS`).
-            let lv = (lv & !COMPLETE).min(COMPLETE - 2);
+            // Levels past LEVELS − 1 share the counters' last level anyway.
+            let lv = (lv & !COMPLETE).min(LEVELS as u8 - 2);
             // Each child's sphere if it is current (one stamp check and load each), both
             // from the compact balls in a complete subtree (n is current: it was tested).
             let (sl, sr, compact) = match self.compact_children(ii, nv, n, c, r, known) {
@@ -2477,7 +2485,7 @@ impl DeformTracer {
             if let (Some((cl, rl)), Some((cr, rr))) = (sl, sr) {
                 let cnt = 2 * m.count_ones() as u64;
                 dc.sphere_tests += cnt;
-                dc.tests_at(lv + 1, cnt);
+                dc.tests_below(lv + 1, cnt);
                 ctr.add(Counter::node_tests, cnt);
                 let (ml, mr) = (m & pk.test_any(cl, rl, tfar), m & pk.test_any(cr, rr, tfar));
                 if leaf_l && ml != 0 {
@@ -2524,7 +2532,7 @@ impl DeformTracer {
                 let (c, r) = self.sphere_as_nv(ii, nv, n, leaf);
                 let cnt = m.count_ones() as u64;
                 dc.sphere_tests += cnt;
-                dc.tests_at(lv, cnt);
+                dc.tests_below(lv, cnt);
                 ctr.add(Counter::node_tests, cnt);
                 m &= pk.test_any(c, r, tfar);
                 if m == 0 {
