@@ -537,6 +537,14 @@ impl DeformCounters {
     fn tests_at(&mut self, level: u8, n: u64) {
         self.level_tests[(level as usize).min(LEVELS - 1)] += n;
     }
+    /// [`tests_at`](Self::tests_at) of a level the caller clamped below [`LEVELS`] already
+    /// (the packet traversals, whose stacks carry clamped levels).
+    #[inline(always)]
+    fn tests_below(&mut self, level: u8, n: u64) {
+        const { assert!(LEVELS.is_power_of_two() && LEVELS <= COMPLETE as usize) };
+        debug_assert!((level as usize) < LEVELS);
+        self.level_tests[level as usize & (LEVELS - 1)] += n;
+    }
     /// Mean MLS iterations of converged hits and rejections together.
     pub fn mean_mls_iterations(&self) -> f64 {
         self.mls_iterations as f64 / (self.mls_runs.max(1)) as f64
@@ -1140,7 +1148,14 @@ impl DeformTracer {
     /// right child.
     #[inline(always)]
     fn sphere_as(&self, ii: &Instance, n: usize, leaf: bool) -> (Vec3, f32) {
-        if let Some(t) = &ii.naive {
+        self.sphere_as_nv(ii, ii.naive.as_ref(), n, leaf)
+    }
+
+    /// [`sphere_as`](Self::sphere_as) with `ii.naive` read by the caller (`nv`), once per
+    /// traversal of the instance rather than per node.
+    #[inline(always)]
+    fn sphere_as_nv(&self, ii: &Instance, nv: Option<&Topology>, n: usize, leaf: bool) -> (Vec3, f32) {
+        if let Some(t) = nv {
             return (t.center(n), t.r[n]);
         }
         // A leaf's sphere is its surfel's leaf ball, stored with the deformed surfel (§4.1.2
@@ -1161,8 +1176,8 @@ impl DeformTracer {
     /// (nothing is updated): [`current`](Self::current) and [`sphere`](Self::sphere) in one
     /// stamp check. The caller knows whether n is a leaf ([`Topology::split`]).
     #[inline(always)]
-    fn current_sphere(&self, ii: &Instance, n: usize, leaf: bool) -> Option<(Vec3, f32)> {
-        if let Some(t) = &ii.naive {
+    fn current_sphere(&self, ii: &Instance, nv: Option<&Topology>, n: usize, leaf: bool) -> Option<(Vec3, f32)> {
+        if let Some(t) = nv {
             return Some((t.center(n), t.r[n]));
         }
         if leaf {
@@ -1336,25 +1351,25 @@ impl DeformTracer {
     /// parent's is, [`compact_children`](Self::compact_children)). The third value says
     /// whether n's subtree is complete, and so its children's.
     #[inline(always)]
-    fn child_spheres(&self, ii: &Instance, n: usize, c: u32, known: bool) -> ((Vec3, f32), (Vec3, f32), bool) {
+    fn child_spheres(&self, ii: &Instance, nv: Option<&Topology>, n: usize, c: u32, known: bool) -> ((Vec3, f32), (Vec3, f32), bool) {
         let (rc, c1, c2) = Topology::split(n, c);
         let (leaf1, leaf2) = (c1 == 1, c2 == 1);
-        let ((s1, s2), compact) = match self.compact_children(ii, n, c, rc, known) {
+        let ((s1, s2), compact) = match self.compact_children(ii, nv, n, c, rc, known) {
             Some(b) => (b, true),
             None => {
-                self.prefetch_node(ii, rc, leaf2);
-                ((self.sphere_as(ii, n + 1, leaf1), self.sphere_as(ii, rc, leaf2)), false)
+                self.prefetch_node(ii, nv, rc, leaf2);
+                ((self.sphere_as_nv(ii, nv, n + 1, leaf1), self.sphere_as_nv(ii, nv, rc, leaf2)), false)
             }
         };
         // A node inside a refitted subtree took Eq. 11 from its final children when it was
         // refitted (`refit_subtree`), so it is skipped here. Median splits halve the counts,
         // so a node of fewer than exact_below/2 surfels is inside one; a subtree's own root
         // (≥ exact_below/2) may carry the Eq. 9 sphere of a claimed refit and is tightened.
-        if ii.naive.is_none() && self.params.eq11 && 2 * c >= self.params.exact_below {
+        if nv.is_none() && self.params.eq11 && 2 * c >= self.params.exact_below {
             // n was tested before the descent, so it is current; its centre is read only for
             // the paper's Eq. 11 (the re-centred form encloses the two child spheres).
-            let c = if self.params.recentre_eq11 { Vec3::NAN } else { self.sphere(ii, n).0 };
-            self.tighten(ii, n, c, s1, s2);
+            let c = if self.params.recentre_eq11 { Vec3::NAN } else { self.sphere_as_nv(ii, None, n, false).0 };
+            self.tighten_lazy(ii, n, c, s1, s2);
         }
         (s1, s2, compact)
     }
@@ -1362,8 +1377,8 @@ impl DeformTracer {
     /// Starts the load of node n's lazy state (its slot, or its surfel's for a leaf) so
     /// that it overlaps the load of its sibling's.
     #[inline(always)]
-    fn prefetch_node(&self, ii: &Instance, n: usize, leaf: bool) {
-        if ii.naive.is_some() {
+    fn prefetch_node(&self, ii: &Instance, nv: Option<&Topology>, n: usize, leaf: bool) {
+        if nv.is_some() {
             return;
         }
         if leaf {
@@ -1394,8 +1409,16 @@ impl DeformTracer {
     /// their stacks, so below the first complete node no slot is read at all (stop
     /// 68; the claim's load was a miss on every node of more than 64 surfels there).
     #[inline(always)]
-    fn compact_children(&self, ii: &Instance, n: usize, cnt: u32, rc: usize, known: bool) -> Option<((Vec3, f32), (Vec3, f32))> {
-        if ii.naive.is_some() {
+    fn compact_children(
+        &self,
+        ii: &Instance,
+        nv: Option<&Topology>,
+        n: usize,
+        cnt: u32,
+        rc: usize,
+        known: bool,
+    ) -> Option<((Vec3, f32), (Vec3, f32))> {
+        if nv.is_some() {
             return None;
         }
         let complete = known || cnt <= self.compact_max() || (cnt > REFIT_CLAIM_MIN && ii.nodes.slot[n].complete(self.frame));
@@ -1417,8 +1440,8 @@ impl DeformTracer {
     /// surfel slot's instead of following it: perf put a quarter of `iterate`'s samples on
     /// the row and the radius (stop 67).
     #[inline(always)]
-    fn prefetch_leaf(&self, ii: &Instance, n: usize) {
-        let (obj, s) = (&*ii.obj, self.topo(ii).surfel[n] as usize);
+    fn prefetch_leaf(&self, ii: &Instance, topo: &Topology, n: usize) {
+        let (obj, s) = (&*ii.obj, topo.surfel[n] as usize);
         prefetch_read_at(&ii.surf.slot, s);
         let row = s * obj.nk;
         prefetch_read_at(&obj.nbr, row);
@@ -1453,6 +1476,12 @@ impl DeformTracer {
         if ii.naive.is_some() || !self.params.eq11 {
             return;
         }
+        self.tighten_lazy(ii, n, c, s1, s2);
+    }
+
+    /// [`tighten`](Self::tighten) for a caller that checked that ii is lazy and Eq. 11 on.
+    #[inline]
+    fn tighten_lazy(&self, ii: &Instance, n: usize, c: Vec3, s1: (Vec3, f32), s2: (Vec3, f32)) {
         let slot = &ii.nodes.slot[n];
         let cur = f32::from_bits(slot.r.load(Relaxed));
         // No square root on the common path: the enclosing radius is at least
@@ -2024,7 +2053,7 @@ impl DeformTracer {
                 continue;
             }
             let (l, r) = (n + 1, topo.right_child(n));
-            let (s1, s2, _) = self.child_spheres(ii, n, topo.count[n], false);
+            let (s1, s2, _) = self.child_spheres(ii, ii.naive.as_ref(), n, topo.count[n], false);
             dc.sphere_tests += 2;
             dc.tests_at(topo.level[l], 2);
             ctr.add(Counter::node_tests, 2);
@@ -2236,8 +2265,33 @@ impl DeformTracer {
         stack: &mut Vec<(u32, u32, u8, u8, f32x8)>,
         tfar: f32x8,
     ) {
+        // One copy of the loop per kind of tree, so no node checks `ii.naive` again.
+        match &self.inst[k].naive {
+            Some(t) => self.closest_in_x8_nv(k, Some(t), rays, pk, mask, entry, best, skip, dc, ctr, stack, tfar),
+            None => self.closest_in_x8_nv(k, None, rays, pk, mask, entry, best, skip, dc, ctr, stack, tfar),
+        }
+    }
+
+    /// [`closest_in_x8`](Self::closest_in_x8) with `nv`, instance k's naive tree if any.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn closest_in_x8_nv(
+        &self,
+        k: usize,
+        nv: Option<&Topology>,
+        rays: &[Ray],
+        pk: &RayPacketX8,
+        mask: u8,
+        entry: f32x8,
+        best: &mut [Best; 8],
+        skip: &[(u32, u32); 8],
+        dc: &mut DeformCounters,
+        ctr: &mut Counters,
+        stack: &mut Vec<(u32, u32, u8, u8, f32x8)>,
+        tfar: f32x8,
+    ) {
         let ii = &self.inst[k];
-        let topo = self.topo(ii);
+        let topo = nv.unwrap_or(&ii.obj.tree.topo);
         let skipn: [u32; 8] = std::array::from_fn(|i| if skip[i].0 == k as u32 { skip[i].1 } else { u32::MAX });
         let any_skip = skipn.iter().any(|&s| s != u32::MAX);
         let skip8 = u32x8::from(skipn);
@@ -2260,7 +2314,7 @@ impl DeformTracer {
             }
             let n = n as usize;
             if leaf {
-                let (node, s) = (leaf_node(ii, n), topo.surfel[n] as usize);
+                let (node, s) = (if nv.is_some() { u32::MAX } else { n as u32 }, topo.surfel[n] as usize);
                 let (ds, hit, t, x) = self.ellipse_x8(k, s, pk, m, tfar, dc, ctr);
                 for i in lanes(hit) {
                     let x0 = Vec3::new(x[0][i], x[1][i], x[2][i]);
@@ -2271,22 +2325,22 @@ impl DeformTracer {
             }
             let (l, (r, c1, c2)) = (n + 1, Topology::split(n, c));
             let (leaf1, leaf2) = (c1 == 1, c2 == 1);
-            let (s1, s2, compact) = self.child_spheres(ii, n, c, known);
-            // The children's level; past 62 they share the counters' last level anyway
-            // (`LEVELS`).
-            let lv = lv.min(COMPLETE - 2) + 1;
+            let (s1, s2, compact) = self.child_spheres(ii, nv, n, c, known);
+            // The children's level; past LEVELS − 1 they share the counters' last level
+            // anyway.
+            let lv = lv.min(LEVELS as u8 - 2) + 1;
             let cnt = 2 * m.count_ones() as u64;
             dc.sphere_tests += cnt;
-            dc.tests_at(lv, cnt);
+            dc.tests_below(lv, cnt);
             ctr.add(Counter::node_tests, cnt);
             let (m1, e1) = pk.test(s1.0, s1.1, tb);
             let (m2, e2) = pk.test(s2.0, s2.1, tb);
             let (m1, m2) = (m1 & m, m2 & m);
             if leaf1 && m1 != 0 {
-                self.prefetch_leaf(ii, l);
+                self.prefetch_leaf(ii, topo, l);
             }
             if leaf2 && m2 != 0 {
-                self.prefetch_leaf(ii, r);
+                self.prefetch_leaf(ii, topo, r);
             }
             if compact {
                 // The far one of a hit inner child's two child balls (the near one shares
@@ -2362,106 +2416,136 @@ impl DeformTracer {
             if m == 0 {
                 continue;
             }
+            // One copy of the loop per kind of tree, so no node checks `ii.naive` again.
+            // (A const parameter rather than `nv` alone: each copy then has its own `expand`
+            // closure, inlined at its one call site.)
             let ii = &self.inst[k];
-            let topo = self.topo(ii);
-            if topo.right[0] == LEAF {
-                done |= self.leaf_x8(k, 0, rays, pk, m, tfar, dc, ctr);
+            done = match &ii.naive {
+                Some(t) => self.occluded_in_x8::<true>(k, t, rays, pk, valid, tfar, m, done, stack, dc, ctr),
+                None => self.occluded_in_x8::<false>(k, &ii.obj.tree.topo, rays, pk, valid, tfar, m, done, stack, dc, ctr),
+            };
+            if done == valid {
+                return done;
+            }
+        }
+        done
+    }
+
+    /// [`occluded_roots_x8`](Self::occluded_roots_x8) below the root of instance k (`topo`
+    /// its tree, its naive one if `NAIVE`) for the lanes `m`: returns `done` with the lanes
+    /// occluded there.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn occluded_in_x8<const NAIVE: bool>(
+        &self,
+        k: usize,
+        topo: &Topology,
+        rays: &[Ray],
+        pk: &RayPacketX8,
+        valid: u8,
+        tfar: f32x8,
+        m: u8,
+        mut done: u8,
+        stack: &mut Vec<(u32, u32, u8, u8)>,
+        dc: &mut DeformCounters,
+        ctr: &mut Counters,
+    ) -> u8 {
+        let ii = &self.inst[k];
+        let nv = if NAIVE { Some(topo) } else { None };
+        if topo.right[0] == LEAF {
+            return done | self.leaf_x8(k, 0, rays, pk, m, tfar, dc, ctr);
+        }
+        // Stack entries are (node, count, level | UNTESTED, lanes): a node whose sphere was
+        // tested already, together with its sibling, when both were current (one load of
+        // each and two independent tests, so the two misses overlap), or one still to test
+        // (the paper's shadow-ray order: the current child first, and the other updated
+        // only if the ray still needs it, §4.4).
+        // The count (n's kind and children, [`Topology::split`]) rides on the stack
+        // rather than costing a load per node.
+        // COMPLETE in the level byte as in `closest_in_x8` (only on tested entries: both
+        // children of a complete node are current, so they are tested together).
+        const UNTESTED: u8 = 0x80;
+        let expand = |stack: &mut Vec<(u32, u32, u8, u8)>, n: usize, c: u32, lv: u8, m: u8, dc: &mut DeformCounters, ctr: &mut Counters| {
+            let (l, (r, nl, nr)) = (n + 1, Topology::split(n, c));
+            let (leaf_l, leaf_r) = (nl == 1, nr == 1);
+            let known = lv & COMPLETE != 0;
+            // Levels past LEVELS − 1 share the counters' last level anyway.
+            let lv = (lv & !COMPLETE).min(LEVELS as u8 - 2);
+            // Each child's sphere if it is current (one stamp check and load each), both
+            // from the compact balls in a complete subtree (n is current: it was tested).
+            let (sl, sr, compact) = match self.compact_children(ii, nv, n, c, r, known) {
+                Some((a, b)) => (Some(a), Some(b), true),
+                None => {
+                    self.prefetch_node(ii, nv, r, leaf_r);
+                    let sl = self.current_sphere(ii, nv, l, leaf_l);
+                    let sr = if sl.is_some() || self.params.shadow_updated_first { self.current_sphere(ii, nv, r, leaf_r) } else { None };
+                    (sl, sr, false)
+                }
+            };
+            if let (Some((cl, rl)), Some((cr, rr))) = (sl, sr) {
+                let cnt = 2 * m.count_ones() as u64;
+                dc.sphere_tests += cnt;
+                dc.tests_below(lv + 1, cnt);
+                ctr.add(Counter::node_tests, cnt);
+                let (ml, mr) = (m & pk.test_any(cl, rl, tfar), m & pk.test_any(cr, rr, tfar));
+                if leaf_l && ml != 0 {
+                    self.prefetch_leaf(ii, topo, l);
+                }
+                if leaf_r && mr != 0 {
+                    self.prefetch_leaf(ii, topo, r);
+                }
+                let kc = if compact {
+                    // As in `closest_in_x8`: the far grandchild balls a level ahead.
+                    self.prefetch_far_ball(ii, l, nl, ml);
+                    self.prefetch_far_ball(ii, r, nr, mr);
+                    COMPLETE
+                } else {
+                    0
+                };
+                if mr != 0 {
+                    stack.push((r as u32, nr, (lv + 1) | kc, mr));
+                }
+                if ml != 0 {
+                    stack.push((l as u32, nl, (lv + 1) | kc, ml));
+                }
+            } else if !self.params.shadow_updated_first || sl.is_some() || sr.is_none() {
+                // §4.4: the current child first (`left_first`).
+                stack.push((r as u32, nr, (lv + 1) | UNTESTED, m));
+                stack.push((l as u32, nl, (lv + 1) | UNTESTED, m));
+            } else {
+                stack.push((l as u32, nl, (lv + 1) | UNTESTED, m));
+                stack.push((r as u32, nr, (lv + 1) | UNTESTED, m));
+            }
+        };
+        // The root (tested in `root_hits_x8`) as a tested entry, so `expand` has one call
+        // site and is inlined into the loop.
+        stack.clear();
+        stack.push((0, topo.count[0], 0, m));
+        while let Some((n, c, lv, m)) = stack.pop() {
+            let mut m = m & !done;
+            if m == 0 {
                 continue;
             }
-            // Stack entries are (node, count, level | UNTESTED, lanes): a node whose sphere was
-            // tested already, together with its sibling, when both were current (one load of
-            // each and two independent tests, so the two misses overlap), or one still to test
-            // (the paper's shadow-ray order: the current child first, and the other updated
-            // only if the ray still needs it, §4.4).
-            // The count (n's kind and children, [`Topology::split`]) rides on the stack
-            // rather than costing a load per node.
-            // COMPLETE in the level byte as in `closest_in_x8` (only on tested entries: both
-            // children of a complete node are current, so they are tested together).
-            const UNTESTED: u8 = 0x80;
-            let expand =
-                |stack: &mut Vec<(u32, u32, u8, u8)>, n: usize, c: u32, lv: u8, m: u8, dc: &mut DeformCounters, ctr: &mut Counters| {
-                    let (l, (r, nl, nr)) = (n + 1, Topology::split(n, c));
-                    let (leaf_l, leaf_r) = (nl == 1, nr == 1);
-                    let known = lv & COMPLETE != 0;
-                    // Levels past 62 share the counters' last level anyway (`LEVELS`).
-                    let lv = (lv & !COMPLETE).min(COMPLETE - 2);
-                    // Each child's sphere if it is current (one stamp check and load each), both
-                    // from the compact balls in a complete subtree (n is current: it was tested).
-                    let (sl, sr, compact) = match self.compact_children(ii, n, c, r, known) {
-                        Some((a, b)) => (Some(a), Some(b), true),
-                        None => {
-                            self.prefetch_node(ii, r, leaf_r);
-                            let sl = self.current_sphere(ii, l, leaf_l);
-                            let sr =
-                                if sl.is_some() || self.params.shadow_updated_first { self.current_sphere(ii, r, leaf_r) } else { None };
-                            (sl, sr, false)
-                        }
-                    };
-                    if let (Some((cl, rl)), Some((cr, rr))) = (sl, sr) {
-                        let cnt = 2 * m.count_ones() as u64;
-                        dc.sphere_tests += cnt;
-                        dc.tests_at(lv + 1, cnt);
-                        ctr.add(Counter::node_tests, cnt);
-                        let (ml, mr) = (m & pk.test_any(cl, rl, tfar), m & pk.test_any(cr, rr, tfar));
-                        if leaf_l && ml != 0 {
-                            self.prefetch_leaf(ii, l);
-                        }
-                        if leaf_r && mr != 0 {
-                            self.prefetch_leaf(ii, r);
-                        }
-                        let kc = if compact {
-                            // As in `closest_in_x8`: the far grandchild balls a level ahead.
-                            self.prefetch_far_ball(ii, l, nl, ml);
-                            self.prefetch_far_ball(ii, r, nr, mr);
-                            COMPLETE
-                        } else {
-                            0
-                        };
-                        if mr != 0 {
-                            stack.push((r as u32, nr, (lv + 1) | kc, mr));
-                        }
-                        if ml != 0 {
-                            stack.push((l as u32, nl, (lv + 1) | kc, ml));
-                        }
-                    } else if !self.params.shadow_updated_first || sl.is_some() || sr.is_none() {
-                        // §4.4: the current child first (`left_first`).
-                        stack.push((r as u32, nr, (lv + 1) | UNTESTED, m));
-                        stack.push((l as u32, nl, (lv + 1) | UNTESTED, m));
-                    } else {
-                        stack.push((l as u32, nl, (lv + 1) | UNTESTED, m));
-                        stack.push((r as u32, nr, (lv + 1) | UNTESTED, m));
-                    }
-                };
-            // The root (tested in `root_hits_x8`) as a tested entry, so `expand` has one call
-            // site and is inlined into the loop.
-            stack.clear();
-            stack.push((0, topo.count[0], 0, m));
-            while let Some((n, c, lv, m)) = stack.pop() {
-                let mut m = m & !done;
+            let n = n as usize;
+            let (untested, leaf, lv) = (lv & UNTESTED != 0, c == 1, lv & !UNTESTED);
+            if untested {
+                let (c, r) = self.sphere_as_nv(ii, nv, n, leaf);
+                let cnt = m.count_ones() as u64;
+                dc.sphere_tests += cnt;
+                dc.tests_below(lv, cnt);
+                ctr.add(Counter::node_tests, cnt);
+                m &= pk.test_any(c, r, tfar);
                 if m == 0 {
                     continue;
                 }
-                let n = n as usize;
-                let (untested, leaf, lv) = (lv & UNTESTED != 0, c == 1, lv & !UNTESTED);
-                if untested {
-                    let (c, r) = self.sphere_as(ii, n, leaf);
-                    let cnt = m.count_ones() as u64;
-                    dc.sphere_tests += cnt;
-                    dc.tests_at(lv, cnt);
-                    ctr.add(Counter::node_tests, cnt);
-                    m &= pk.test_any(c, r, tfar);
-                    if m == 0 {
-                        continue;
-                    }
+            }
+            if leaf {
+                done |= self.leaf_x8(k, n, rays, pk, m, tfar, dc, ctr);
+                if done == valid {
+                    return done;
                 }
-                if leaf {
-                    done |= self.leaf_x8(k, n, rays, pk, m, tfar, dc, ctr);
-                    if done == valid {
-                        return done;
-                    }
-                } else {
-                    expand(stack, n, c, lv, m, dc, ctr);
-                }
+            } else {
+                expand(stack, n, c, lv, m, dc, ctr);
             }
         }
         done
@@ -2714,7 +2798,7 @@ impl DeformTracer {
                 // The compact balls that traversals would read below n instead of slots: every
                 // ball of a complete subtree is a child of one of its current inner nodes.
                 let rc = topo.right_child(n);
-                let (b1, b2) = self.compact_children(ii, n, topo.count[n], rc, false)?;
+                let (b1, b2) = self.compact_children(ii, ii.naive.as_ref(), n, topo.count[n], rc, false)?;
                 [(n + 1, b1), (rc, b2)].into_iter().find_map(|(q, b)| {
                     outside(q, b)
                         .map(|(s, reach, r)| format!("instance {k} ball {q} (below complete {n}): surfel {s} reaches {reach}, radius {r}"))
