@@ -2314,7 +2314,7 @@ impl DeformTracer {
             }
             let n = n as usize;
             if leaf {
-                let (node, s) = (if nv.is_some() { u32::MAX } else { n as u32 }, topo.surfel[n] as usize);
+                let (node, s) = (leaf_node_of(nv.is_some(), n), topo.surfel[n] as usize);
                 let (ds, hit, t, x) = self.ellipse_x8(k, s, pk, m, tfar, dc, ctr);
                 for i in lanes(hit) {
                     let x0 = Vec3::new(x[0][i], x[1][i], x[2][i]);
@@ -2823,7 +2823,13 @@ fn leaf_surfel(ii: &Instance, n: usize) -> Option<usize> {
 /// The node a hit at leaf `n` reports (for the per-ray cache): none in a rebuilt tree.
 #[inline]
 fn leaf_node(ii: &Instance, n: usize) -> u32 {
-    if ii.naive.is_some() {
+    leaf_node_of(ii.naive.is_some(), n)
+}
+
+/// [`leaf_node`] for a traversal that knows whether it walks a naive (rebuilt) tree.
+#[inline(always)]
+fn leaf_node_of(naive: bool, n: usize) -> u32 {
+    if naive {
         u32::MAX
     } else {
         n as u32

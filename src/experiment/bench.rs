@@ -971,6 +971,18 @@ fn plan_options(a: &BenchArgs) -> Result<Plan> {
 /// sweep point's images, including those only some methods write (cost, LOD maps). Checked
 /// before the first render ([`crate::film::io::check_out_files`]), `scenes` the triangle
 /// scenes' names.
+/// The file name of one of a run's images in its output folder: `NAME-PART.png`, or
+/// `NAME-PART-KIND.png` when `kind` is not empty (a scene or sequence name, then a method's
+/// slug or the figure's name). The writers and the check of the outputs before the first
+/// render ([`output_names`]) take names from here, so the two lists cannot drift apart.
+pub(crate) fn image_name(name: &str, part: &str, kind: &str) -> String {
+    if kind.is_empty() {
+        format!("{name}-{part}.png")
+    } else {
+        format!("{name}-{part}-{kind}.png")
+    }
+}
+
 fn output_names(a: &BenchArgs, plan: &Plan, scenes: &[String]) -> Vec<String> {
     let mut names: Vec<String> = ["bench.json", "bench.md", "bench-time.png"].map(String::from).into();
     if let Some(sizes) = &plan.surfel_sizes {
@@ -979,9 +991,9 @@ fn output_names(a: &BenchArgs, plan: &Plan, scenes: &[String]) -> Vec<String> {
         for &(w, h) in sizes {
             let dir = if a.sizes.is_some() { format!("{w}x{h}/") } else { String::new() };
             for seq in &seqs {
-                names.push(format!("{dir}{seq}-frame-times.png"));
-                names.push(format!("{dir}{seq}-sphere-tests.png"));
-                names.extend(plan.specs.iter().map(|s| format!("{dir}{seq}-{}.png", s.slug())));
+                names.push(format!("{dir}{}", image_name(seq, "frame-times", "")));
+                names.push(format!("{dir}{}", image_name(seq, "sphere-tests", "")));
+                names.extend(plan.specs.iter().map(|s| format!("{dir}{}", image_name(seq, &s.slug(), ""))));
             }
         }
         return names;
@@ -992,10 +1004,10 @@ fn output_names(a: &BenchArgs, plan: &Plan, scenes: &[String]) -> Vec<String> {
     }
     for s in scenes {
         if let Some(r) = reference {
-            names.push(format!("{s}-reference-{}.png", r.slug()));
+            names.push(image_name(s, "reference", &r.slug()));
         }
         if !plan.sweeps.is_empty() {
-            names.push(format!("{s}-equal-time.png"));
+            names.push(image_name(s, "equal-time", ""));
         }
         let mut rows: Vec<(String, Method)> = plan.specs.iter().map(|m| (m.slug(), m.method)).collect();
         for sw in &plan.sweeps {
@@ -1006,13 +1018,13 @@ fn output_names(a: &BenchArgs, plan: &Plan, scenes: &[String]) -> Vec<String> {
             }
         }
         for (slug, m) in rows {
-            names.push(format!("{s}-{slug}.png"));
+            names.push(image_name(s, &slug, ""));
             if reference.is_some() {
-                names.push(format!("{s}-{slug}-flip.png"));
+                names.push(image_name(s, &slug, "flip"));
             }
-            names.push(format!("{s}-{slug}-cost.png"));
+            names.push(image_name(s, &slug, "cost"));
             if m == Method::Lod {
-                names.extend(["diff", "disparity-r", "disparity-t"].map(|k| format!("{s}-{slug}-{k}.png")));
+                names.extend(["diff", "disparity-r", "disparity-t"].map(|k| image_name(s, &slug, k)));
             }
         }
     }
@@ -1080,7 +1092,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             Some(r) => {
                 let (film, ..) = run_spec(scene, r, a.width, a.height, a.threads, 1, a.quiet)?;
                 if let Some(out) = &a.out {
-                    crate::film::io::write_png(&out.join(format!("{}-reference-{}.png", scene.name, r.slug())), &film)?;
+                    crate::film::io::write_png(&out.join(image_name(&scene.name, "reference", &r.slug())), &film)?;
                 }
                 Some(film)
             }
@@ -1111,7 +1123,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
             if let (Some(out), Some(v)) = (&a.out, &pixel_tests) {
                 // Where the cone tracer's work went: tests per pixel, log-scale heat map.
                 crate::film::io::write_rgb8_png(
-                    &out.join(format!("{}-{}-cost.png", scene.name, spec.slug())),
+                    &out.join(image_name(&scene.name, &spec.slug(), "cost")),
                     &crate::film::metrics::cost_map(v, film.width, film.height)?,
                 )?;
             }
@@ -1169,7 +1181,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                     });
                     if let Some(out) = &a.out {
                         crate::film::io::write_rgb8_png(
-                            &out.join(format!("{}-{}-diff.png", scene.name, spec.slug())),
+                            &out.join(image_name(&scene.name, &spec.slug(), "diff")),
                             &diff_image(&d, film.width, film.height),
                         )?;
                     }
@@ -1177,7 +1189,7 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                 if let (Some(out), Some(m)) = (&a.out, &maps) {
                     for k in ["disparity-r", "disparity-t"] {
                         crate::film::io::write_rgb8_png(
-                            &out.join(format!("{}-{}-{k}.png", scene.name, spec.slug())),
+                            &out.join(image_name(&scene.name, &spec.slug(), k)),
                             &crate::lod::maps_image(m, k),
                         )?;
                     }
@@ -1301,7 +1313,7 @@ fn finish_row(
                 });
             }
             if let Some(out) = out {
-                crate::film::io::write_rgb8_png(&out.join(format!("{}-{}-flip.png", scene.name, spec.slug())), &map)?;
+                crate::film::io::write_rgb8_png(&out.join(image_name(&scene.name, &spec.slug(), "flip")), &map)?;
             }
             // PSNR is +inf for an identical image; JSON has no infinity.
             (Some(x), y.is_finite().then_some(y), Some(z))
@@ -1310,7 +1322,7 @@ fn finish_row(
     };
     let image = match out {
         Some(out) => {
-            let name = format!("{}-{}.png", scene.name, spec.slug());
+            let name = image_name(&scene.name, &spec.slug(), "");
             crate::film::io::write_png(&out.join(&name), film)?;
             Some(name)
         }
@@ -1394,7 +1406,7 @@ fn write_outputs(out: &Path, report: &BenchReport) -> Result<()> {
             let ts = per.iter().flat_map(|c| c.1.iter().map(|p| p.0)).filter(|t| *t > 0.0);
             let (tl, th) = ts.fold((f64::INFINITY, 0.0f64), |(a, b), t| (a.min(t), b.max(t)));
             super::plot::line_chart_fmt(
-                &out.join(format!("{sc}-equal-time.png")),
+                &out.join(image_name(sc, "equal-time", "")),
                 &format!("{sc}: mean FLIP against the reference vs render time"),
                 "render time (s)",
                 "mean FLIP",

@@ -197,7 +197,7 @@ pub fn run(
             let tot: u64 = st.radius_ratios.iter().map(|r| r.sampled).sum();
             let image = match out {
                 Some(o) => {
-                    let name = format!("{}-{}.png", st.scene, spec.slug());
+                    let name = super::bench::image_name(&st.scene, &spec.slug(), "");
                     crate::film::io::write_png(&o.join(&name), &st.last_frame)?;
                     Some(name)
                 }
@@ -333,14 +333,14 @@ fn plots(out: &Path, rows: &[DeformRow]) -> Result<()> {
         rows.iter().zip(&names).map(|(r, n)| (n.clone(), f(r).into_iter().enumerate().map(|(i, y)| (i as f64, y)).collect())).collect()
     };
     plot::line_chart(
-        &out.join(format!("{seq}-frame-times.png")),
+        &out.join(super::bench::image_name(&seq, "frame-times", "")),
         &format!("{seq}: time per frame"),
         "frame",
         "ms",
         &series(&|r| r.per_frame_ms.clone()),
     )?;
     plot::line_chart(
-        &out.join(format!("{seq}-sphere-tests.png")),
+        &out.join(super::bench::image_name(&seq, "sphere-tests", "")),
         &format!("{seq}: bounding-volume tests per frame"),
         "frame",
         "tests",
