@@ -769,10 +769,15 @@ fn hit_colliders_x8(rays: &[Ray], colliders: &[Collider], tmax: &[f32; 8]) -> [O
     if colliders.is_empty() || rays.is_empty() {
         return out;
     }
-    let lane = |f: &dyn Fn(&Ray) -> f32, pad: f32| f32x8::from(std::array::from_fn::<f32, 8, _>(|i| rays.get(i).map_or(pad, f)));
-    let o = [lane(&|r| r.org.x, 0.0), lane(&|r| r.org.y, 0.0), lane(&|r| r.org.z, 0.0)];
-    let d = [lane(&|r| r.dir.x, 1.0), lane(&|r| r.dir.y, 1.0), lane(&|r| r.dir.z, 1.0)];
-    let tnear = lane(&|r| r.tnear, f32::INFINITY);
+    let (mut ol, mut dl, mut nl) = ([[0.0f32; 8]; 3], [[1.0f32; 8]; 3], [f32::INFINITY; 8]);
+    for (i, r) in rays.iter().enumerate().take(8) {
+        for a in 0..3 {
+            ol[a][i] = r.org[a];
+            dl[a][i] = r.dir[a];
+        }
+        nl[i] = r.tnear;
+    }
+    let (o, d, tnear) = (ol.map(f32x8::from), dl.map(f32x8::from), f32x8::from(nl));
     let inv = [f32x8::ONE / d[0], f32x8::ONE / d[1], f32x8::ONE / d[2]];
     let mut tb = f32x8::from(*tmax);
     let mut hit = f32x8::ZERO;
