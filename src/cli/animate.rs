@@ -932,7 +932,8 @@ fn shade_x8(tr: &DeformTracer, rays: &[Ray], slots: &[Option<u32>], sc: &ShadeCt
     c.add(Counter::rays_primary, rays.len() as u64);
     c.add(Counter::samples, rays.len() as u64);
     let hits = tr.intersect_x8(rays, slots, c, dc);
-    let coll = hit_colliders_x8(rays, sc.colliders, &std::array::from_fn(|i| hits.get(i).copied().flatten().map_or(f32::INFINITY, |h| h.t)));
+    let coll =
+        hit_colliders_x8(rays, sc.colliders, &std::array::from_fn(|i| hits.get(i).copied().flatten().map_or(f32::INFINITY, |h| h.t)));
     let mut out = [BACKGROUND; 8];
     let mut srays = [Ray::new(Vec3::ZERO, Vec3::X); 8];
     let mut lit = [(Vec3::ZERO, 0.0f32); 8];
@@ -1043,7 +1044,9 @@ mod tests {
             for i in 0..8 {
                 let want = rays.get(i).and_then(|r| hit_colliders(r, &cols, tmax[i]));
                 let same = match (got[i], want) {
-                    (Some((ta, na)), Some((tb, nb))) => ta.to_bits() == tb.to_bits() && na.to_array().map(f32::to_bits) == nb.to_array().map(f32::to_bits),
+                    (Some((ta, na)), Some((tb, nb))) => {
+                        ta.to_bits() == tb.to_bits() && na.to_array().map(f32::to_bits) == nb.to_array().map(f32::to_bits)
+                    }
                     (a, b) => a.is_none() && b.is_none(),
                 };
                 assert!(same, "round {round} lane {i}: packet {:?}, scalar {want:?}, ray {:?}", got[i], rays.get(i));

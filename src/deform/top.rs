@@ -18,15 +18,138 @@
 //!
 //! Layout: depth-first, the left child of node n at n + 1, the right one at `right[n]`
 //! ([`LEAF`] for leaves, whose instances are `order[first..first + count]`), struct of arrays.
+//!
+//! **Packet cone (stop 85).** A packet's rays mostly share an origin (primary rays: the eye)
+//! or an end (shadow rays: the light). [`PacketCone`] bounds all its active segments by one
+//! cone, and a scene of at most [`CONE_FLAT_MAX`] instances tests every instance sphere
+//! against it, eight spheres per f32x8 step ([`TopTree::candidates_cone`]), instead of
+//! walking the tree with eight-ray sphere tests and testing each candidate leaf's roots:
+//! 40 instances are five steps. The test is conservative (below), so the candidates still
+//! hold every instance a lane reaches and the images are unchanged; the caller then tests
+//! each candidate's root per lane as before. A packet without such a cone (a wide one, or
+//! one whose rays share neither end) walks the tree.
 
 use super::trace::enclosing_sphere as enclose;
 use super::tree::{sphere_test_1, RayPacketX8, LEAF};
 use crate::baseline::accel::Ray;
 use glam::Vec3;
-use wide::f32x8;
+use wide::{f32x8, u32x8};
 
 /// At most this many instances per leaf of the instance tree.
 pub const TOP_LEAF: usize = 4;
+
+/// Scenes of more than [`TOP_LEAF`] and at most this many instances find a packet's
+/// candidates with the [`PacketCone`] scan over all instance spheres (eight steps at most).
+pub const CONE_FLAT_MAX: usize = 64;
+
+/// A cone holding the segments of a packet's active rays, widened by `pad` (module docs).
+///
+/// Either the rays share their origin (bitwise): the apex is that origin and each ray's
+/// direction lies in the cone; or every ray has a finite end `o + d·tfar`: the apex is the
+/// first ray's end, `pad` the largest distance of another end from it, and each origin
+/// lies in the cone. A segment from a point of the cone to within `pad` of the apex lies
+/// within `pad` of the cone (the cone is convex, its half-angle below 90°), so a sphere of
+/// radius `r` no lane reaches misses the cone widened to `r + pad`.
+///
+/// The test of a sphere (centre c, radius r) against the cone (apex a, unit axis w,
+/// half-angle θ): with `v = c − a`, `d = v·w` and `e = ‖v × w‖` (no cancellation), the
+/// distance from c to the cone is at least `e cos θ − d sin θ` (equal to it while the
+/// nearest point is on the cone's side, below the distance to the apex otherwise); every
+/// point of the cone has `0 ≤ v·w ≤ far`. So the sphere is culled if `e cos θ − d sin θ`,
+/// `−d` or `d − far` exceeds `r + pad`, each side padded by a relative 1e-5 and θ by 1e-4
+/// against f32 rounding. A NaN anywhere makes the sphere a candidate.
+#[derive(Clone, Copy, Debug)]
+pub struct PacketCone {
+    apex: Vec3,
+    axis: Vec3,
+    cos: f32,
+    sin: f32,
+    far: f32,
+    pad: f32,
+}
+
+/// A packet cone is not used when wider than this (cos of the half-angle; 60°).
+const CONE_MIN_COS: f32 = 0.5;
+
+/// The lanes of `m` as an all-ones f32x8 mask.
+#[inline]
+fn lane_mask(m: u8) -> f32x8 {
+    let bit = u32x8::from([1, 2, 4, 8, 16, 32, 64, 128]);
+    wide::bytemuck::cast((u32x8::splat(m as u32) & bit).simd_eq(bit))
+}
+
+/// The largest of the lanes of `sel` (−∞ if none; a NaN lane gives NaN or is skipped, as
+/// `f32::max` does, so callers check the result and the axis for finiteness).
+#[inline]
+fn hmax(sel: f32x8, v: f32x8) -> f32 {
+    sel.select(v, f32x8::splat(f32::NEG_INFINITY)).to_array().into_iter().fold(f32::NEG_INFINITY, f32::max)
+}
+
+impl PacketCone {
+    /// The cone of the lanes `mask` of `pk`, each ray ending at its `tfar`; None if there is
+    /// none narrower than 120° (see the type's docs).
+    pub fn new(pk: &RayPacketX8, mask: u8, tfar: f32x8) -> Option<PacketCone> {
+        if mask == 0 {
+            return None;
+        }
+        // Eight lanes at once (this runs for every packet); the lanes outside `mask` are
+        // blended out of every reduction.
+        let (o, d, a, tnear) = pk.soa();
+        let sel = lane_mask(mask);
+        // A segment starting behind its origin leaves the cone.
+        if (sel & (!tnear.simd_ge(f32x8::ZERO) | tfar.is_nan())).any() {
+            return None;
+        }
+        let first = mask.trailing_zeros() as usize;
+        let at = |v: f32x8| v.as_array()[first];
+        let o0 = [at(o[0]), at(o[1]), at(o[2])];
+        let same = o[0].simd_eq(f32x8::splat(o0[0])) & o[1].simd_eq(f32x8::splat(o0[1])) & o[2].simd_eq(f32x8::splat(o0[2]));
+        // The cone's generators g (unit vectors from the apex) and how far it reaches.
+        let (apex, g, pad, far) = if (sel & !same).none() {
+            let len = a.sqrt();
+            let g = [d[0] / len, d[1] / len, d[2] / len];
+            (Vec3::from(o0), g, 0.0, hmax(sel, tfar * len))
+        } else {
+            let end = [o[0] + d[0] * tfar, o[1] + d[1] * tfar, o[2] + d[2] * tfar];
+            let apex = [at(end[0]), at(end[1]), at(end[2])];
+            let off = [end[0] - apex[0], end[1] - apex[1], end[2] - apex[2]];
+            let w = [o[0] - apex[0], o[1] - apex[1], o[2] - apex[2]];
+            let len = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
+            let pad = hmax(sel, (off[0] * off[0] + off[1] * off[1] + off[2] * off[2]).sqrt());
+            (Vec3::from(apex), [w[0] / len, w[1] / len, w[2] / len], pad, hmax(sel, len))
+        };
+        let axis = Vec3::new(
+            sel.select(g[0], f32x8::ZERO).reduce_add(),
+            sel.select(g[1], f32x8::ZERO).reduce_add(),
+            sel.select(g[2], f32x8::ZERO).reduce_add(),
+        )
+        .normalize();
+        let dots = g[0] * axis.x + g[1] * axis.y + g[2] * axis.z;
+        // The min over the lanes as −max(−x). `hmax` skips NaN lanes, but a NaN generator
+        // also sums into the axis, which must be finite.
+        let cos = -hmax(sel, -dots) - 1e-4;
+        if !(apex.is_finite() && axis.is_finite() && pad.is_finite() && cos >= CONE_MIN_COS && !far.is_nan()) {
+            return None;
+        }
+        let far = if far.is_finite() { far * (1.0 + 1e-5) } else { far };
+        Some(PacketCone { apex, axis, cos, sin: (1.0 - cos * cos).max(0.0).sqrt(), far, pad })
+    }
+
+    /// Mask of the spheres (x, y, z, r: eight lanes each) that may meet the cone.
+    #[inline]
+    pub fn test_x8(&self, x: f32x8, y: f32x8, z: f32x8, r: f32x8) -> u8 {
+        let (vx, vy, vz) = (x - self.apex.x, y - self.apex.y, z - self.apex.z);
+        let w = self.axis;
+        let d = vx * w.x + vy * w.y + vz * w.z;
+        let (cx, cy, cz) = (vy * w.z - vz * w.y, vz * w.x - vx * w.z, vx * w.y - vy * w.x);
+        let e = (cx * cx + cy * cy + cz * cz).sqrt();
+        let rr = r + self.pad + f32x8::splat(1e-5) * (d.abs() + e + r.abs() + self.pad);
+        let side = (e * self.cos - d * self.sin).simd_gt(rr);
+        let behind = (-d).simd_gt(rr);
+        let beyond = (d - self.far).simd_gt(rr);
+        !((side | behind | beyond).to_bitmask() as u8)
+    }
+}
 
 /// The instance tree (module docs).
 #[derive(Clone, Debug, Default)]
@@ -37,6 +160,10 @@ pub struct TopTree {
     first: Vec<u32>,
     count: Vec<u32>,
     order: Vec<u32>,
+    /// The instance spheres (x, y, z, r), padded to a multiple of 8 with spheres that never
+    /// meet a cone; empty unless the scene has more than [`TOP_LEAF`] and at most
+    /// [`CONE_FLAT_MAX`] instances.
+    flat: [Vec<f32>; 4],
 }
 
 impl TopTree {
@@ -52,7 +179,37 @@ impl TopTree {
         let mut idx: Vec<u32> = (0..spheres.len() as u32).collect();
         t.build_rec(spheres, &mut idx, 0);
         t.order = idx;
+        if spheres.len() <= CONE_FLAT_MAX {
+            let len = spheres.len().div_ceil(8) * 8;
+            for (a, v) in t.flat.iter_mut().enumerate() {
+                *v = (0..len)
+                    .map(|k| spheres.get(k).map_or(if a == 3 { f32::NEG_INFINITY } else { 0.0 }, |s| if a == 3 { s.1 } else { s.0[a] }))
+                    .collect();
+            }
+        }
         t
+    }
+
+    /// Whether [`Self::candidates_cone`] is available (the scene's instance count).
+    #[inline]
+    pub fn has_flat(&self) -> bool {
+        !self.flat[3].is_empty()
+    }
+
+    /// Every instance whose sphere may meet `cone`, in index order, passed to `visit`
+    /// (needs [`Self::has_flat`]). Returns the number of sphere tests: one per instance.
+    #[inline]
+    pub fn candidates_cone(&self, cone: &PacketCone, mut visit: impl FnMut(u32)) -> u64 {
+        let [x, y, z, r] = &self.flat;
+        for b in (0..r.len()).step_by(8) {
+            let ld = |v: &[f32]| f32x8::from(<[f32; 8]>::try_from(&v[b..b + 8]).unwrap());
+            let mut m = cone.test_x8(ld(x), ld(y), ld(z), ld(r));
+            while m != 0 {
+                visit((b + m.trailing_zeros() as usize) as u32);
+                m &= m - 1;
+            }
+        }
+        self.order.len() as u64
     }
 
     /// One leaf over `n` instances: every ray tests every root (the ablation).
@@ -281,6 +438,89 @@ mod tests {
         }
         assert!(total < 64 * 8 * 40 / 2, "the tree culls little: {total} candidates");
         assert!(differ <= 8, "packet and scalar candidates differ for {differ} of 512 rays");
+    }
+
+    /// The packet cone never culls an instance sphere that one of the packet's segments
+    /// meets: packets from one origin (unbounded, and with `tfar`), packets ending near one
+    /// point (shadow rays to a light, from spread-out origins), narrow and wide; and it does
+    /// cull.
+    #[test]
+    fn the_packet_cone_keeps_every_sphere_a_lane_meets() {
+        let mut g = Rng::new(7, 0, 0);
+        let (mut kept, mut met, mut tested, mut cones) = (0usize, 0usize, 0usize, 0usize);
+        for round in 0..3000 {
+            let s = spheres(40, round);
+            let t = TopTree::build(&s);
+            assert!(t.has_flat());
+            let spread = [0.002, 0.02, 0.2, 1.0][round as usize % 4];
+            let n = 1 + round as usize % 8;
+            let eye = Vec3::new(g.next() * 30.0 - 15.0, g.next() * 6.0, g.next() * 30.0 - 15.0);
+            let aim = Vec3::new(g.next() * 20.0 - 10.0, g.next() * 4.0, g.next() * 20.0 - 10.0) - eye;
+            let light = Vec3::new(g.next() * 10.0 - 5.0, 2.0 + g.next() * 3.0, g.next() * 10.0 - 5.0);
+            let rays: Vec<Ray> = (0..8)
+                .map(|_| {
+                    let j = Vec3::new(g.next() - 0.5, g.next() - 0.5, g.next() - 0.5) * spread;
+                    match round % 3 {
+                        0 => Ray::new(eye, aim.normalize() + j),
+                        1 => Ray::segment(eye, aim + j * aim.length(), 0.0, g.next() * 1.5),
+                        _ => {
+                            // From a point near the aim towards the light, ending a little off it
+                            // (as the shadow rays' offset start makes them).
+                            let p = eye + aim + j * 10.0;
+                            let off = Vec3::new(g.next() - 0.5, g.next() - 0.5, g.next() - 0.5) * 0.6;
+                            let to = light - p;
+                            Ray::segment(p + off, to / to.length(), 0.0, to.length())
+                        }
+                    }
+                })
+                .collect();
+            let pk = RayPacketX8::new(
+                &std::array::from_fn(|a| std::array::from_fn(|i| rays[i].org[a])),
+                &std::array::from_fn(|a| std::array::from_fn(|i| rays[i].dir[a])),
+                &std::array::from_fn(|i| rays[i].tnear),
+            );
+            let mask = ((1u32 << n) - 1) as u8;
+            let tfar = f32x8::from(std::array::from_fn::<f32, 8, _>(|i| rays[i].tfar));
+            let Some(cone) = PacketCone::new(&pk, mask, tfar) else { continue };
+            cones += 1;
+            let mut cand = Vec::new();
+            tested += t.candidates_cone(&cone, |k| cand.push(k)) as usize;
+            kept += cand.len();
+            for (k, &(c, r)) in s.iter().enumerate() {
+                for ray in &rays[..n] {
+                    if sphere_test_1(ray.org, ray.dir, c, r, ray.tnear, ray.tfar).is_some() {
+                        met += 1;
+                        assert!(cand.contains(&(k as u32)), "round {round}: sphere {k} met by {ray:?} but culled");
+                    }
+                }
+            }
+        }
+        assert!(cones > 2000, "only {cones} packets had a cone");
+        assert!(kept < tested / 3 && met > 0, "the cone culls little: {kept} of {tested} kept ({met} meetings)");
+    }
+
+    /// Rays starting behind their origin, or without a common origin or a finite end, get no
+    /// cone (the caller walks the tree).
+    #[test]
+    fn no_cone_for_packets_it_cannot_bound() {
+        let mk = |rays: &[Ray]| {
+            RayPacketX8::new(
+                &std::array::from_fn(|a| std::array::from_fn(|i| rays[i % rays.len()].org[a])),
+                &std::array::from_fn(|a| std::array::from_fn(|i| rays[i % rays.len()].dir[a])),
+                &std::array::from_fn(|i| rays[i % rays.len()].tnear),
+            )
+        };
+        let inf = f32x8::splat(f32::INFINITY);
+        let a = Ray::new(Vec3::ZERO, Vec3::X);
+        assert!(PacketCone::new(&mk(&[a]), 0xff, inf).is_some());
+        let behind = Ray::segment(Vec3::ZERO, Vec3::X, -1.0, 5.0);
+        assert!(PacketCone::new(&mk(&[behind]), 0xff, inf).is_none());
+        let b = Ray::new(Vec3::Y, Vec3::X);
+        assert!(PacketCone::new(&mk(&[a, b]), 0b11, inf).is_none(), "two origins, no finite end");
+        let wide = Ray::new(Vec3::ZERO, -Vec3::X);
+        assert!(PacketCone::new(&mk(&[a, wide]), 0b11, inf).is_none(), "opposite directions");
+        let nan = Ray::new(Vec3::ZERO, Vec3::new(f32::NAN, 0.0, 0.0));
+        assert!(PacketCone::new(&mk(&[nan]), 0xff, inf).is_none());
     }
 
     #[test]

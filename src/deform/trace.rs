@@ -178,7 +178,7 @@ use super::displace::{deform_point, DeformField, DeformedSurfel};
 use super::miniball::miniball;
 use super::mls::{clipped_by, ellipse_hit, mls_intersect_x8, MlsNbr, MlsOutcome, MlsParams, MAX_NBR};
 use super::object::{SurfelObject, NO_NBR};
-use super::top::TopTree;
+use super::top::{PacketCone, TopTree};
 use super::tree::{
     child_bound, leaf_sphere, max_reach_x8, sphere_test_1, sphere_test_spheres, RayPacketX8, Topology, LEAF, RADIUS_PAD, REACH_PAD,
 };
@@ -2233,7 +2233,7 @@ impl DeformTracer {
     ) {
         roots.clear();
         let mut root_tests = 0;
-        let top_tests = self.top.candidates_x8(pk, valid, tfar, |k, lm| {
+        let mut root = |k: u32, lm: u8| {
             let k = k as usize;
             let (c, r) = self.sphere(&self.inst[k], 0);
             root_tests += lm.count_ones() as u64;
@@ -2242,7 +2242,13 @@ impl DeformTracer {
             if m != 0 {
                 roots.push((hmin(e, m), k, m, e));
             }
-        });
+        };
+        // Few instances: the packet's cone against all their spheres, eight per step.
+        let cone = if self.top.has_flat() { PacketCone::new(pk, valid, tfar) } else { None };
+        let top_tests = match cone {
+            Some(cone) => self.top.candidates_cone(&cone, |k| root(k, valid)),
+            None => self.top.candidates_x8(pk, valid, tfar, root),
+        };
         dc.sphere_tests += top_tests + root_tests;
         dc.tests_at(0, root_tests);
         ctr.add(Counter::node_tests, top_tests + root_tests);

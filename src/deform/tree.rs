@@ -590,6 +590,12 @@ impl RayPacketX8 {
         self.tnear
     }
 
+    /// The lanes' origins, directions, squared direction lengths and `tnear`s.
+    #[inline]
+    pub fn soa(&self) -> (&[f32x8; 3], &[f32x8; 3], f32x8, f32x8) {
+        (&self.o, &self.d, self.a, self.tnear)
+    }
+
     /// Hit mask only, for any-hit (shadow) traversal: the segment [tnear, tfar] of each ray
     /// against the sphere by the distance from `c` to the segment's nearest point, with no
     /// square root and no entry distance. Conservative like [`Self::test`] (see
