@@ -686,10 +686,15 @@ fn render_frame(
                 rays.clear();
                 slots.clear();
                 idx.clear();
+                // The tile's directions in one pass (lanes past the image's edge unused).
+                let dirs = cam.pixel_center_dirs_x8(
+                    std::array::from_fn(|k| (x0 + k % 4).min(w - 1) as u32),
+                    std::array::from_fn(|k| (j0 + k / 4).min(j0 + nrows - 1) as u32),
+                );
                 for dy in 0..nrows {
                     for x in x0..(x0 + 4).min(w) {
                         let j = j0 + dy;
-                        rays.push(Ray::new(cam.eye, cam.pixel_center_dir(x as u32, j as u32)));
+                        rays.push(Ray::new(cam.eye, dirs[dy * 4 + x - x0]));
                         slots.push(Some((j * w + x) as u32));
                         idx.push(dy * w + x);
                     }
