@@ -1326,11 +1326,23 @@ pub fn point_w_x8(cone: &Cone, blk: &PointBlock, boxe: Option<&Eigen2>, clamp: f
     let qcut = f32x8::splat(Q_CUT);
     let (tmin, tmax) = (f32x8::splat(cone.tmin), f32x8::splat(cone.tmax));
     let kc = f32x8::splat(scale * (quant::COVER_MAX / 255.0));
-    // Lanes with q ≤ Q_CUT inside the cone's depth range, the tail past n masked off.
+    // Lanes with q ≤ Q_CUT inside the cone's depth range, the tail past n masked off. Only
+    // the last packet has a tail: its mask is taken once, and the others test one compare
+    // (the per-packet `(n - i).min(8)` shift was 8 of a packet's 75 instructions).
+    let tail = 0xFFu32 >> ((8 - n % 8) % 8);
+    let full = n - n % 8;
     let lanes = |q: f32x8, t: f32x8, i: usize| {
         let m = (q.simd_le(qcut) & t.simd_ge(tmin) & t.simd_le(tmax)).to_bitmask();
-        m & (0xFFu32 >> (8 - (n - i).min(8)))
+        if i < full {
+            m
+        } else {
+            m & tail
+        }
     };
+    // The three grid axes cut to one length (they have the same, [`PointBlock::from_grid`]),
+    // so a packet's three loads share one bounds test.
+    let len = blk.qx.len();
+    let (qx, qy, qz) = (&blk.qx[..len], &blk.qy[..len], &blk.qz[..len]);
     // The lanes' weights. The survivors are chosen on q and t alone (a zero weight, from a
     // normal at right angles to the cone or an empty cover, is kept and skipped by the
     // caller), so the mask and the output position do not wait for the weight's long chain.
@@ -1349,7 +1361,7 @@ pub fn point_w_x8(cone: &Cone, blk: &PointBlock, boxe: Option<&Eigen2>, clamp: f
             let (r1, r2) = (e.s2 * ia, e.s1 * ia);
             let (i1, i2, inv_area) = (f32x8::splat(r1 * r1), f32x8::splat(r2 * r2), f32x8::splat(ia));
             while i < n {
-                let g = (load(blk.qx, i), load(blk.qy, i), load(blk.qz, i));
+                let g = (load(qx, i), load(qy, i), load(qz, i));
                 let (a, b, t) = (lin(a0, av, g), lin(b0, bv, g), lin(blk.t0, blk.at, g));
                 let q = (a * a).mul_add(i1, b * b * i2);
                 let m = lanes(q, t, i);
@@ -1361,7 +1373,7 @@ pub fn point_w_x8(cone: &Cone, blk: &PointBlock, boxe: Option<&Eigen2>, clamp: f
         }
         None => {
             while i < n {
-                let g = (load(blk.qx, i), load(blk.qy, i), load(blk.qz, i));
+                let g = (load(qx, i), load(qy, i), load(qz, i));
                 let (x, y, t) = (lin(blk.x0, blk.ax, g), lin(blk.y0, blk.ay, g), lin(blk.t0, blk.at, g));
                 let (sa, sb, sc) = cone.sigma_x8(t.fast_max(zero));
                 let e = eigen_x8(sa, sb, sc, clamp, floor);
