@@ -1558,6 +1558,11 @@ pub struct Scratch {
     /// the nearest, above the index of the entry in `entries`); sifting moves 8 bytes and
     /// compares integers instead of 24-byte entries under `f32::total_cmp`.
     heap: BinaryHeap<u64>,
+    /// The nearest key pushed since the last pop, held beside the heap: a step's nearest
+    /// child is mostly the next entry popped (front-to-back descent), and then it never
+    /// enters the heap. `pop` returns the larger of it and the heap's top, so the order is
+    /// the heap's alone (keys are unique). 1.9 % of `complex`'s cone instructions saved.
+    next: Option<u64>,
     entries: Vec<Entry>,
     locals: Vec<Local>,
     eigs: Vec<Eigen2>,
@@ -1574,11 +1579,31 @@ impl Scratch {
         let ordered = if b >> 31 == 1 { !b } else { b | 0x8000_0000 };
         let i = self.entries.len() as u64;
         self.entries.push(e);
-        self.heap.push(((!ordered as u64) << 32) | i);
+        let key = ((!ordered as u64) << 32) | i;
+        match self.next {
+            Some(n) if n > key => self.heap.push(key),
+            Some(n) => {
+                self.heap.push(n);
+                self.next = Some(key);
+            }
+            None => self.next = Some(key),
+        }
     }
     #[inline]
     fn pop(&mut self) -> Option<Entry> {
-        self.heap.pop().map(|k| self.entries[(k & 0xFFFF_FFFF) as usize])
+        let k = match self.next {
+            Some(n) if self.heap.peek().is_none_or(|&h| n > h) => {
+                self.next = None;
+                n
+            }
+            _ => self.heap.pop()?,
+        };
+        Some(self.entries[(k & 0xFFFF_FFFF) as usize])
+    }
+    fn clear(&mut self) {
+        self.heap.clear();
+        self.next = None;
+        self.entries.clear();
     }
 }
 
@@ -1586,6 +1611,7 @@ impl Default for Scratch {
     fn default() -> Self {
         Scratch {
             heap: BinaryHeap::with_capacity(256),
+            next: None,
             entries: Vec::with_capacity(1024),
             locals: Vec::with_capacity(64),
             eigs: Vec::with_capacity(1024),
@@ -1713,8 +1739,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         if skip_plane && flat.slot[0] == own.plane {
             return;
         }
-        sc.heap.clear();
-        sc.entries.clear();
+        sc.clear();
         sc.locals.clear();
         sc.eigs.clear();
         let clamp = self.clamp;
