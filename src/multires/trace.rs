@@ -2195,8 +2195,10 @@ impl<'s, 'a> Tracer<'s, 'a> {
         // share one (a mesh of one material; on `complex` 71 % of the shaded hits reuse it),
         // and the seven decodes were 60 of a hit's 230 instructions.
         let mut last: Option<([u8; 7], [f32; 7])> = None;
-        for k in 0..hits.len {
-            let (j, t, w) = (start + hits.idx[k] as usize, hits.t[k], hits.w[k]);
+        // The three arrays zipped: no bounds test per hit.
+        let n = hits.len;
+        for ((&i, &t), &w) in hits.idx[..n].iter().zip(&hits.t[..n]).zip(&hits.w[..n]) {
+            let j = start + i as usize;
             // The sign is the point's facing: > 0 away from the cone's origin.
             let away = w > 0.0 && self.p.facing;
             let w = w.abs();
