@@ -665,6 +665,9 @@ pub struct BoxReach {
     pub org: Vec3,
     pub dir: Vec3,
     pub inv_dir: Vec3,
+    /// |dir|, taken once for the boxes' far sides: a square root per 8 boxes otherwise (0.5 %
+    /// of `complex`'s cone instructions).
+    pub dir_len: f32,
     /// Reach r(t) = cut·max(a + b·t, floor), t ≥ 0.
     pub a: f32,
     pub b: f32,
@@ -686,7 +689,7 @@ impl BoxReach {
     fn new(org: Vec3, dir: Vec3, a: f32, b: f32, floor: f32, tmin: f32, tmax: f32) -> Self {
         // Zero components get a huge finite inverse: (lo − o)·inv stays ±huge or 0, never NaN.
         let inv = |x: f32| if x.abs() > 1e-30 { 1.0 / x } else { 1e30f32.copysign(x) };
-        BoxReach { org, dir, inv_dir: Vec3::new(inv(dir.x), inv(dir.y), inv(dir.z)), a, b, floor, tmin, tmax }
+        BoxReach { org, dir, inv_dir: Vec3::new(inv(dir.x), inv(dir.y), inv(dir.z)), dir_len: dir.length(), a, b, floor, tmin, tmax }
     }
 }
 
@@ -709,7 +712,7 @@ pub fn box_test_1(rc: &BoxReach, b: &Bounds, l: usize) -> Option<f32> {
         return None;
     }
     let c = Vec3::new(b.c[0][l], b.c[1][l], b.c[2][l]);
-    let t_far = ((c - rc.org).dot(rc.dir) + r * rc.dir.length()).max(0.0);
+    let t_far = ((c - rc.org).dot(rc.dir) + r * rc.dir_len).max(0.0);
     let m = (rc.a + rc.b * t_far).max(rc.floor);
     let (mut tn, mut tf) = (rc.tmin.max(0.0), rc.tmax);
     for k in 0..3 {
@@ -730,7 +733,7 @@ pub fn boxes_x8(rc: &BoxReach, b: &Bounds, f: usize) -> (u32, [f32; 8]) {
     let ld = |v: &[f32]| f32x8::from(<[f32; 8]>::try_from(&v[f..f + 8]).expect("8 volumes"));
     let sp = f32x8::splat;
     let (cx, cy, cz, r) = (ld(b.c[0]) - sp(rc.org.x), ld(b.c[1]) - sp(rc.org.y), ld(b.c[2]) - sp(rc.org.z), ld(b.c[3]));
-    let t_far = (cx.mul_add(sp(rc.dir.x), cy.mul_add(sp(rc.dir.y), cz * sp(rc.dir.z))) + r * sp(rc.dir.length())).fast_max(sp(0.0));
+    let t_far = (cx.mul_add(sp(rc.dir.x), cy.mul_add(sp(rc.dir.y), cz * sp(rc.dir.z))) + r * sp(rc.dir_len)).fast_max(sp(0.0));
     let m = t_far.mul_add(sp(rc.b), sp(rc.a)).fast_max(sp(rc.floor));
     let (mut tn, mut tf) = (sp(rc.tmin.max(0.0)), sp(rc.tmax));
     for k in 0..3 {
