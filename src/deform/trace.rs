@@ -64,7 +64,9 @@
 //! Instances of the same object share its precomputed data (§6). A ray finds the instances
 //! along it in a sphere tree over their root spheres, rebuilt in `begin_frame` (not in the
 //! paper: [`super::top`]; `TraceParams::instance_tree = false` tests every root, the
-//! candidates' roots 8 per step with the f32x8 sphere kernel).
+//! candidates' roots 8 per step with the f32x8 sphere kernel). A packet in a scene of 5–64
+//! instances instead bounds its rays by one cone and tests all instance spheres against it,
+//! eight per step ([`super::top::PacketCone`], stop 85).
 //!
 //! **Packets (the user's design card: sphere tests for several rays per SIMD step).**
 //! `intersect_x8` / `occluded_x8` trace up to eight rays together (`lodtrace animate` uses

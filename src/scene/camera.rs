@@ -114,7 +114,7 @@ impl CameraFrame {
     pub fn pixel_center_dir(&self, i: u32, j: u32) -> Vec3 {
         self.dir_at(i as f32 + 0.5, j as f32 + 0.5)
     }
-    /// [`pixel_center_dir`](Self::pixel_center_dir) of eight pixels (i[k], j[k]) in one
+    /// [`pixel_center_dir`](Self::pixel_center_dir) of eight pixels (`i[k]`, `j[k]`) in one
     /// f32x8 pass, bit for bit (the same IEEE operations in the same order as glam's). A
     /// packet tracer's tile of rays takes three divisions and a square root per ray, whose
     /// latency the scalar loop mostly waited on.
