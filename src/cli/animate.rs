@@ -1008,11 +1008,8 @@ mod tests {
     /// planes and boxes, partial packets, and per-lane `tmax` including −∞ (a lane not asked).
     #[test]
     fn packet_collider_test_is_the_scalar_one_per_lane() {
-        let mut seed = 99u64;
-        let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (seed >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut g = crate::core::rng::Sampler::new(99, 0, 0);
+        let mut rnd = || g.next();
         let mut cols = Collider::hollow_box(Vec3::new(-1.5, 0.0, -1.5), Vec3::new(1.5, 4.0, 1.5), true);
         for _ in 0..6 {
             let lo = Vec3::new(rnd() * 2.0 - 1.0, rnd(), rnd() * 2.0 - 1.0);
