@@ -27,7 +27,9 @@
 //! 40 instances are five steps. The test is conservative (below), so the candidates still
 //! hold every instance a lane reaches and the images are unchanged; the caller then tests
 //! each candidate's root per lane as before. A packet without such a cone (a wide one, or
-//! one whose rays share neither end) walks the tree.
+//! one whose rays share neither end) walks the tree. A cone test counts as one sphere test
+//! per instance (the tree's tests count one per active lane), so such scenes report fewer
+//! bounding-volume tests than before stop 85.
 
 use super::trace::enclosing_sphere as enclose;
 use super::tree::{sphere_test_1, RayPacketX8, LEAF};
