@@ -2196,7 +2196,11 @@ impl DeformTracer {
             let pk = packet(rays, active);
             self.root_hits_x8(&pk, active, best_t(&best), dc, ctr, &mut sc.roots);
             for &(_, k, m, e) in &sc.roots {
-                self.closest_in_x8(k, rays, &pk, m, e, &mut best, &skip, dc, ctr, &mut sc.stack, tfar);
+                // One copy of the loop per kind of tree, so no node checks `ii.naive` again.
+                match &self.inst[k].naive {
+                    Some(t) => self.closest_in_x8(k, Some(t), rays, &pk, m, e, &mut best, &skip, dc, ctr, &mut sc.stack, tfar),
+                    None => self.closest_in_x8(k, None, rays, &pk, m, e, &mut best, &skip, dc, ctr, &mut sc.stack, tfar),
+                }
             }
             let mut again = 0u8;
             for i in lanes(active) {
@@ -2257,33 +2261,12 @@ impl DeformTracer {
         roots.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     }
 
-    /// Packet form of [`closest_in`](Self::closest_in) from the root of instance `k`.
-    #[allow(clippy::too_many_arguments)]
-    fn closest_in_x8(
-        &self,
-        k: usize,
-        rays: &[Ray],
-        pk: &RayPacketX8,
-        mask: u8,
-        entry: f32x8,
-        best: &mut [Best; 8],
-        skip: &[(u32, u32); 8],
-        dc: &mut DeformCounters,
-        ctr: &mut Counters,
-        stack: &mut Vec<(u32, u32, u8, u8, f32x8)>,
-        tfar: f32x8,
-    ) {
-        // One copy of the loop per kind of tree, so no node checks `ii.naive` again.
-        match &self.inst[k].naive {
-            Some(t) => self.closest_in_x8_nv(k, Some(t), rays, pk, mask, entry, best, skip, dc, ctr, stack, tfar),
-            None => self.closest_in_x8_nv(k, None, rays, pk, mask, entry, best, skip, dc, ctr, stack, tfar),
-        }
-    }
-
-    /// [`closest_in_x8`](Self::closest_in_x8) with `nv`, instance k's naive tree if any.
+    /// Packet form of [`closest_in`](Self::closest_in) from the root of instance `k`; `nv`
+    /// is instance k's naive tree if any (the caller passes `Some`/`None` literally, so each
+    /// kind of tree gets its own inlined copy of the loop).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn closest_in_x8_nv(
+    fn closest_in_x8(
         &self,
         k: usize,
         nv: Option<&Topology>,
