@@ -1592,22 +1592,25 @@ fn shape_matching_energy_stays_bounded() {
     }
 }
 
-/// The cache gate (`TraceParams::cache_gate`, stop 70). Under front-to-back descent a frame
-/// whose lookups (at least 256) hit less than the gate's share closes the cache: the next
-/// frames look nothing up except the probes every `CACHE_PROBE` frames, and a probe that
-/// hits enough reopens it. A cache whose lookups hit (the same frame again) stays open;
+/// The cache gate (`TraceParams::cache_gate`, stops 70 and 86). Under front-to-back descent
+/// a frame whose lookups (at least 256) hit less than the gate's share closes the cache, and
+/// so does a frame without lookups, every `CACHE_PROBE` frames, that takes no more than 5 %
+/// more sphere and leaf tests than the frame with them before it: the lookups saved nothing.
+/// A closed cache looks nothing up except on the probes every `CACHE_PROBE` frames, and a
+/// probe that hits enough and saves 5 % of the tests against the frame before reopens it.
 /// `cache_gate = 0` and the unordered descent look up every frame. The hits equal `lazy`'s
-/// throughout.
+/// throughout. A still scene's lookups all hit, and front to back they save nothing: its
+/// cache closes at the first probe.
 #[test]
 fn cache_gate_closes_on_misses_and_probes() {
     use lodtrace::deform::trace::CACHE_PROBE;
     let opts = SequenceOptions { detail: 0.05, ..Default::default() };
     let mut seq = Sequence::builtin("elastic-balls", &opts).unwrap();
-    let n = 2 * CACHE_PROBE as usize + 2;
+    let n = 3 * CACHE_PROBE as usize + 2;
     let rec = seq.record(n as u32).unwrap();
     let (w, h) = (64, 48);
-    // (lookups, hits) per frame.
-    let run = |params: TraceParams, still: bool| -> Vec<(u64, u64)> {
+    // (lookups, hits, sphere and leaf tests) per frame.
+    let run = |params: TraceParams, still: bool| -> Vec<(u64, u64, u64)> {
         let mut plain = DeformTracer::new(&seq.scene, UpdateMode::Lazy, params.clone()).unwrap();
         let mut tr = DeformTracer::new(&seq.scene, UpdateMode::LazyCache, params).unwrap();
         tr.set_cache_slots((w * h) as usize);
@@ -1620,35 +1623,50 @@ fn cache_gate_closes_on_misses_and_probes() {
                 let img = render(&tr, &seq.camera, w, h, &mut dc);
                 same_hits(&render(&plain, &seq.camera, w, h, &mut DeformCounters::default()), &img).unwrap();
                 tr.end_frame(0.0, &dc);
-                (dc.cache_lookups, dc.cache_hits)
+                (dc.cache_lookups, dc.cache_hits, dc.sphere_tests + dc.leaf_tests)
             })
             .collect()
     };
     let gate = TraceParams::default().cache_gate;
     assert!(gate > 0.0);
+    // The gate's rule, replayed on the counters: the frames it looks up in, and how often
+    // it closed.
+    let replay = |r: &[(u64, u64, u64)]| -> u32 {
+        // The tracer counts frames from 1: frame index f is the tracer's frame f + 1.
+        let probe = |f: usize| (f + 1).is_multiple_of(CACHE_PROBE as usize);
+        let saves = |with: u64, without: u64| (with as f64) < 0.95 * without as f64;
+        let (mut open, mut prev, mut closed) = (true, None::<(u64, bool, u64)>, 0);
+        for (f, &(l, hits, work)) in r.iter().enumerate() {
+            let look = if open { !(probe(f) && prev.is_some()) } else { probe(f) };
+            if f > 0 {
+                assert_eq!(l > 0, look, "frame {f}: {r:?}");
+            }
+            let (enough, hit) = (l >= 256, hits as f64 >= gate as f64 * l as f64);
+            let was = open;
+            match (open, look, prev) {
+                (true, true, _) if enough => open = hit,
+                (true, false, Some((pw, true, pl))) if pl >= 256 => open = saves(pw, work),
+                (false, true, Some((pw, false, _))) if enough => open = hit && saves(work, pw),
+                _ => {}
+            }
+            closed += (was && !open) as u32;
+            prev = Some((work, look, l));
+        }
+        closed
+    };
     let moving = run(TraceParams::default(), false);
     eprintln!("moving: {moving:?}");
-    // The tracer counts frames from 1: frame index f is the tracer's frame f + 1.
-    let probe = |f: usize| (f + 1).is_multiple_of(CACHE_PROBE as usize);
-    let mut open = true;
-    let mut closed = 0;
-    for (f, &(l, hits)) in moving.iter().enumerate() {
-        if f > 0 {
-            assert_eq!(l > 0, open || probe(f), "frame {f}: {moving:?}");
-        }
-        if l >= 256 {
-            open = hits as f64 >= gate as f64 * l as f64;
-            closed += !open as u32;
-        }
-    }
-    assert!(closed > 0, "the moving balls' cache never closed: {moving:?}");
-    for (what, params, still) in [
-        ("still", TraceParams::default(), true),
-        ("gate 0", TraceParams { cache_gate: 0.0, ..TraceParams::default() }, false),
-        ("unordered", TraceParams { ordered: false, ..TraceParams::default() }, false),
+    assert!(replay(&moving) > 0, "the moving balls' cache never closed: {moving:?}");
+    let still = run(TraceParams::default(), true);
+    eprintln!("still: {still:?}");
+    assert!(still[1..].iter().filter(|r| r.0 > 0).all(|r| r.1 == r.0), "a still frame's lookups all hit: {still:?}");
+    assert!(replay(&still) > 0, "the still cache saved tests front to back: {still:?}");
+    for (what, params) in [
+        ("gate 0", TraceParams { cache_gate: 0.0, ..TraceParams::default() }),
+        ("unordered", TraceParams { ordered: false, ..TraceParams::default() }),
     ] {
-        let r = run(params, still);
-        assert!(r[1..].iter().all(|&(l, _)| l >= 256), "{what}: {r:?}");
+        let r = run(params, false);
+        assert!(r[1..].iter().all(|&(l, _, _)| l >= 256), "{what}: {r:?}");
     }
 }
 

@@ -26,9 +26,17 @@
 //!   there, and under this motion its leaves hit on 0.7–7 % of lookups; its slot loads and
 //!   stores, prefetches and scalar searches made `lazy-cache` 2–4 % slower than `lazy` on
 //!   all four sequences (stop 70 bench). Gated, `elastic-balls` lazy-cache runs 3.4 %
-//!   faster, as fast as `lazy`. `cache_gate = 0` looks up every frame, as the paper does;
-//!   the unordered descent (the paper's, where the cache's bound pays) is never gated.
-//!   Same images either way.
+//!   faster, as fast as `lazy`. Hits alone do not make the cache pay: `bend`'s leaves hit on
+//!   a third of the lookups over its first swing, the gate stayed open, and the lookups cut
+//!   no sphere or leaf test (3.979 M a frame against `lazy`'s 3.978 M) while costing 4.9 %
+//!   of `render_frame`'s instructions. So since stop 86 an open cache also skips its lookups
+//!   every [`CACHE_PROBE`] frames (keeping its slots), and closes unless the frame before,
+//!   with lookups, took [`CACHE_GATE_SAVING`] fewer sphere and leaf tests than this one
+//!   without; a closed cache's probe reopens it only if it hits often enough and takes that
+//!   many fewer tests than the frame before it. (A still frame repeated, every lookup a hit:
+//!   3.5 % fewer tests, not enough.) `cache_gate = 0` looks up every frame, as the paper
+//!   does; the unordered descent (the paper's, where the cache's bound pays) is never
+//!   gated. Same images either way.
 //!
 //! - `Auto` (not in the paper; the heuristic its §6 asks for): per frame `Naive` or `Lazy`,
 //!   whichever cost less when last tried ([`AutoPick`]; the caller reports frame times with
@@ -346,9 +354,11 @@ pub struct TraceParams {
     pub clip_early: bool,
     /// Per-ray cache (LazyCache) under front-to-back traversal (`ordered`): the cache is
     /// looked up only while at least this share of its lookups hit (checked every frame it
-    /// runs, and on a probe every [`CACHE_PROBE`] frames while it rests); 0 = every frame,
-    /// as in the paper. Not in the paper: front-to-back descent finds the near hit that a
-    /// cached node would bound the ray with by itself, so a cache that mostly misses is pure
+    /// runs, and on a probe every [`CACHE_PROBE`] frames while it rests) and its lookups
+    /// save 5 % of the sphere and leaf tests against an adjacent frame without them
+    /// (checked every [`CACHE_PROBE`] frames); 0 = every frame, as in the paper. Not in the
+    /// paper: front-to-back descent finds the near hit that a cached node would bound the
+    /// ray with by itself, so a cache that misses, or hits without saving tests, is pure
     /// cost (module docs, "Cache gate"). The unordered descent always runs it.
     pub cache_gate: f32,
 }
@@ -424,6 +434,11 @@ pub const CACHE_PROBE: u32 = 8;
 /// A frame's lookups decide the cache gate only if there are at least this many (a few rays
 /// on the object say nothing about the cache; the gate then stays as it was).
 const CACHE_GATE_MIN_LOOKUPS: u64 = 256;
+
+/// The share of a frame's sphere and leaf tests that its cache lookups must save, against
+/// an adjacent frame without them, for the gate to keep or open the cache
+/// ([`TraceParams::cache_gate`]).
+const CACHE_GATE_SAVING: f64 = 0.05;
 
 /// Upper limit of [`TraceParams::cache_up`] (deeper than any tree: the root is cached).
 pub const MAX_CACHE_UP: u32 = 64;
@@ -893,10 +908,13 @@ pub struct DeformTracer {
     /// `UpdateMode::Auto`'s state.
     auto: AutoPick,
     /// The per-ray cache's gate ([`TraceParams::cache_gate`]): on while its lookups hit
-    /// often enough; `look` and `keep`: this frame looks the slots up, stores into them.
+    /// often enough and save work; `look` and `keep`: this frame looks the slots up, stores
+    /// into them; `gate_prev`: the last reported frame's sphere and leaf tests, whether it
+    /// looked up, and its lookups (for the probes' comparison).
     cache_on: bool,
     cache_look: bool,
     cache_keep: bool,
+    gate_prev: Option<(u64, bool, u64)>,
 }
 
 impl DeformTracer {
@@ -935,6 +953,7 @@ impl DeformTracer {
             cache_on: true,
             cache_look: mode == UpdateMode::LazyCache,
             cache_keep: mode == UpdateMode::LazyCache,
+            gate_prev: None,
         })
     }
 
@@ -962,8 +981,26 @@ impl DeformTracer {
         if self.mode == UpdateMode::Auto {
             self.auto.record(seconds);
         }
-        if self.cache_gated() && self.cache_look && dc.cache_lookups >= CACHE_GATE_MIN_LOOKUPS {
-            self.cache_on = dc.cache_hits as f64 >= self.params.cache_gate as f64 * dc.cache_lookups as f64;
+        if self.cache_gated() {
+            let work = dc.sphere_tests + dc.leaf_tests;
+            // Lookups pay when a frame with them takes CACHE_GATE_SAVING fewer tests than
+            // the frame before or after without them (the probes; adjacent frames differ by
+            // a frame's motion, 1–2 % of the tests on the built-in sequences).
+            let saves = |with: u64, without: u64| (with as f64) < (1.0 - CACHE_GATE_SAVING) * without as f64;
+            let enough = dc.cache_lookups >= CACHE_GATE_MIN_LOOKUPS;
+            let hit = dc.cache_hits as f64 >= self.params.cache_gate as f64 * dc.cache_lookups as f64;
+            match (self.cache_on, self.cache_look, self.gate_prev) {
+                // Open: a frame whose lookups miss too often closes it.
+                (true, true, _) if enough => self.cache_on = hit,
+                // Open, a frame without lookups after one with them: it stays open only if
+                // the lookups saved tests.
+                (true, false, Some((w, true, l))) if l >= CACHE_GATE_MIN_LOOKUPS => self.cache_on = saves(w, work),
+                // Closed, a probe after a frame without lookups: it opens if the lookups hit
+                // often enough and saved tests.
+                (false, true, Some((w, false, _))) if enough => self.cache_on = hit && saves(work, w),
+                _ => {}
+            }
+            self.gate_prev = Some((work, self.cache_look, dc.cache_lookups));
         }
     }
 
@@ -994,9 +1031,12 @@ impl DeformTracer {
         if self.mode == UpdateMode::LazyCache {
             // A resting cache is probed every CACHE_PROBE frames, with the slots its
             // previous frame stored.
-            let on = self.cache_on || !self.cache_gated();
-            self.cache_look = on || frame.is_multiple_of(CACHE_PROBE);
-            self.cache_keep = on || frame.is_multiple_of(CACHE_PROBE) || frame.wrapping_add(1).is_multiple_of(CACHE_PROBE);
+            // An open one skips its lookups every CACHE_PROBE frames (once frames are
+            // reported), keeping its slots, to measure what they save.
+            let (gated, probe) = (self.cache_gated(), frame.is_multiple_of(CACHE_PROBE));
+            let on = self.cache_on || !gated;
+            self.cache_look = if on { !(gated && probe && self.gate_prev.is_some()) } else { probe };
+            self.cache_keep = on || probe || frame.wrapping_add(1).is_multiple_of(CACHE_PROBE);
         }
         for (i, f) in self.inst.iter_mut().zip(fields) {
             i.field = f;
