@@ -1295,6 +1295,11 @@ impl DeformTracer {
                 }
             }
             let perm = &topo.perm[s0..s0 + cnt];
+            // The used lengths as slices, whose bounds stay in registers across the atomic
+            // stores (as the node buffers' below).
+            let n8 = cnt + REACH_PAD;
+            let (x, y, z, r) = (&mut x[..n8], &mut y[..n8], &mut z[..n8], &mut r[..n8]);
+            let (slot, obj, field) = (&ii.surf.slot[..], &*ii.obj, &ii.field);
             // Eight surfels at a time: those not yet current are deformed (Eq. 1) one by
             // one, then their normals and leaf balls computed in one f32x8 pass.
             let mut def = [DeformedSurfel { p: Vec3::ZERO, u: Vec3::ZERO, v: Vec3::ZERO, stretch: 0.0 }; 8];
@@ -1304,15 +1309,15 @@ impl DeformTracer {
                 let mut m = 0;
                 for (j, &s) in chunk.iter().enumerate() {
                     if let Some(&a) = perm.get(base + j + PREFETCH_AHEAD) {
-                        prefetch_at(&ii.surf.slot, a as usize);
-                        prefetch_surfel_inputs(&ii.obj, a as usize);
+                        prefetch_at(slot, a as usize);
+                        prefetch_surfel_inputs(obj, a as usize);
                     }
                     let s = s as usize;
-                    if ii.surf.slot[s].stamp.load(Acquire) == self.frame {
+                    if slot[s].stamp.load(Acquire) == self.frame {
                         let (c, rr) = load_surfel_ball(&ii.surf, s);
                         (x[base + j], y[base + j], z[base + j], r[base + j]) = (c.x, c.y, c.z, rr);
                     } else {
-                        def[m] = deform_surfel(&ii.obj, &ii.field, s);
+                        def[m] = deform_surfel(obj, field, s);
                         todo[m] = base + j;
                         m += 1;
                     }
@@ -1327,52 +1332,65 @@ impl DeformTracer {
                     }
                 }
             }
-            // Each node's entry is written before its parent reads it (below): grow only.
+            // Each inner node's entry is written before its parent reads it (below): grow
+            // only. A leaf has no entry: its parent reads its ball from the arrays above.
             let m = 2 * cnt - 1;
             if lo.len() < m {
                 lo.resize(m, Vec3A::ZERO);
                 hi.resize(m, Vec3A::ZERO);
                 sph.resize(m, (Vec3::ZERO, 0.0));
             }
+            // The buffers and the subtree's topology as slices of their used lengths, indexed
+            // by q − n: their bounds stay in registers across the atomic stores below.
+            let (lo, hi, sph) = (&mut lo[..m], &mut hi[..m], &mut sph[..m]);
+            let (x, y, z, r) = (&*x, &*y, &*z, &*r);
+            let (starts, counts) = (&topo.start[n..n + m], &topo.count[n..n + m]);
+            let (balls, slots) = (&ii.ball[n..n + m], &ii.nodes.slot[n..n + m]);
+            let ball_at = |a: usize| (Vec3::new(x[a], y[a], z[a]), r[a]);
             // Pre-order: a node's descendants follow it, so descending indices visit every
             // child before its parent.
-            for q in (n..n + m).rev() {
-                if q >= n + PREFETCH_AHEAD {
-                    prefetch_at(&ii.nodes.slot, q - PREFETCH_AHEAD);
-                    prefetch_at(&ii.ball, q - PREFETCH_AHEAD);
+            for i in (0..m).rev() {
+                if i >= PREFETCH_AHEAD {
+                    prefetch_at(slots, i - PREFETCH_AHEAD);
+                    prefetch_at(balls, i - PREFETCH_AHEAD);
                 }
-                let (a, k) = (topo.start[q] as usize - s0, topo.count[q] as usize);
-                let b = if topo.right[q] == LEAF {
-                    let c = Vec3::new(x[a], y[a], z[a]);
-                    (lo[q - n], hi[q - n]) = (Vec3A::from(c), Vec3A::from(c));
-                    (c, r[a])
+                let (a, k) = (starts[i] as usize - s0, counts[i]);
+                if k == 1 {
+                    // A leaf: its surfel's ball (§4.1.2), for the traversals' compact reads.
+                    balls[i].store(ball_at(a));
+                    continue;
+                }
+                let (q, k) = (n + i, k as usize);
+                let (rq, c1, c2) = Topology::split(q, k as u32);
+                let (l, rr) = (i + 1, rq - n);
+                let pt = |a: usize| Vec3A::new(x[a], y[a], z[a]);
+                let (lo_l, hi_l) = if c1 == 1 { (pt(a), pt(a)) } else { (lo[l], hi[l]) };
+                let ar = a + c1 as usize;
+                let (lo_r, hi_r) = if c2 == 1 { (pt(ar), pt(ar)) } else { (lo[rr], hi[rr]) };
+                (lo[i], hi[i]) = (lo_l.min(lo_r), hi_l.max(hi_r));
+                // Around two leaf balls the smallest sphere is Eq. 11 re-centred: no reach to
+                // compute (nor for three, `ENC_MAX`; its left child is a leaf). Above, only
+                // the exact reach from the box centre (stop 71): the sphere around both
+                // children, a square root and a division chained up the tree, was the smaller
+                // one at 7-10 % of the nodes; without it the sphere tests moved by at most
+                // 0.3 % and the whole-ball refits got 10 % faster (BENCHMARKS.md, "Stop 71").
+                let b = if k <= ENC_MAX {
+                    let s2 = if c2 == 1 { ball_at(ar) } else { sph[rr] };
+                    enclosing_sphere(ball_at(a), s2)
                 } else {
-                    let (l, rr) = (q + 1 - n, topo.right[q] as usize - n);
-                    (lo[q - n], hi[q - n]) = (lo[l].min(lo[rr]), hi[l].max(hi[rr]));
-                    // Around two leaf balls the smallest sphere is Eq. 11 re-centred: no
-                    // reach to compute (nor for three, `ENC_MAX`). Above, only the exact
-                    // reach from the box centre (stop 71): the sphere around both children,
-                    // a square root and a division chained up the tree, was the smaller one
-                    // at 7-10 % of the nodes; without it the sphere tests moved by at most
-                    // 0.3 % and the whole-ball refits got 10 % faster (BENCHMARKS.md,
-                    // "Stop 71").
-                    if k <= ENC_MAX {
-                        enclosing_sphere(sph[l], sph[rr])
-                    } else {
-                        let c = Vec3::from(0.5 * (lo[q - n] + hi[q - n]));
-                        let reach = max_reach_x8(x, y, z, r, a..a + k, c);
-                        (c, reach * (1.0 + RADIUS_PAD) + RADIUS_PAD * c.abs().max_element())
-                    }
+                    let c = Vec3::from(0.5 * (lo[i] + hi[i]));
+                    let reach = max_reach_x8(x, y, z, r, a..a + k, c);
+                    (c, reach * (1.0 + RADIUS_PAD) + RADIUS_PAD * c.abs().max_element())
                 };
-                sph[q - n] = b;
+                sph[i] = b;
                 // Before q's stamp (below, or the caller's for n): a reader that sees q
                 // current finds every ball of q's subtree written (`compact_max`).
-                ii.ball[q].store(b);
+                balls[i].store(b);
                 if k > REFIT_CLAIM_MIN as usize {
                     // q's whole subtree is written (bottom up): complete, for `compact_children`.
-                    ii.nodes.slot[q].mark_complete(self.frame);
+                    slots[i].mark_complete(self.frame);
                 }
-                if q != n && k > 1 && ii.nodes.slot[q].stamp.load(Relaxed) != self.frame {
+                if i != 0 && slots[i].stamp.load(Relaxed) != self.frame {
                     // Without the lock where every writer writes these same values: a node
                     // of at most REFIT_CLAIM_MIN surfels is never claimed, so never bounded
                     // by Eq. 9 (any thread that reaches it first refits it, from the same
