@@ -26,7 +26,7 @@
 
 use super::knn::KdTree;
 use super::DeformError;
-use glam::{Mat3, Mat3A, Vec3, Vec4};
+use glam::{Mat3, Mat3A, Vec3, Vec3A, Vec4};
 use wide::f32x8;
 
 /// The radial spline of Eq. 2: `1 − 6r² + 8r³ − 3r⁴` for `r < 1`, else 0 (NaN too, as
@@ -306,10 +306,10 @@ impl DeformedSurfel {
     }
 }
 
-/// Eq. 1 for one point with reference position `x`, tangent axes (u, v) and node weights,
-/// from the packed per-node fields ([`NodeLin`]).
-#[inline]
-pub fn deform_point(f: &DeformField, x: Vec3, axes: (Vec3, Vec3), idx: &[u32], w: &[f32]) -> DeformedSurfel {
+/// Eq. 1's weighted sums over a point's nodes: [Σω K_x | Σω K_y] and [Σω K_z | Σω a, Σω ‖K‖_F]
+/// (fourth lanes of the K columns padding).
+#[inline(always)]
+fn eq1_sums(f: &DeformField, idx: &[u32], w: &[f32]) -> ([f32; 8], [f32; 8]) {
     // A node's 64-byte line is two f32x8 loads, [K_x | K_y] and [K_z | a, ‖K‖_F], and its
     // term two 8-wide multiply-adds; even and odd nodes go to separate sums, halving the
     // chain of dependent multiply-adds. Criterion `deform_point` (16 nodes per surfel), stop
@@ -331,7 +331,31 @@ pub fn deform_point(f: &DeformField, x: Vec3, axes: (Vec3, Vec3), idx: &[u32], w
         s0 = a[0].mul_add(wa, s0);
         s1 = a[1].mul_add(wa, s1);
     }
-    let (k01, k2a) = ((s0 + t0).to_array(), (s1 + t1).to_array());
+    ((s0 + t0).to_array(), (s1 + t1).to_array())
+}
+
+/// Eq. 1 for one point with reference position `x`, tangent axes (u, v) and node weights,
+/// from the packed per-node fields ([`NodeLin`]).
+#[inline]
+pub fn deform_point(f: &DeformField, x: Vec3, axes: (Vec3, Vec3), idx: &[u32], w: &[f32]) -> DeformedSurfel {
+    let (k01, k2a) = eq1_sums(f, idx, w);
+    // `deform_point_ref`'s matrix products in 4-wide columns (glam's `Mat3A`): each lane
+    // takes the same operations in the same order as its `Mat3` (scalar lanes), so the
+    // results are bit for bit the same, in about a quarter of the instructions.
+    let col = |a: &[f32; 8], i: usize| Vec3A::new(a[i], a[i + 1], a[i + 2]);
+    let kw = Mat3A::from_cols(col(&k01, 0), col(&k01, 4), col(&k2a, 0));
+    let rot = Mat3A::from(f.rot);
+    let xa = Vec3A::from(x);
+    let p = rot * xa + Vec3A::from(f.trans) + col(&k2a, 4) + kw * xa;
+    let g = rot + kw;
+    DeformedSurfel { p: p.into(), u: (g * Vec3A::from(axes.0)).into(), v: (g * Vec3A::from(axes.1)).into(), stretch: 1.0 + k2a[7] }
+}
+
+/// [`deform_point`] as written first, on glam's scalar-lane `Mat3` (the reference its tests
+/// compare it with, bit for bit).
+#[cfg(test)]
+fn deform_point_ref(f: &DeformField, x: Vec3, axes: (Vec3, Vec3), idx: &[u32], w: &[f32]) -> DeformedSurfel {
+    let (k01, k2a) = eq1_sums(f, idx, w);
     let kw = Mat3::from_cols(Vec3::new(k01[0], k01[1], k01[2]), Vec3::new(k01[4], k01[5], k01[6]), Vec3::new(k2a[0], k2a[1], k2a[2]));
     let akf = Vec4::new(k2a[4], k2a[5], k2a[6], k2a[7]);
     let p = f.rot * x + f.trans + akf.truncate() + kw * x;
@@ -388,6 +412,34 @@ mod tests {
         let s = deform_point(&f, x, (Vec3::X, Vec3::Y), &w.idx, &w.w);
         assert!((s.p - a * x).length() < 1e-3, "{} vs {}", s.p, a * x);
         assert!((s.u - a * Vec3::X).length() < 1e-3);
+    }
+
+    /// [`deform_point`]'s 4-wide matrix products give bit for bit its scalar-lane reference's
+    /// results, on random motions, points and axes (degenerate axes included).
+    #[test]
+    fn deform_point_matches_its_reference_bit_for_bit() {
+        use crate::core::rng::Sampler;
+        let mut s = Sampler::new(9, 4, 1);
+        let rest: Vec<Vec3> = (0..40).map(|_| Vec3::new(s.next(), s.next(), s.next()) * 3.0 - 1.0).collect();
+        let nodes = SimNodes::new(rest.clone(), vec![1.0; 40], 8).unwrap();
+        for trial in 0..6 {
+            let q = glam::Quat::from_axis_angle(Vec3::new(s.next(), 1.0, s.next()).normalize(), 3.0 * s.next());
+            let amp = 0.3 * trial as f32;
+            let def: Vec<Vec3> = rest.iter().map(|x| q * *x + amp * Vec3::new((2.0 * x.y).sin(), x.x * x.z, x.y * x.y)).collect();
+            let f = DeformField::compute(&nodes, &def, trial % 2 == 0).unwrap();
+            let pts: Vec<Vec3> = (0..200).map(|_| Vec3::new(s.next(), s.next(), s.next()) * 3.0 - 1.0).collect();
+            for k in [1, 5, 16] {
+                let w = NodeWeights::new(&pts, &nodes, k);
+                for (i, &x) in pts.iter().enumerate() {
+                    let (idx, ws) = (&w.idx[i * k..i * k + k], &w.w[i * k..i * k + k]);
+                    let u = Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * 0.02;
+                    let v = if i % 7 == 0 { u } else { Vec3::new(s.next() - 0.5, s.next() - 0.5, s.next() - 0.5) * 0.02 };
+                    let (a, b) = (deform_point(&f, x, (u, v), idx, ws), deform_point_ref(&f, x, (u, v), idx, ws));
+                    let bits = |d: &DeformedSurfel| [d.p, d.u, d.v].map(|v| v.to_array().map(f32::to_bits)).concat();
+                    assert_eq!((bits(&a), a.stretch.to_bits()), (bits(&b), b.stretch.to_bits()), "trial {trial}, k {k}, point {i}");
+                }
+            }
+        }
     }
 
     /// The packed form of Eq. 1 ([`NodeLin`]) equals the direct sum
