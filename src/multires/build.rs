@@ -312,6 +312,12 @@ pub struct PointTree {
 pub struct NodeBoxes {
     pub lo: [Vec<f32>; 3],
     pub hi: [Vec<f32>; 3],
+    /// Per node, the box of its own points' grid codes ([`PointSoa::qx`]): the lowest x, y, z
+    /// code, then the highest (all 0 without points). [`super::trace::point_box_may_hit`]
+    /// culls a point block by it before its points are weighed: the node's box and sphere
+    /// hold its whole subtree and the cone's round reach, so most blocks they admit lie
+    /// wholly outside the footprint's ellipse.
+    pub pts: Vec<[u8; 6]>,
 }
 
 impl NodeBoxes {
@@ -342,6 +348,19 @@ impl NodeBoxes {
             (lo[i], hi[i]) = (l, h);
         }
         let mut b = NodeBoxes::default();
+        let p = &t.points;
+        b.pts = (0..n)
+            .map(|i| {
+                let s = t.nodes.pt_start[i] as usize;
+                let r = s..s + t.nodes.pt_count[i] as usize;
+                if r.is_empty() {
+                    return [0; 6];
+                }
+                let lo = |q: &[u8]| q[r.clone()].iter().copied().min().unwrap_or(0);
+                let hi = |q: &[u8]| q[r.clone()].iter().copied().max().unwrap_or(0);
+                [lo(&p.qx), lo(&p.qy), lo(&p.qz), hi(&p.qx), hi(&p.qy), hi(&p.qz)]
+            })
+            .collect();
         for i in 0..n {
             // Rounding slack, as the sphere's: the tests compute positions the same way.
             let pad = Vec3::splat(1e-5 * (hi[i] - lo[i]).max_element().max(0.0) + 1e-6 * (1.0 + hi[i].abs().max_element()));
@@ -539,6 +558,7 @@ pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<Po
             boxes: NodeBoxes {
                 lo: [vec![f32::INFINITY], vec![f32::INFINITY], vec![f32::INFINITY]],
                 hi: [vec![f32::NEG_INFINITY], vec![f32::NEG_INFINITY], vec![f32::NEG_INFINITY]],
+                pts: vec![[0; 6]],
             },
         });
     }

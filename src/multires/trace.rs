@@ -63,7 +63,7 @@ use rayon::prelude::*;
 use std::collections::BinaryHeap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
-use wide::{f32x8, i32x8, u16x8, u8x16};
+use wide::{f32x4, f32x8, i32x8, u16x8, u8x16};
 
 /// Gaussian cut-off (§4.4 footnote: weights below 2% are clipped): q ≤ ln 50.
 pub const Q_CUT: f32 = 3.912_023;
@@ -1216,6 +1216,46 @@ pub fn point_q_1(e: &Eigen2, x: f32, y: f32) -> f32 {
     a * a / (e.s1 * e.s1) + b * b / (e.s2 * e.s2)
 }
 
+/// Whether any point of a block whose grid codes lie in the box `qb` (lowest x, y, z code,
+/// then the highest: [`super::build::NodeBoxes::pts`]) can pass the per-box point test of
+/// [`point_w_x8`] with the decomposition `e` (q ≤ Q_CUT inside the cone's depth range).
+///
+/// *Deviation from the paper* (which weighs every point of a node the node test admits,
+/// §4.6, §5.1), result-neutral: the block's linear maps (a, b, t as affine functions of the
+/// codes, as [`point_w_x8`] folds them) bound a, b and t over the box by interval
+/// arithmetic; q ≥ dist(0, [a])²/s₁² + dist(0, [b])²/s₂². The intervals are widened by
+/// 1e-5 of the terms' magnitudes and the cut by 1e-4, far beyond the packet's rounding, so
+/// no point it would weigh is culled (tested against [`point_w_ref`]).
+#[inline]
+pub fn point_box_may_hit(cone: &Cone, blk: &PointBlock, e: &Eigen2, qb: [u8; 6]) -> bool {
+    // Lanes t, a, b: the block's maps o + q·(column x, y, z) (the columns of the matrix with
+    // rows at, A, B of `point_w_x8`), in one f32x4 step each.
+    let sp = f32x4::splat;
+    let (co, sn) = (e.cos, e.sin);
+    let (e0, p, q) = (f32x4::from([1.0, 0.0, 0.0, 0.0]), f32x4::from([0.0, co, -sn, 0.0]), f32x4::from([0.0, sn, co, 0.0]));
+    let map = |t: f32, x: f32, y: f32| e0.mul_add(sp(t), p.mul_add(sp(x), q * sp(y)));
+    let o = map(blk.t0, blk.x0, blk.y0);
+    let col = [map(blk.at.x, blk.ax.x, blk.ay.x), map(blk.at.y, blk.ax.y, blk.ay.y), map(blk.at.z, blk.ax.z, blk.ay.z)];
+    // The box's centre, half extents and high corner per axis.
+    let (mut mid, mut rad, mut mag) = (o, sp(0.0), o.abs());
+    for k in 0..3 {
+        let (lo, hi) = (qb[k] as f32, qb[k + 3] as f32);
+        let ac = col[k].abs();
+        mid = col[k].mul_add(sp(0.5 * (lo + hi)), mid);
+        rad = ac.mul_add(sp(0.5 * (hi - lo)), rad);
+        mag = ac.mul_add(sp(hi), mag);
+    }
+    // The ranges' distances from 0 (t: from the depth range's middle), widened by the slack.
+    let reach = rad + mag * sp(1e-5);
+    let [mt, ma, mb, _] = mid.to_array();
+    let [rt, ra, rb, _] = reach.to_array();
+    if !(mt + rt >= cone.tmin && mt - rt <= cone.tmax) {
+        return false;
+    }
+    let (da, db) = ((ma.abs() - ra).max(0.0) / e.s1, (mb.abs() - rb).max(0.0) / e.s2);
+    !(da * da + db * db > Q_CUT * (1.0 + 1e-4))
+}
+
 /// The points of a block that carry weight: index in the block, depth along the cone and
 /// weight, in block order; `len` of them (the arrays have 8 slots of room past it, see
 /// [`crate::core::pack`]).
@@ -2113,6 +2153,11 @@ impl<'s, 'a> Tracer<'s, 'a> {
         c: &mut Counters,
     ) {
         let blk = PointBlock::new(tree, n, lc);
+        // Per box, a block wholly outside the footprint's ellipse or depth range is culled by
+        // its points' box (on `complex` most blocks the node test admits have no hit).
+        if self.p.eigen != EigenMode::Exact && !point_box_may_hit(lc, &blk, boxe, tree.boxes.pts[n]) {
+            return;
+        }
         let h = tree.spacing(tree.nodes.depth[n]);
         // The fragments' setup only for a block with hits (28 % of them on `complex`).
         if !self.weigh_points(lc, &blk, s, h, boxe, blend, hits, c) {
@@ -3501,6 +3546,39 @@ mod tests {
         assert!(total > 100, "too few point hits exercised: {total}");
         // The sphere's points face both ways along the cones: both signs were compared.
         assert!(away > 10 && total - away > 10, "{away} of {total} points facing away");
+    }
+
+    /// [`point_box_may_hit`] culls no block with a point either kernel weighs, per box, on
+    /// random and degenerate cones (decompositions at several depths, so the footprint's
+    /// ellipse and depth range cut through the blocks), and culls blocks at all.
+    #[test]
+    fn point_box_cull_keeps_every_weighed_block() {
+        let tree = sphere_tree();
+        let mut s = Sampler::new(5, 0, 0);
+        let (mut refh, mut got) = (PointHits::default(), PointHits::default());
+        let (mut culled, mut kept_hit) = (0, 0);
+        for i in 0..400 {
+            let c = if i % 2 == 0 { rnd_cone(&mut s) } else { degenerate_cone(&mut s, i / 2 % DEGENERATE_KINDS) };
+            let mut cone = aim_at_sphere(&mut s, c);
+            (cone.tmin, cone.tmax) = if i % 3 == 0 { (3.6, 4.2) } else { (0.0, f32::INFINITY) };
+            let floor = if i % 5 == 0 { 0.03 } else { 1e-7 };
+            let be = eigen_1(cone.sigma(1.0 + (i % 7) as f32 * 0.5), 0.125, floor);
+            for node in 0..tree.nodes.len() {
+                if tree.nodes.pt_count[node] == 0 {
+                    continue;
+                }
+                let blk = PointBlock::new(&tree, node, &cone);
+                point_w_ref(&cone, &blk, Some(&be), 0.125, floor, 0.7, &mut refh);
+                point_w_x8(&cone, &blk, Some(&be), 0.125, floor, 0.7, &mut got);
+                if point_box_may_hit(&cone, &blk, &be, tree.boxes.pts[node]) {
+                    kept_hit += (got.len > 0) as usize;
+                } else {
+                    assert!(refh.len == 0 && got.len == 0, "node {node}: culled with {} / {} hits, {cone:?}", refh.len, got.len);
+                    culled += 1;
+                }
+            }
+        }
+        assert!(culled > 1000 && kept_hit > 1000, "culled {culled}, kept with hits {kept_hit}");
     }
 
     /// [`point_w_x8`] against [`point_w_ref`] on the degenerate footprints of
