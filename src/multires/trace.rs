@@ -848,9 +848,12 @@ impl NodeLanes {
     }
 }
 
-/// [`node_test_x8`] without the masked fill ([`NodeLanes`]).
+/// [`node_test_x8`] without the masked fill ([`NodeLanes`]). Inlined into its two traversal
+/// callers (the instance tree's step and `push_children`): called, its 8-lane arguments went
+/// through the stack and its lanes came back through memory (1.9 % of `complex`'s cone
+/// instructions).
 #[allow(clippy::too_many_arguments)]
-#[inline]
+#[inline(always)]
 pub fn node_lanes_x8(
     cone: &Cone,
     cx: &[f32; 8],
