@@ -2194,6 +2194,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let e = (start + n + 7).min(p.len());
         let q = (&p.qx[start..e], &p.qy[start..e], &p.qz[start..e]);
         let blk = PointBlock { n, ..PointBlock::from_grid(q, &p.normal[start..e], &p.cover[start..e], g.grid_lo[gi], g.step[gi], cone) };
+        if self.p.eigen != EigenMode::Exact && !point_box_may_hit(cone, &blk, boxe, g.pts_box[gi]) {
+            return;
+        }
         let (h, best) = (g.h[gi], |j: usize| Elem::Group { slot: gi as u32, idx: j as u32 });
         if self.weigh_points(cone, &blk, 1.0, h, boxe, blend, hits, c) {
             let piece = (best, self.mesh_key(super::abuffer::ANY_MESH), false);
