@@ -63,7 +63,7 @@ use rayon::prelude::*;
 use std::collections::BinaryHeap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
-use wide::{f32x4, f32x8, i32x8, u16x8, u8x16};
+use wide::{f32x4, f32x8, i32x8, u16x8, u32x8, u8x16};
 
 /// Gaussian cut-off (§4.4 footnote: weights below 2% are clipped): q ≤ ln 50.
 pub const Q_CUT: f32 = 3.912_023;
@@ -1920,11 +1920,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 let f = ch as usize;
                 let (mut m, mut t_near) = tlas_box_test_x8(&reach, tl, f);
                 if skip_plane {
-                    for l in 0..8 {
-                        if flat.slot[f + l] == own.plane {
-                            m &= !(1 << l);
-                        }
-                    }
+                    // The 8 slots' planes in one compare (a lane loop was 0.3 % of `complex`).
+                    let planes: [u32; 8] = flat.slot[f..f + 8].try_into().expect("8 slots");
+                    m &= !(u32x8::from(planes).simd_eq(u32x8::splat(own.plane)).to_bitmask());
                 }
                 c.add(Counter::instance_tests, 8);
                 let mut eig = [u32::MAX; 8];
