@@ -294,6 +294,26 @@ pub struct PointTree {
     pub tris: TriSoa,
     /// Derived (not cached): each node's axis-aligned box ([`NodeBoxes`]).
     pub boxes: NodeBoxes,
+    /// Derived from `root_side` and `k`: [`PointTree::spacing`] and [`PointTree::code_step`]
+    /// of every depth ([`Levels`]).
+    pub levels: Levels,
+}
+
+/// A tree's point spacing and position-code step per depth (0–255, any `u8`), computed once:
+/// the traversal asks for them at every node and point block, and each took a division, an
+/// integer division and a 64-bit conversion (1 % of `complex`'s cone instructions).
+#[derive(Clone, Debug)]
+pub struct Levels(Box<[[f32; 2]; 256]>);
+
+impl Levels {
+    pub fn of(root_side: f32, k: u32) -> Levels {
+        let m = codes_per_voxel(k) as f32;
+        Levels(Box::new(std::array::from_fn(|d| {
+            // As the shift in release builds (its amount taken mod 64).
+            let h = root_side / (k as f32 * 1u64.wrapping_shl(d as u32) as f32);
+            [h, h / m]
+        })))
+    }
 }
 
 /// Axis-aligned boxes of the octree nodes, struct-of-arrays like [`NodeSoa`] (children of a
@@ -434,10 +454,10 @@ impl TriSoa {
 }
 
 impl PointTree {
-    /// Point spacing (voxel side) at `depth`.
+    /// Point spacing (voxel side) at `depth`: root_side / (k·2^depth).
     #[inline]
     pub fn spacing(&self, depth: u8) -> f32 {
-        self.root_side / (self.k as f32 * (1u64 << depth) as f32)
+        self.levels.0[depth as usize][0]
     }
     /// Position codes per voxel side (m): the 2k voxels of a grid row share the 256 codes
     /// of 8 bits.
@@ -448,7 +468,7 @@ impl PointTree {
     /// The step of the position codes at `depth`: h / m.
     #[inline]
     pub fn code_step(&self, depth: u8) -> f32 {
-        self.spacing(depth) / self.codes_per_voxel() as f32
+        self.levels.0[depth as usize][1]
     }
     #[inline]
     pub fn point_pos(&self, node: usize, i: usize) -> Vec3 {
@@ -552,6 +572,7 @@ pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<Po
             tri_index: vec![],
             root_side: 1.0,
             k: params.k,
+            levels: Levels::of(1.0, params.k),
             ranges,
             stats: BuildStats { nodes: 1, triangles_dropped: dropped, ..Default::default() },
             tris: TriSoa::of(mesh, &[]),
@@ -618,7 +639,9 @@ pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<Po
     stats.nodes = nodes.len();
     stats.points = points.len();
     let tris = TriSoa::of(mesh, &tri_index);
-    let mut tree = PointTree { nodes, points, tri_index, root_side: side, k: params.k, ranges, stats, tris, boxes: NodeBoxes::default() };
+    let levels = Levels::of(side, params.k);
+    let mut tree =
+        PointTree { nodes, points, tri_index, root_side: side, k: params.k, ranges, stats, tris, boxes: NodeBoxes::default(), levels };
     tree.boxes = NodeBoxes::of(&tree);
     tree.stats.bytes = tree.memory_bytes();
     tree.stats.seconds = t0.elapsed().as_secs_f64();
@@ -941,6 +964,22 @@ mod tests {
         let m = Material::default();
         let mats: Vec<&Material> = vec![&m; mesh.tri_count()];
         build(mesh, &mats, p).unwrap()
+    }
+
+    /// [`Levels`] holds the spacing and code step of their formulas bit for bit, and a tree
+    /// read back from the cache's fields has the same.
+    #[test]
+    fn levels_are_the_spacing_formula() {
+        for (side, k) in [(1.0f32, 4u32), (3.7, 8), (1e-3, 1), (250.0, 16), (0.9, 200)] {
+            let l = Levels::of(side, k);
+            for d in 0..=40u8 {
+                let h = side / (k as f32 * (1u64 << d) as f32);
+                assert_eq!(l.0[d as usize], [h, h / codes_per_voxel(k) as f32], "side {side} k {k} depth {d}");
+            }
+        }
+        let t = tree_of(&builtin::icosphere(2, 0), &BuildParams::default());
+        assert_eq!(t.levels.0, Levels::of(t.root_side, t.k).0);
+        assert_eq!(t.spacing(2), t.root_side / (t.k as f32 * 4.0));
     }
 
     /// Every triangle ends up stored exactly once; every point and triangle vertex is inside
