@@ -297,6 +297,34 @@ pub struct PointTree {
     /// Derived from `root_side` and `k`: [`PointTree::spacing`] and [`PointTree::code_step`]
     /// of every depth ([`Levels`]).
     pub levels: Levels,
+    /// Derived from `ranges`: the decoded value of every material code ([`MatTable`]).
+    pub mat: MatTable,
+}
+
+/// Every code of a hierarchy's material ranges decoded ([`quant::decode_color`],
+/// [`Range8::decode`]), so a shaded point hit looks its colour and properties up instead of
+/// decoding them (the logarithmic shininess took two logarithms and an exponential: 1.5 % of
+/// `complex`'s cone instructions). Bit for bit the decoders' values.
+#[derive(Clone, Debug)]
+pub struct MatTable {
+    pub color: Box<[f32; 256]>,
+    /// kd, ks, shininess, reflect, transmit, ior, roughness.
+    pub props: Box<[[f32; 256]; 7]>,
+}
+
+impl MatTable {
+    pub fn of(r: &MatRanges) -> MatTable {
+        MatTable {
+            color: Box::new(std::array::from_fn(|q| quant::decode_color(q as u8, r.color_hi))),
+            props: Box::new(std::array::from_fn(|i| std::array::from_fn(|q| r.props[i].decode(q as u8)))),
+        }
+    }
+}
+
+impl Default for MatTable {
+    fn default() -> Self {
+        MatTable::of(&MatRanges::default())
+    }
 }
 
 /// A tree's point spacing and position-code step per depth (0–255, any `u8`), computed once:
@@ -573,6 +601,7 @@ pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<Po
             root_side: 1.0,
             k: params.k,
             levels: Levels::of(1.0, params.k),
+            mat: MatTable::of(&ranges),
             ranges,
             stats: BuildStats { nodes: 1, triangles_dropped: dropped, ..Default::default() },
             tris: TriSoa::of(mesh, &[]),
@@ -639,9 +668,9 @@ pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<Po
     stats.nodes = nodes.len();
     stats.points = points.len();
     let tris = TriSoa::of(mesh, &tri_index);
-    let levels = Levels::of(side, params.k);
+    let (levels, mat) = (Levels::of(side, params.k), MatTable::of(&ranges));
     let mut tree =
-        PointTree { nodes, points, tri_index, root_side: side, k: params.k, ranges, stats, tris, boxes: NodeBoxes::default(), levels };
+        PointTree { nodes, points, tri_index, root_side: side, k: params.k, ranges, stats, tris, boxes: NodeBoxes::default(), levels, mat };
     tree.boxes = NodeBoxes::of(&tree);
     tree.stats.bytes = tree.memory_bytes();
     tree.stats.seconds = t0.elapsed().as_secs_f64();
@@ -964,6 +993,23 @@ mod tests {
         let m = Material::default();
         let mats: Vec<&Material> = vec![&m; mesh.tri_count()];
         build(mesh, &mats, p).unwrap()
+    }
+
+    /// [`MatTable`] holds the decoders' values bit for bit, logarithmic ranges included.
+    #[test]
+    fn mat_table_is_the_decoders() {
+        let mut mats: Vec<Material> = vec![Material::default(); 3];
+        (mats[0].shininess, mats[1].shininess, mats[2].shininess) = (2.0, 80.0, 1000.0);
+        (mats[0].kd, mats[2].kd, mats[1].ior) = (0.1, 0.9, 1.5);
+        let r = MatRanges::of(&mats.iter().collect::<Vec<_>>());
+        assert!(r.props[2].log, "shininess 2-1000 is log-coded");
+        let t = MatTable::of(&r);
+        for q in 0..=255u8 {
+            assert_eq!(t.color[q as usize].to_bits(), quant::decode_color(q, r.color_hi).to_bits());
+            for i in 0..7 {
+                assert_eq!(t.props[i][q as usize].to_bits(), r.props[i].decode(q).to_bits(), "prop {i} code {q}");
+            }
+        }
     }
 
     /// [`Levels`] holds the spacing and code step of their formulas bit for bit, and a tree

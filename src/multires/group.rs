@@ -73,6 +73,8 @@ pub struct GroupPoints {
     pub points: PointSoa,
     /// Material code ranges over all the scene's materials.
     pub ranges: MatRanges,
+    /// `ranges` decoded ([`super::build::MatTable`]).
+    pub mat: super::build::MatTable,
     /// Samples drawn (all slots).
     pub samples: u64,
 }
@@ -261,7 +263,7 @@ pub fn build(materials: &[Material], tree_meshes: &[(&Mesh, Vec<u32>)], leaves: 
             (grid_lo, h, step, pts, drawn)
         })
         .collect();
-    let mut g = GroupPoints { ranges, ..Default::default() };
+    let mut g = GroupPoints { mat: super::build::MatTable::of(&ranges), ranges, ..Default::default() };
     for (grid_lo, h, step, pts, drawn) in built {
         g.start.push(g.points.len() as u32);
         g.count.push(pts.len() as u32);

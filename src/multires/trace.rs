@@ -48,7 +48,7 @@
 //! and angle.
 
 use super::abuffer::{ABuffer, Elem, Frag, Piece};
-use super::build::{mat_props, BuildParams, MatRanges, PointSoa, PointTree, TriSoa, NO_CHILD};
+use super::build::{mat_props, BuildParams, MatTable, PointSoa, PointTree, TriSoa, NO_CHILD};
 use super::cone::{self, Cone, Outgoing};
 use super::group::GroupPoints;
 use super::mass::{gauss_tri_mass_8, gauss_tri_mass_x8};
@@ -1609,8 +1609,8 @@ pub(crate) fn closest_to_origin(a: glam::Vec2, b: glam::Vec2, c: glam::Vec2) -> 
 /// (`Tracer::weigh_points`), and inlined, the loop-invariant logarithms of the log-coded
 /// range were hoisted out of the hit loop, 14 `logf` calls for every point block.
 #[inline(never)]
-fn decode_props(ranges: &MatRanges, code: [u8; 7]) -> [f32; 7] {
-    std::array::from_fn(|i| ranges.props[i].decode(code[i]))
+fn decode_props(mat: &MatTable, code: [u8; 7]) -> [f32; 7] {
+    std::array::from_fn(|i| mat.props[i][code[i] as usize])
 }
 
 // ---------------------------------------------------------------------------------------
@@ -2165,7 +2165,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
             return;
         }
         let start = tree.nodes.pt_start[n] as usize;
-        let pts = (&tree.points, start, &tree.ranges);
+        let pts = (&tree.points, start, &tree.mat);
         let leaf = &self.ms.leaves[li as usize];
         let best = |j: usize| Elem::Point { leaf: li, node: n as u32, idx: j as u32 };
         let piece = (best, self.mesh_key(leaf.mesh), self.ms.closed[leaf.mesh as usize]);
@@ -2198,7 +2198,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let (h, best) = (g.h[gi], |j: usize| Elem::Group { slot: gi as u32, idx: j as u32 });
         if self.weigh_points(cone, &blk, 1.0, h, boxe, blend, hits, c) {
             let piece = (best, self.mesh_key(super::abuffer::ANY_MESH), false);
-            self.insert_points(1.0, h, (p, start, &g.ranges), None, piece, ab, hits, mode);
+            self.insert_points(1.0, h, (p, start, &g.mat), None, piece, ab, hits, mode);
         }
     }
 
@@ -2234,7 +2234,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         &self,
         s: f32,
         h: f32,
-        (pts, start, ranges): (&PointSoa, usize, &MatRanges),
+        (pts, start, mat): (&PointSoa, usize, &MatTable),
         normal_mat: Option<&Mat3>,
         (best, key, closed): (impl Fn(usize) -> Elem, u32, bool),
         ab: &mut ABuffer,
@@ -2267,12 +2267,12 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 let props = match last {
                     Some((c, p)) if c == code => p,
                     _ => {
-                        let p = decode_props(ranges, code);
+                        let p = decode_props(mat, code);
                         last = Some((code, p));
                         p
                     }
                 };
-                let rgb = pts.rgb[j].map(|q| quant::decode_color(q, ranges.color_hi));
+                let rgb = pts.rgb[j].map(|q| mat.color[q as usize]);
                 f.col = Vec3::from_array(rgb) * w;
                 f.props = props.map(|v| v * w);
                 // The point's normal spread (|mean normal| < 1) carries into the fragment.
