@@ -1604,11 +1604,11 @@ pub(crate) fn closest_to_origin(a: glam::Vec2, b: glam::Vec2, c: glam::Vec2) -> 
     }
 }
 
-/// The material properties of a point's code, as [`MatRanges::decode`] gives them. Not
-/// inlined: the traversal decodes only when a hit's code differs from the last one's
-/// (`Tracer::weigh_points`), and inlined, the loop-invariant logarithms of the log-coded
-/// range were hoisted out of the hit loop, 14 `logf` calls for every point block.
-#[inline(never)]
+/// The material properties of a point's code, as [`super::build::MatRanges::decode`] gives
+/// them, looked up in the hierarchy's [`MatTable`]. (Inlined since the table: while it decoded,
+/// it was kept out of line, or the log-coded range's loop-invariant logarithms were hoisted
+/// out of the hit loop, 14 `logf` calls for every point block.)
+#[inline]
 fn decode_props(mat: &MatTable, code: [u8; 7]) -> [f32; 7] {
     std::array::from_fn(|i| mat.props[i][code[i] as usize])
 }
