@@ -294,6 +294,54 @@ pub struct PointTree {
     pub tris: TriSoa,
     /// Derived (not cached): each node's axis-aligned box ([`NodeBoxes`]).
     pub boxes: NodeBoxes,
+    /// Derived from `root_side` and `k`: [`PointTree::spacing`] and [`PointTree::code_step`]
+    /// of every depth ([`Levels`]).
+    pub levels: Levels,
+    /// Derived from `ranges`: the decoded value of every material code ([`MatTable`]).
+    pub mat: MatTable,
+}
+
+/// Every code of a hierarchy's material ranges decoded ([`quant::decode_color`],
+/// [`Range8::decode`]), so a shaded point hit looks its colour and properties up instead of
+/// decoding them (the logarithmic shininess took two logarithms and an exponential: 1.5 % of
+/// `complex`'s cone instructions). Bit for bit the decoders' values.
+#[derive(Clone, Debug)]
+pub struct MatTable {
+    pub color: Box<[f32; 256]>,
+    /// kd, ks, shininess, reflect, transmit, ior, roughness.
+    pub props: Box<[[f32; 256]; 7]>,
+}
+
+impl MatTable {
+    pub fn of(r: &MatRanges) -> MatTable {
+        MatTable {
+            color: Box::new(std::array::from_fn(|q| quant::decode_color(q as u8, r.color_hi))),
+            props: Box::new(std::array::from_fn(|i| std::array::from_fn(|q| r.props[i].decode(q as u8)))),
+        }
+    }
+}
+
+impl Default for MatTable {
+    fn default() -> Self {
+        MatTable::of(&MatRanges::default())
+    }
+}
+
+/// A tree's point spacing and position-code step per depth (0–255, any `u8`), computed once:
+/// the traversal asks for them at every node and point block, and each took a division, an
+/// integer division and a 64-bit conversion (1 % of `complex`'s cone instructions).
+#[derive(Clone, Debug)]
+pub struct Levels(Box<[[f32; 2]; 256]>);
+
+impl Levels {
+    pub fn of(root_side: f32, k: u32) -> Levels {
+        let m = codes_per_voxel(k) as f32;
+        Levels(Box::new(std::array::from_fn(|d| {
+            // As the shift in release builds (its amount taken mod 64).
+            let h = root_side / (k as f32 * 1u64.wrapping_shl(d as u32) as f32);
+            [h, h / m]
+        })))
+    }
 }
 
 /// Axis-aligned boxes of the octree nodes, struct-of-arrays like [`NodeSoa`] (children of a
@@ -312,6 +360,12 @@ pub struct PointTree {
 pub struct NodeBoxes {
     pub lo: [Vec<f32>; 3],
     pub hi: [Vec<f32>; 3],
+    /// Per node, the box of its own points' grid codes ([`PointSoa::qx`]): the lowest x, y, z
+    /// code, then the highest (all 0 without points). [`super::trace::point_box_may_hit`]
+    /// culls a point block by it before its points are weighed: the node's box and sphere
+    /// hold its whole subtree and the cone's round reach, so most blocks they admit lie
+    /// wholly outside the footprint's ellipse.
+    pub pts: Vec<[u8; 6]>,
 }
 
 impl NodeBoxes {
@@ -342,6 +396,19 @@ impl NodeBoxes {
             (lo[i], hi[i]) = (l, h);
         }
         let mut b = NodeBoxes::default();
+        let p = &t.points;
+        b.pts = (0..n)
+            .map(|i| {
+                let s = t.nodes.pt_start[i] as usize;
+                let r = s..s + t.nodes.pt_count[i] as usize;
+                if r.is_empty() {
+                    return [0; 6];
+                }
+                let lo = |q: &[u8]| q[r.clone()].iter().copied().min().unwrap_or(0);
+                let hi = |q: &[u8]| q[r.clone()].iter().copied().max().unwrap_or(0);
+                [lo(&p.qx), lo(&p.qy), lo(&p.qz), hi(&p.qx), hi(&p.qy), hi(&p.qz)]
+            })
+            .collect();
         for i in 0..n {
             // Rounding slack, as the sphere's: the tests compute positions the same way.
             let pad = Vec3::splat(1e-5 * (hi[i] - lo[i]).max_element().max(0.0) + 1e-6 * (1.0 + hi[i].abs().max_element()));
@@ -415,10 +482,10 @@ impl TriSoa {
 }
 
 impl PointTree {
-    /// Point spacing (voxel side) at `depth`.
+    /// Point spacing (voxel side) at `depth`: root_side / (k·2^depth).
     #[inline]
     pub fn spacing(&self, depth: u8) -> f32 {
-        self.root_side / (self.k as f32 * (1u64 << depth) as f32)
+        self.levels.0[depth as usize][0]
     }
     /// Position codes per voxel side (m): the 2k voxels of a grid row share the 256 codes
     /// of 8 bits.
@@ -429,7 +496,7 @@ impl PointTree {
     /// The step of the position codes at `depth`: h / m.
     #[inline]
     pub fn code_step(&self, depth: u8) -> f32 {
-        self.spacing(depth) / self.codes_per_voxel() as f32
+        self.levels.0[depth as usize][1]
     }
     #[inline]
     pub fn point_pos(&self, node: usize, i: usize) -> Vec3 {
@@ -533,12 +600,15 @@ pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<Po
             tri_index: vec![],
             root_side: 1.0,
             k: params.k,
+            levels: Levels::of(1.0, params.k),
+            mat: MatTable::of(&ranges),
             ranges,
             stats: BuildStats { nodes: 1, triangles_dropped: dropped, ..Default::default() },
             tris: TriSoa::of(mesh, &[]),
             boxes: NodeBoxes {
                 lo: [vec![f32::INFINITY], vec![f32::INFINITY], vec![f32::INFINITY]],
                 hi: [vec![f32::NEG_INFINITY], vec![f32::NEG_INFINITY], vec![f32::NEG_INFINITY]],
+                pts: vec![[0; 6]],
             },
         });
     }
@@ -598,7 +668,9 @@ pub fn build(mesh: &Mesh, mats: &[&Material], params: &BuildParams) -> Result<Po
     stats.nodes = nodes.len();
     stats.points = points.len();
     let tris = TriSoa::of(mesh, &tri_index);
-    let mut tree = PointTree { nodes, points, tri_index, root_side: side, k: params.k, ranges, stats, tris, boxes: NodeBoxes::default() };
+    let (levels, mat) = (Levels::of(side, params.k), MatTable::of(&ranges));
+    let mut tree =
+        PointTree { nodes, points, tri_index, root_side: side, k: params.k, ranges, stats, tris, boxes: NodeBoxes::default(), levels, mat };
     tree.boxes = NodeBoxes::of(&tree);
     tree.stats.bytes = tree.memory_bytes();
     tree.stats.seconds = t0.elapsed().as_secs_f64();
@@ -921,6 +993,39 @@ mod tests {
         let m = Material::default();
         let mats: Vec<&Material> = vec![&m; mesh.tri_count()];
         build(mesh, &mats, p).unwrap()
+    }
+
+    /// [`MatTable`] holds the decoders' values bit for bit, logarithmic ranges included.
+    #[test]
+    fn mat_table_is_the_decoders() {
+        let mut mats: Vec<Material> = vec![Material::default(); 3];
+        (mats[0].shininess, mats[1].shininess, mats[2].shininess) = (2.0, 80.0, 1000.0);
+        (mats[0].kd, mats[2].kd, mats[1].ior) = (0.1, 0.9, 1.5);
+        let r = MatRanges::of(&mats.iter().collect::<Vec<_>>());
+        assert!(r.props[2].log, "shininess 2-1000 is log-coded");
+        let t = MatTable::of(&r);
+        for q in 0..=255u8 {
+            assert_eq!(t.color[q as usize].to_bits(), quant::decode_color(q, r.color_hi).to_bits());
+            for i in 0..7 {
+                assert_eq!(t.props[i][q as usize].to_bits(), r.props[i].decode(q).to_bits(), "prop {i} code {q}");
+            }
+        }
+    }
+
+    /// [`Levels`] holds the spacing and code step of their formulas bit for bit, and a tree
+    /// read back from the cache's fields has the same.
+    #[test]
+    fn levels_are_the_spacing_formula() {
+        for (side, k) in [(1.0f32, 4u32), (3.7, 8), (1e-3, 1), (250.0, 16), (0.9, 200)] {
+            let l = Levels::of(side, k);
+            for d in 0..=40u8 {
+                let h = side / (k as f32 * (1u64 << d) as f32);
+                assert_eq!(l.0[d as usize], [h, h / codes_per_voxel(k) as f32], "side {side} k {k} depth {d}");
+            }
+        }
+        let t = tree_of(&builtin::icosphere(2, 0), &BuildParams::default());
+        assert_eq!(t.levels.0, Levels::of(t.root_side, t.k).0);
+        assert_eq!(t.spacing(2), t.root_side / (t.k as f32 * 4.0));
     }
 
     /// Every triangle ends up stored exactly once; every point and triangle vertex is inside

@@ -356,6 +356,8 @@ pub fn decode(b: &[u8], key: u64, n_tris: usize, params: &BuildParams) -> Option
         stats: BuildStats { triangles_dropped, samples, max_depth, from_cache: true, ..Default::default() },
         tris: Default::default(),  // derived from the mesh by the caller
         boxes: Default::default(), // likewise
+        levels: super::build::Levels::of(root_side, k),
+        mat: super::build::MatTable::of(&MatRanges { color_hi, props }),
     };
     t.stats.nodes = t.nodes.len();
     t.stats.points = t.points.len();

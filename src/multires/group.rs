@@ -68,16 +68,20 @@ pub struct GroupPoints {
     pub h: Vec<f32>,
     /// Step of the 8-bit point positions: a point is at `grid_lo + (q + ½)·step`.
     pub step: Vec<f32>,
+    /// The box of each slot's point codes, as [`super::build::NodeBoxes::pts`].
+    pub pts_box: Vec<[u8; 6]>,
     pub points: PointSoa,
     /// Material code ranges over all the scene's materials.
     pub ranges: MatRanges,
+    /// `ranges` decoded ([`super::build::MatTable`]).
+    pub mat: super::build::MatTable,
     /// Samples drawn (all slots).
     pub samples: u64,
 }
 
 impl GroupPoints {
     pub fn bytes(&self) -> usize {
-        self.start.len() * (4 + 4 + 12 + 4 + 4) + self.points.bytes()
+        self.start.len() * (4 + 4 + 12 + 4 + 4 + 6) + self.points.bytes()
     }
 }
 
@@ -259,7 +263,7 @@ pub fn build(materials: &[Material], tree_meshes: &[(&Mesh, Vec<u32>)], leaves: 
             (grid_lo, h, step, pts, drawn)
         })
         .collect();
-    let mut g = GroupPoints { ranges, ..Default::default() };
+    let mut g = GroupPoints { mat: super::build::MatTable::of(&ranges), ranges, ..Default::default() };
     for (grid_lo, h, step, pts, drawn) in built {
         g.start.push(g.points.len() as u32);
         g.count.push(pts.len() as u32);
@@ -267,6 +271,10 @@ pub fn build(materials: &[Material], tree_meshes: &[(&Mesh, Vec<u32>)], leaves: 
         g.h.push(if pts.is_empty() { 0.0 } else { h });
         g.step.push(step);
         g.samples += drawn;
+        let (lo, hi) = pts.iter().fold(([u8::MAX; 3], [0u8; 3]), |(lo, hi), r| {
+            (std::array::from_fn(|k| lo[k].min(r.g[k])), std::array::from_fn(|k| hi[k].max(r.g[k])))
+        });
+        g.pts_box.push(if pts.is_empty() { [0; 6] } else { [lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]] });
         let p = &mut g.points;
         for r in pts {
             p.qx.push(r.g[0]);
@@ -351,7 +359,12 @@ mod tests {
             // Cover codes step by 1/64 of h² per point.
             let tol = 0.02 * want + (b - a) as f32 * h * h / 128.0;
             assert!((got - want).abs() <= tol, "slot {s}: points hold {got}, instances {want} (± {tol})");
-            // Every point lies in the slot's box (up to half a voxel: centres of the cells).
+            // Every point lies in the slot's box (up to half a voxel: centres of the cells), and
+            // its codes in the slot's code box, which they span.
+            let qb = g.pts_box[s];
+            for (k, q) in [&g.points.qx, &g.points.qy, &g.points.qz].into_iter().enumerate() {
+                assert_eq!((q[a..b].iter().min(), q[a..b].iter().max()), (Some(&qb[k]), Some(&qb[k + 3])), "slot {s} axis {k}");
+            }
             for i in a..b {
                 let st = g.step[s];
                 let p = g.grid_lo[s] + (Vec3::new(g.points.qx[i] as f32, g.points.qy[i] as f32, g.points.qz[i] as f32) + 0.5) * st;

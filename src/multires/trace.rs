@@ -48,7 +48,7 @@
 //! and angle.
 
 use super::abuffer::{ABuffer, Elem, Frag, Piece};
-use super::build::{mat_props, BuildParams, MatRanges, PointSoa, PointTree, TriSoa, NO_CHILD};
+use super::build::{mat_props, BuildParams, MatTable, PointSoa, PointTree, TriSoa, NO_CHILD};
 use super::cone::{self, Cone, Outgoing};
 use super::group::GroupPoints;
 use super::mass::{gauss_tri_mass_8, gauss_tri_mass_x8};
@@ -63,7 +63,7 @@ use rayon::prelude::*;
 use std::collections::BinaryHeap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
-use wide::{f32x8, i32x8, u16x8, u8x16};
+use wide::{f32x4, f32x8, i32x8, u16x8, u32x8, u8x16};
 
 /// Gaussian cut-off (§4.4 footnote: weights below 2% are clipped): q ≤ ln 50.
 pub const Q_CUT: f32 = 3.912_023;
@@ -794,8 +794,9 @@ pub fn node_test_1(cone: &Cone, cx: &[f32], cy: &[f32], cz: &[f32], r: &[f32], c
 /// footprint's decomposition at the centre depth (as [`NodeHits`]), or None. The traversal's
 /// test of one sphere (an instance's root, the instance tree's root): inlined there, it fills
 /// no eight-lane [`NodeHits`] (about 200 bytes) for the one lane read (17 instructions of
-/// a test's 355).
-#[inline]
+/// a test's 355). Always inlined: called, it passed its result through memory (0.3 % of
+/// `complex`'s cone instructions).
+#[inline(always)]
 pub fn node_test_one(cone: &Cone, c: Vec3, r: f32, clamp: f32, floor: f32, cut: f32) -> Option<(f32, f32, Eigen2)> {
     let rr = r;
     if !(rr >= 0.0) {
@@ -848,9 +849,12 @@ impl NodeLanes {
     }
 }
 
-/// [`node_test_x8`] without the masked fill ([`NodeLanes`]).
+/// [`node_test_x8`] without the masked fill ([`NodeLanes`]). Inlined into its two traversal
+/// callers (the instance tree's step and `push_children`): called, its 8-lane arguments went
+/// through the stack and its lanes came back through memory (1.9 % of `complex`'s cone
+/// instructions).
 #[allow(clippy::too_many_arguments)]
-#[inline]
+#[inline(always)]
 pub fn node_lanes_x8(
     cone: &Cone,
     cx: &[f32; 8],
@@ -1086,8 +1090,10 @@ impl TriLanes {
 /// repeated the same projection from the triangle's vertex record, a cache miss, for
 /// every survivor). The lanes agree with [`triangle_per_box_2d`] to rounding (tested).
 /// They are written to `out`, which the caller keeps across blocks (stop 65: returned by
-/// value, the 320 bytes were copied once more, 0.6 % of a `complex` frame).
+/// value, the 320 bytes were copied once more, 0.6 % of a `complex` frame). Inlined into the
+/// node visit, its one caller in the traversal (−0.8 % of `spheres`' cone instructions).
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 pub fn tri_footprint_x8_lanes(lc: &Cone, tris: &TriSoa, k: usize, boxe: &Eigen2, clamp: f32, lf: f32, cut: f32, out: &mut TriLanes) -> u8 {
     let sp = f32x8::splat;
     let ld = |a: &Vec<f32>| f32x8::from(<[f32; 8]>::try_from(&a[k..k + 8]).expect("padded to 8"));
@@ -1214,6 +1220,46 @@ pub fn point_q_1(e: &Eigen2, x: f32, y: f32) -> f32 {
     let a = e.cos * x + e.sin * y;
     let b = e.cos * y - e.sin * x;
     a * a / (e.s1 * e.s1) + b * b / (e.s2 * e.s2)
+}
+
+/// Whether any point of a block whose grid codes lie in the box `qb` (lowest x, y, z code,
+/// then the highest: [`super::build::NodeBoxes::pts`]) can pass the per-box point test of
+/// [`point_w_x8`] with the decomposition `e` (q ≤ Q_CUT inside the cone's depth range).
+///
+/// *Deviation from the paper* (which weighs every point of a node the node test admits,
+/// §4.6, §5.1), result-neutral: the block's linear maps (a, b, t as affine functions of the
+/// codes, as [`point_w_x8`] folds them) bound a, b and t over the box by interval
+/// arithmetic; q ≥ dist(0, [a])²/s₁² + dist(0, [b])²/s₂². The intervals are widened by
+/// 1e-5 of the terms' magnitudes and the cut by 1e-4, far beyond the packet's rounding, so
+/// no point it would weigh is culled (tested against [`point_w_ref`]).
+#[inline]
+pub fn point_box_may_hit(cone: &Cone, blk: &PointBlock, e: &Eigen2, qb: [u8; 6]) -> bool {
+    // Lanes t, a, b: the block's maps o + q·(column x, y, z) (the columns of the matrix with
+    // rows at, A, B of `point_w_x8`), in one f32x4 step each.
+    let sp = f32x4::splat;
+    let (co, sn) = (e.cos, e.sin);
+    let (e0, p, q) = (f32x4::from([1.0, 0.0, 0.0, 0.0]), f32x4::from([0.0, co, -sn, 0.0]), f32x4::from([0.0, sn, co, 0.0]));
+    let map = |t: f32, x: f32, y: f32| e0.mul_add(sp(t), p.mul_add(sp(x), q * sp(y)));
+    let o = map(blk.t0, blk.x0, blk.y0);
+    let col = [map(blk.at.x, blk.ax.x, blk.ay.x), map(blk.at.y, blk.ax.y, blk.ay.y), map(blk.at.z, blk.ax.z, blk.ay.z)];
+    // The box's centre, half extents and high corner per axis.
+    let (mut mid, mut rad, mut mag) = (o, sp(0.0), o.abs());
+    for k in 0..3 {
+        let (lo, hi) = (qb[k] as f32, qb[k + 3] as f32);
+        let ac = col[k].abs();
+        mid = col[k].mul_add(sp(0.5 * (lo + hi)), mid);
+        rad = ac.mul_add(sp(0.5 * (hi - lo)), rad);
+        mag = ac.mul_add(sp(hi), mag);
+    }
+    // The ranges' distances from 0 (t: from the depth range's middle), widened by the slack.
+    let reach = rad + mag * sp(1e-5);
+    let [mt, ma, mb, _] = mid.to_array();
+    let [rt, ra, rb, _] = reach.to_array();
+    if !(mt + rt >= cone.tmin && mt - rt <= cone.tmax) {
+        return false;
+    }
+    let (da, db) = ((ma.abs() - ra).max(0.0) / e.s1, (mb.abs() - rb).max(0.0) / e.s2);
+    !(da * da + db * db > Q_CUT * (1.0 + 1e-4))
 }
 
 /// The points of a block that carry weight: index in the block, depth along the cone and
@@ -1561,13 +1607,13 @@ pub(crate) fn closest_to_origin(a: glam::Vec2, b: glam::Vec2, c: glam::Vec2) -> 
     }
 }
 
-/// The material properties of a point's code, as [`MatRanges::decode`] gives them. Not
-/// inlined: the traversal decodes only when a hit's code differs from the last one's
-/// (`Tracer::weigh_points`), and inlined, the loop-invariant logarithms of the log-coded
-/// range were hoisted out of the hit loop, 14 `logf` calls for every point block.
-#[inline(never)]
-fn decode_props(ranges: &MatRanges, code: [u8; 7]) -> [f32; 7] {
-    std::array::from_fn(|i| ranges.props[i].decode(code[i]))
+/// The material properties of a point's code, as [`super::build::MatRanges::decode`] gives
+/// them, looked up in the hierarchy's [`MatTable`]. (Inlined since the table: while it decoded,
+/// it was kept out of line, or the log-coded range's loop-invariant logarithms were hoisted
+/// out of the hit loop, 14 `logf` calls for every point block.)
+#[inline]
+fn decode_props(mat: &MatTable, code: [u8; 7]) -> [f32; 7] {
+    std::array::from_fn(|i| mat.props[i][code[i] as usize])
 }
 
 // ---------------------------------------------------------------------------------------
@@ -1877,11 +1923,9 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 let f = ch as usize;
                 let (mut m, mut t_near) = tlas_box_test_x8(&reach, tl, f);
                 if skip_plane {
-                    for l in 0..8 {
-                        if flat.slot[f + l] == own.plane {
-                            m &= !(1 << l);
-                        }
-                    }
+                    // The 8 slots' planes in one compare (a lane loop was 0.3 % of `complex`).
+                    let planes: [u32; 8] = flat.slot[f..f + 8].try_into().expect("8 slots");
+                    m &= !(u32x8::from(planes).simd_eq(u32x8::splat(own.plane)).to_bitmask());
                 }
                 c.add(Counter::instance_tests, 8);
                 let mut eig = [u32::MAX; 8];
@@ -2113,13 +2157,18 @@ impl<'s, 'a> Tracer<'s, 'a> {
         c: &mut Counters,
     ) {
         let blk = PointBlock::new(tree, n, lc);
+        // Per box, a block wholly outside the footprint's ellipse or depth range is culled by
+        // its points' box (on `complex` most blocks the node test admits have no hit).
+        if self.p.eigen != EigenMode::Exact && !point_box_may_hit(lc, &blk, boxe, tree.boxes.pts[n]) {
+            return;
+        }
         let h = tree.spacing(tree.nodes.depth[n]);
         // The fragments' setup only for a block with hits (28 % of them on `complex`).
         if !self.weigh_points(lc, &blk, s, h, boxe, blend, hits, c) {
             return;
         }
         let start = tree.nodes.pt_start[n] as usize;
-        let pts = (&tree.points, start, &tree.ranges);
+        let pts = (&tree.points, start, &tree.mat);
         let leaf = &self.ms.leaves[li as usize];
         let best = |j: usize| Elem::Point { leaf: li, node: n as u32, idx: j as u32 };
         let piece = (best, self.mesh_key(leaf.mesh), self.ms.closed[leaf.mesh as usize]);
@@ -2146,10 +2195,13 @@ impl<'s, 'a> Tracer<'s, 'a> {
         let e = (start + n + 7).min(p.len());
         let q = (&p.qx[start..e], &p.qy[start..e], &p.qz[start..e]);
         let blk = PointBlock { n, ..PointBlock::from_grid(q, &p.normal[start..e], &p.cover[start..e], g.grid_lo[gi], g.step[gi], cone) };
+        if self.p.eigen != EigenMode::Exact && !point_box_may_hit(cone, &blk, boxe, g.pts_box[gi]) {
+            return;
+        }
         let (h, best) = (g.h[gi], |j: usize| Elem::Group { slot: gi as u32, idx: j as u32 });
         if self.weigh_points(cone, &blk, 1.0, h, boxe, blend, hits, c) {
             let piece = (best, self.mesh_key(super::abuffer::ANY_MESH), false);
-            self.insert_points(1.0, h, (p, start, &g.ranges), None, piece, ab, hits, mode);
+            self.insert_points(1.0, h, (p, start, &g.mat), None, piece, ab, hits, mode);
         }
     }
 
@@ -2185,7 +2237,7 @@ impl<'s, 'a> Tracer<'s, 'a> {
         &self,
         s: f32,
         h: f32,
-        (pts, start, ranges): (&PointSoa, usize, &MatRanges),
+        (pts, start, mat): (&PointSoa, usize, &MatTable),
         normal_mat: Option<&Mat3>,
         (best, key, closed): (impl Fn(usize) -> Elem, u32, bool),
         ab: &mut ABuffer,
@@ -2218,12 +2270,12 @@ impl<'s, 'a> Tracer<'s, 'a> {
                 let props = match last {
                     Some((c, p)) if c == code => p,
                     _ => {
-                        let p = decode_props(ranges, code);
+                        let p = decode_props(mat, code);
                         last = Some((code, p));
                         p
                     }
                 };
-                let rgb = pts.rgb[j].map(|q| quant::decode_color(q, ranges.color_hi));
+                let rgb = pts.rgb[j].map(|q| mat.color[q as usize]);
                 f.col = Vec3::from_array(rgb) * w;
                 f.props = props.map(|v| v * w);
                 // The point's normal spread (|mean normal| < 1) carries into the fragment.
@@ -3501,6 +3553,39 @@ mod tests {
         assert!(total > 100, "too few point hits exercised: {total}");
         // The sphere's points face both ways along the cones: both signs were compared.
         assert!(away > 10 && total - away > 10, "{away} of {total} points facing away");
+    }
+
+    /// [`point_box_may_hit`] culls no block with a point either kernel weighs, per box, on
+    /// random and degenerate cones (decompositions at several depths, so the footprint's
+    /// ellipse and depth range cut through the blocks), and culls blocks at all.
+    #[test]
+    fn point_box_cull_keeps_every_weighed_block() {
+        let tree = sphere_tree();
+        let mut s = Sampler::new(5, 0, 0);
+        let (mut refh, mut got) = (PointHits::default(), PointHits::default());
+        let (mut culled, mut kept_hit) = (0, 0);
+        for i in 0..400 {
+            let c = if i % 2 == 0 { rnd_cone(&mut s) } else { degenerate_cone(&mut s, i / 2 % DEGENERATE_KINDS) };
+            let mut cone = aim_at_sphere(&mut s, c);
+            (cone.tmin, cone.tmax) = if i % 3 == 0 { (3.6, 4.2) } else { (0.0, f32::INFINITY) };
+            let floor = if i % 5 == 0 { 0.03 } else { 1e-7 };
+            let be = eigen_1(cone.sigma(1.0 + (i % 7) as f32 * 0.5), 0.125, floor);
+            for node in 0..tree.nodes.len() {
+                if tree.nodes.pt_count[node] == 0 {
+                    continue;
+                }
+                let blk = PointBlock::new(&tree, node, &cone);
+                point_w_ref(&cone, &blk, Some(&be), 0.125, floor, 0.7, &mut refh);
+                point_w_x8(&cone, &blk, Some(&be), 0.125, floor, 0.7, &mut got);
+                if point_box_may_hit(&cone, &blk, &be, tree.boxes.pts[node]) {
+                    kept_hit += (got.len > 0) as usize;
+                } else {
+                    assert!(refh.len == 0 && got.len == 0, "node {node}: culled with {} / {} hits, {cone:?}", refh.len, got.len);
+                    culled += 1;
+                }
+            }
+        }
+        assert!(culled > 1000 && kept_hit > 1000, "culled {culled}, kept with hits {kept_hit}");
     }
 
     /// [`point_w_x8`] against [`point_w_ref`] on the degenerate footprints of
