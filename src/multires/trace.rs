@@ -1229,7 +1229,7 @@ pub fn point_q_1(e: &Eigen2, x: f32, y: f32) -> f32 {
 /// *Deviation from the paper* (which weighs every point of a node the node test admits,
 /// §4.6, §5.1), result-neutral: the block's linear maps (a, b, t as affine functions of the
 /// codes, as [`point_w_x8`] folds them) bound a, b and t over the box by interval
-/// arithmetic; q ≥ dist(0, [a])²/s₁² + dist(0, [b])²/s₂². The intervals are widened by
+/// arithmetic; q ≥ dist(0, \[a\])²/s₁² + dist(0, \[b\])²/s₂². The intervals are widened by
 /// 1e-5 of the terms' magnitudes and the cut by 1e-4, far beyond the packet's rounding, so
 /// no point it would weigh is culled (tested against [`point_w_ref`]).
 #[inline]
