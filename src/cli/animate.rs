@@ -803,8 +803,8 @@ fn hit_colliders_x8(rays: &[Ray], colliders: &[Collider], boxes: Option<(Vec3, V
     let zero = f32x8::ZERO;
     let mut nb = [zero; 3];
     let skip_boxes = boxes.is_some_and(|(lo, hi)| {
-        let finite =
-            inv.iter().fold(f32x8::splat(-1.0).simd_eq(f32x8::splat(-1.0)), |m, v| m & v.abs().simd_lt(f32x8::splat(f32::INFINITY)));
+        let inf = f32x8::splat(f32::INFINITY);
+        let finite = inv[0].abs().simd_lt(inf) & inv[1].abs().simd_lt(inf) & inv[2].abs().simd_lt(inf);
         if finite.to_bitmask() != 0xff {
             return false;
         }
