@@ -974,6 +974,41 @@ fn animate_cost_maps_beside_the_frames() {
     }
 }
 
+/// The shadow-ray counters per frame: every shadow ray counted once (their sum is the
+/// `rays_shadow` counter), those entering a root sphere among them and those occluded among
+/// those, their tests a part of all tests; occlusion is a function of the ray and the frame,
+/// so the occluded counts agree in every update mode while the entered ones follow each
+/// mode's root sphere (`refit` bounds by boxes and counts none).
+#[test]
+fn animate_counts_the_shadow_rays() {
+    let modes = ["naive", "lazy", "lazy-cache", "refit"];
+    let runs: Vec<serde_json::Value> = modes.iter().map(|m| small_bend(&format!("shadowctr_{m}"), &["--update", m]).0).collect();
+    let col = |v: &serde_json::Value, k: &str| -> Vec<u64> {
+        v["per_frame"].as_array().unwrap().iter().map(|r| r[k].as_u64().unwrap()).collect()
+    };
+    for (m, v) in modes.iter().zip(&runs) {
+        let (rays, entered, occluded) = (col(v, "shadow_rays"), col(v, "shadow_entered"), col(v, "shadow_occluded"));
+        assert_eq!(rays.iter().sum::<u64>(), v["counters"]["rays_shadow"].as_u64().unwrap(), "{m}");
+        for f in 0..rays.len() {
+            if *m != "refit" {
+                assert!(
+                    occluded[f] <= entered[f] && entered[f] < rays[f],
+                    "{m} frame {f}: {} occluded, {} entered, {} rays",
+                    occluded[f],
+                    entered[f],
+                    rays[f]
+                );
+            }
+            assert!(occluded[f] > 0, "{m} frame {f}: no shadow on the floor");
+        }
+        let (st, all) =
+            (col(v, "shadow_tests"), col(v, "sphere_tests").iter().zip(col(v, "leaf_tests")).map(|(a, b)| a + b).collect::<Vec<_>>());
+        assert!(st.iter().zip(&all).all(|(a, b)| a > &0 && a < b), "{m}: shadow tests {st:?} of {all:?}");
+        assert_eq!(occluded, col(&runs[0], "shadow_occluded"), "{m} against naive");
+    }
+    assert!(col(&runs[3], "shadow_entered").iter().all(|&e| e == 0));
+}
+
 /// `--warm-pass` times a second render of every frame (hierarchy already updated) apart
 /// from the frame's own time, which `render_seconds` still sums.
 #[test]

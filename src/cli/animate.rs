@@ -194,6 +194,12 @@ pub struct FrameRow {
     /// Ellipse hits of surfels whose whole leaf ball is clipped, rejected before the MLS
     /// iteration (not in `mls_runs`).
     pub clipped_early: u64,
+    /// Shadow rays: traced, entering an object's root sphere, occluded, and their sphere and
+    /// leaf tests (`DeformCounters::shadow_rays` and after).
+    pub shadow_rays: u64,
+    pub shadow_entered: u64,
+    pub shadow_occluded: u64,
+    pub shadow_tests: u64,
     /// `--warm-pass`: the same frame's rays again, with its hierarchy already updated.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub warm_seconds: Option<f64>,
@@ -566,6 +572,10 @@ fn animate_in_pool(a: &AnimateArgs, mode: UpdateMode, threads: usize) -> Result<
             cache_hits: dc.cache_hits,
             clipped: dc.clipped,
             clipped_early: dc.clipped_early,
+            shadow_rays: dc.shadow_rays,
+            shadow_entered: dc.shadow_entered,
+            shadow_occluded: dc.shadow_occluded,
+            shadow_tests: dc.shadow_tests,
             warm_seconds,
             warm_sphere_tests,
         });

@@ -517,6 +517,15 @@ pub struct DeformCounters {
     /// The cached node gave a hit (under the nearest-ellipse rule: the first pass's candidate,
     /// which may still be rejected).
     pub cache_hits: u64,
+    /// Shadow rays (`occluded*`, valid ones): asked, those whose segment entered some
+    /// object's root sphere (sphere-tree modes; 0 under `refit`), those occluded, and the
+    /// sphere and leaf tests they took (a part of `sphere_tests` + `leaf_tests`). Where the
+    /// any-hit rays' work goes: rays that enter and miss cost the most and no cache of
+    /// their occluder can shorten them (BENCHMARKS.md, "Stop 87").
+    pub shadow_rays: u64,
+    pub shadow_entered: u64,
+    pub shadow_occluded: u64,
+    pub shadow_tests: u64,
     /// `sphere_tests` inside the objects' sphere trees by the tested node's level (0: the
     /// roots; deeper than [`LEVELS`] − 1 counts in the last). The instance tree's tests and
     /// the `refit` mode's box tests are not included, so in a scene of one object the levels
@@ -545,6 +554,10 @@ impl DeformCounters {
         self.clipped_early += o.clipped_early;
         self.cache_lookups += o.cache_lookups;
         self.cache_hits += o.cache_hits;
+        self.shadow_rays += o.shadow_rays;
+        self.shadow_entered += o.shadow_entered;
+        self.shadow_occluded += o.shadow_occluded;
+        self.shadow_tests += o.shadow_tests;
         for (a, b) in self.level_tests.iter_mut().zip(&o.level_tests) {
             *a += b;
         }
@@ -2147,11 +2160,22 @@ impl DeformTracer {
         if !traceable(ray) || self.frame == 0 {
             return false;
         }
+        let w0 = dc.sphere_tests + dc.leaf_tests;
+        let occluded = self.occluded_scalar(ray, ctr, dc);
+        dc.shadow_rays += 1;
+        dc.shadow_occluded += occluded as u64;
+        dc.shadow_tests += dc.sphere_tests + dc.leaf_tests - w0;
+        occluded
+    }
+
+    /// The body of [`occluded_ex`](Self::occluded_ex) (which counts the shadow ray).
+    fn occluded_scalar(&self, ray: &Ray, ctr: &mut Counters, dc: &mut DeformCounters) -> bool {
         if self.mode == UpdateMode::Refit {
             let mut best = Best::new(ray.tfar, self.params.nearest_ellipse);
             return self.refit_traverse(ray, &mut best, true, dc, ctr);
         }
         let mut roots = self.root_hits(ray, ray.tfar, dc, ctr);
+        dc.shadow_entered += !roots.is_empty() as u64;
         // The instances whose root sphere holds the origin last ([`own_last`]).
         roots.sort_by_key(|&(e, _)| e <= ray.tnear);
         let mut stack: Vec<u32> = Vec::with_capacity(64);
@@ -2437,12 +2461,18 @@ impl DeformTracer {
         }
         let pk = packet(rays, valid);
         let tfar = f32x8::from(std::array::from_fn::<f32, 8, _>(|i| if valid & (1 << i) != 0 { rays[i].tfar } else { f32::NEG_INFINITY }));
+        let w0 = dc.sphere_tests + dc.leaf_tests;
         let mut sc = take_scratch();
         self.root_hits_x8(&pk, valid, tfar, dc, ctr, &mut sc.roots);
         own_last(&mut sc.roots, pk.tnear());
+        let entered = sc.roots.iter().fold(0u8, |a, r| a | r.2);
         let stack = &mut sc.any;
         let done = self.occluded_roots_x8(rays, &pk, valid, tfar, &sc.roots, stack, dc, ctr);
         PACKET_SCRATCH.set(sc);
+        dc.shadow_rays += valid.count_ones() as u64;
+        dc.shadow_entered += entered.count_ones() as u64;
+        dc.shadow_occluded += done.count_ones() as u64;
+        dc.shadow_tests += dc.sphere_tests + dc.leaf_tests - w0;
         done
     }
 
