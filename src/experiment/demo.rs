@@ -279,8 +279,72 @@ fn deform_section(a: &DemoArgs, skipped: &mut Vec<String>) -> Result<(String, Ve
     if rows.iter().any(|r| r.scene == "elastic-balls") {
         h_out.push_str(&cost_section(a, &dir, (w, h, frames, detail))?);
     }
+    if !a.quick {
+        let (ph, prows) = paper_setting_section(a, &dir)?;
+        h_out.push_str(&ph);
+        // After the short run's rows: the targets table judges the speed-up on these.
+        rows.extend(prows);
+    }
     h_out.push_str(&size_section(a, &dir, detail)?);
     Ok((h_out, rows))
+}
+
+/// The paper's setting of §5 (Table 1 sizes, 512×384), where the `lazy-cache` ≥ 2× target
+/// is judged: naive and lazy-cache over 90 frames at full detail, one repeat — the README's
+/// `lodtrace bench SEQ --width 512 --height 384 --methods
+/// surfel:update=naive:frames=90,surfel:update=lazy-cache:frames=90` without its repeats
+/// (about 1.5 minutes for the four sequences). Full demo only.
+fn paper_setting_section(a: &DemoArgs, dir: &Path) -> Result<(String, Vec<super::deform_bench::DeformRow>)> {
+    const W: u32 = 512;
+    const H: u32 = 384;
+    let specs: Vec<super::bench::MethodSpec> = ["naive", "lazy-cache"]
+        .iter()
+        .map(|m| super::bench::MethodSpec::parse(&format!("surfel:update={m}:frames=90")))
+        .collect::<Result<_>>()?;
+    let pdir = dir.join("paper");
+    crate::film::io::create_out_dir(&pdir)?;
+    let mut rows = Vec::new();
+    for seq in crate::deform::Sequence::BUILTIN {
+        if !a.quiet {
+            crate::status!("demo: {seq} in the paper's setting ({W}x{H}, 90 frames, full detail): naive and lazy-cache");
+        }
+        match super::deform_bench::run(&[seq.to_string()], &specs, W, H, a.threads, 1, Some(&pdir), a.quiet) {
+            Ok(r) => rows.extend(r),
+            // Said once, above.
+            Err(e) if is_missing_asset(&e) => {}
+            Err(e) => return Err(e),
+        }
+    }
+    if rows.is_empty() {
+        return Ok((String::new(), rows));
+    }
+    bench::write_report(&pdir, &deform_report(W, H, a.threads, rows.clone()))?;
+    let mut h = format!(
+        "<h3>In the paper's setting</h3><p>Naive and lazy-cache at {W}×{H} over 90 frames at full detail (the paper's Table 1 sizes), one run each; the targets table above judges the ≥ 2× speed-up on these rows. Same as <code>lodtrace bench SEQ --width {W} --height {H} --methods surfel:update=naive:frames=90,surfel:update=lazy-cache:frames=90</code> (the README's figures are its best of <code>--repeat 3</code>).</p><table><tr><th>sequence</th><th>update</th><th>surfels</th><th>ms/frame</th><th>vs naive</th><th>update ms/frame</th><th>BV tests/frame</th><th>same image</th></tr>"
+    );
+    for r in &rows {
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.1}</td><td>{:.2}×</td><td>{:.1}</td><td>{:.0}</td><td>{}</td></tr>",
+            r.scene,
+            r.update,
+            r.surfels,
+            r.ms_per_frame,
+            r.speedup_vs_first,
+            r.update_ms_per_frame,
+            r.sphere_tests_per_frame,
+            if r.same_image_as_first { "yes" } else { "NO" },
+        );
+    }
+    h.push_str("</table>");
+    for r in rows.iter().filter(|r| r.update == "lazy-cache") {
+        let _ = write!(
+            h,
+            "<figure><img src=\"deform/paper/{seq}-frame-times.png\"><figcaption>{seq}, {W}×{H}: ms per frame (the paper's Fig. 5)</figcaption></figure>",
+            seq = r.scene
+        );
+    }
+    Ok((h, rows))
 }
 
 /// Where the rays' work goes in `elastic-balls`' last frame, rebuilt tree against lazy tree:
@@ -519,17 +583,21 @@ fn target_rows(reports: &[&BenchReport], deform: &[super::deform_bench::DeformRo
         }
         v
     });
+    // Judged in the paper's setting where the run has it (the full demo), else on the short run.
+    let paper_size = |r: &super::deform_bench::DeformRow| (r.width, r.height, r.frames) == (512, 384, 90);
+    let judged: Vec<&super::deform_bench::DeformRow> =
+        if deform.iter().any(paper_size) { deform.iter().filter(|r| paper_size(r)).collect() } else { deform.iter().collect() };
     let (mut m, mut v) = (Vec::new(), Vec::new());
     for seq in &seqs {
-        let naive = deform.iter().find(|r| r.scene == *seq && r.update == "naive");
-        let lc = deform.iter().filter(plain).find(|r| r.scene == *seq && r.update == "lazy-cache");
+        let naive = judged.iter().find(|r| r.scene == *seq && r.update == "naive");
+        let lc = judged.iter().filter(|r| plain(r)).find(|r| r.scene == *seq && r.update == "lazy-cache");
         if let (Some(n), Some(l)) = (naive, lc) {
             let q = n.ms_per_frame / l.ms_per_frame.max(1e-12);
             m.push(format!("{seq} {q:.2}×"));
             v.push(Some(q >= 2.0));
         }
     }
-    if let Some(r) = deform.first().filter(|_| !m.is_empty()) {
+    if let Some(r) = judged.first().filter(|_| !m.is_empty()) {
         out.push(TargetRow {
             paper: AD,
             target: "lazy-cache ≥ 2× faster per frame than the rebuild (naive); the paper measured 512×384".into(),
@@ -1034,6 +1102,15 @@ mod tests {
             d.iter().cloned().map(|r| super::super::deform_bench::DeformRow { width: 512, height: 384, frames: 90, ..r }).collect();
         let lc = target_rows(&[], &paper).into_iter().find(|r| r.target.starts_with("lazy-cache ≥ 2×")).unwrap();
         assert_eq!(lc.measured, "bend 2.50× (512×384, 90 frames)");
+        // The full demo's rows: the short run's and, after them, the paper's setting, where the
+        // target is judged (here 1.90× there against 2.50× in the short run: not met).
+        let mut both = d.clone();
+        both.extend(paper.iter().cloned().map(|r| super::super::deform_bench::DeformRow {
+            ms_per_frame: if r.update == "naive" { 95.0 } else { r.ms_per_frame * 1.25 },
+            ..r
+        }));
+        let lc = target_rows(&[], &both).into_iter().find(|r| r.target.starts_with("lazy-cache ≥ 2×")).unwrap();
+        assert_eq!((lc.measured.as_str(), lc.status), ("bend 1.90× (512×384, 90 frames)", "not met"));
         assert_eq!(find("updated / tightest").measured, "mean 1.03–1.05, root 1.20–1.30");
         let cache = find("per-ray caching");
         // Judged on the mean, as the paper's 27 % (one sequence below 20 % does not fail it).
