@@ -78,14 +78,15 @@ pub fn spheres_x8(ray: &RayX8, tnear: f32, tfar: f32, cx: &[f32; 8], cy: &[f32; 
     let b = x.mul_add(dx, y.mul_add(dy, z * dz));
     // As in `sphere_1`: |d|²r² − |oc × d|².
     let (cx_, cy_, cz_) = (y.mul_sub(dz, z * dy), z.mul_sub(dx, x * dz), x.mul_sub(dy, y * dx));
-    let disc = (f32x8::splat(ray.dd) * rr).mul_sub(rr, cx_.mul_add(cx_, cy_.mul_add(cy_, cz_ * cz_)));
-    let zero = f32x8::splat(0.0);
-    let s = disc.max(zero).sqrt();
+    // |d|²r·|r|: the same bits as |d|²r² for r ≥ 0, negative for an empty child's r < 0
+    // (−∞, or any negative radius), so that its disc is negative too (or NaN for a NaN r).
+    let disc = (f32x8::splat(ray.dd) * rr).mul_sub(rr.abs(), cx_.mul_add(cx_, cy_.mul_add(cy_, cz_ * cz_)));
+    // NaN where disc < 0 (a miss, or r < 0): every compare below is false there, which
+    // stands in for the tests disc ≥ 0 and r ≥ 0 (4 operations fewer a call; on stop 88's
+    // Intel Xeon the kernel had fallen to 3.2× its scalar reference).
+    let s = disc.sqrt();
     // The interval tests on the unscaled roots b ∓ s against |d|²·[tnear, tfar] (|d|² > 0).
-    let ok = disc.simd_ge(zero)
-        & rr.simd_ge(zero)
-        & (b + s).simd_ge(f32x8::splat(tnear * ray.dd))
-        & (b - s).simd_le(f32x8::splat(tfar * ray.dd));
+    let ok = (b + s).simd_ge(f32x8::splat(tnear * ray.dd)) & (b - s).simd_le(f32x8::splat(tfar * ray.dd));
     (ok.to_bitmask(), ((b - s) * ray.inv_dd).to_array())
 }
 
