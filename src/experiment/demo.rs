@@ -308,12 +308,7 @@ fn paper_setting_section(a: &DemoArgs, dir: &Path) -> Result<(String, Vec<super:
         if !a.quiet {
             crate::status!("demo: {seq} in the paper's setting ({W}x{H}, 90 frames, full detail): naive and lazy-cache");
         }
-        match super::deform_bench::run(&[seq.to_string()], &specs, W, H, a.threads, 1, Some(&pdir), a.quiet) {
-            Ok(r) => rows.extend(r),
-            // Said once, above.
-            Err(e) if is_missing_asset(&e) => {}
-            Err(e) => return Err(e),
-        }
+        rows.extend(run_unless_missing(seq, &specs, (W, H), a.threads, Some(&pdir), a.quiet)?);
     }
     if rows.is_empty() {
         return Ok((String::new(), rows));
@@ -345,6 +340,22 @@ fn paper_setting_section(a: &DemoArgs, dir: &Path) -> Result<(String, Vec<super:
         );
     }
     Ok((h, rows))
+}
+
+/// One sequence's rows of `specs` at `size` (one repeat), none if its mesh is missing (the
+/// demo's first Adams run names the skipped sequences once).
+fn run_unless_missing(
+    seq: &str,
+    specs: &[super::bench::MethodSpec],
+    (w, h): (u32, u32),
+    threads: usize,
+    out: Option<&Path>,
+    quiet: bool,
+) -> Result<Vec<super::deform_bench::DeformRow>> {
+    match super::deform_bench::run(&[seq.to_string()], specs, w, h, threads, 1, out, quiet) {
+        Err(e) if is_missing_asset(&e) => Ok(Vec::new()),
+        r => r,
+    }
 }
 
 /// Where the rays' work goes in `elastic-balls`' last frame, rebuilt tree against lazy tree:
@@ -396,12 +407,7 @@ fn size_section(a: &DemoArgs, dir: &Path, detail: f32) -> Result<String> {
     let mut rows = Vec::new();
     for seq in crate::deform::Sequence::BUILTIN {
         for &(w, h) in sizes {
-            match super::deform_bench::run(&[seq.to_string()], &specs, w, h, a.threads, 1, None, true) {
-                Ok(r) => rows.extend(r),
-                // Said once, above.
-                Err(e) if is_missing_asset(&e) => {}
-                Err(e) => return Err(e),
-            }
+            rows.extend(run_unless_missing(seq, &specs, (w, h), a.threads, None, true)?);
         }
     }
     if rows.is_empty() {

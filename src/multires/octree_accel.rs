@@ -68,7 +68,8 @@ impl RayX8 {
     }
 }
 
-/// The ray against 8 spheres: bit mask of hits within [tnear, tfar] and entry distances.
+/// The ray against 8 spheres: bit mask of hits within [tnear, tfar] and entry distances
+/// (meaningful on the hit lanes only; NaN where the ray misses a sphere's line).
 #[inline]
 pub fn spheres_x8(ray: &RayX8, tnear: f32, tfar: f32, cx: &[f32; 8], cy: &[f32; 8], cz: &[f32; 8], r: &[f32; 8]) -> (u32, [f32; 8]) {
     let [ox, oy, oz] = ray.o;
