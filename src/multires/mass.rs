@@ -117,20 +117,17 @@ pub fn gauss_tri_mass_x8(q: [Vec2; 3]) -> f32 {
     let orient = area2.signum();
     // Edge i is near when its signed distance s_i = orient·(e × −p)/|e| ≤ FAR, tested
     // without the square root: s_i·|e| ≤ FAR·|e|.
+    // The fast path below needs the nearest edge only when it is the one near edge, so the
+    // last near edge found is it (no distance compared; the division that ranked the near
+    // edges cost the full path, small triangles with every edge near, 3 of them a call).
     let (mut near, mut nearest) = (0, 0);
-    let mut best = f32::INFINITY;
     for i in 0..3 {
         let (p, r) = (q[i], q[(i + 1) % 3]);
         let e = r - p;
         let (num, l2) = (orient * e.perp_dot(-p), e.length_squared());
         if l2 > 0.0 && (num <= 0.0 || num * num <= FAR * FAR * l2) {
             near += 1;
-            // Nearest = smallest s_i; compare s_i < s_j without roots via sign and square.
-            let si2 = num * num / l2;
-            let key = if num <= 0.0 { -si2 } else { si2 };
-            if key < best {
-                (best, nearest) = (key, i);
-            }
+            nearest = i;
         }
     }
     if near <= 1 {
