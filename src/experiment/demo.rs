@@ -205,10 +205,15 @@ fn deform_setting(quick: bool) -> (u32, u32, u32, f32) {
 /// cache cuts the tests as in §4.2.2 (BENCHMARKS.md, "Caching (stop 34)" and "Stop 60").
 fn deform_specs(quick: bool) -> Result<Vec<super::bench::MethodSpec>> {
     let (_, _, frames, detail) = deform_setting(quick);
-    ["naive", "lazy", "lazy-cache", "refit", "lazy:ordered=0", "lazy-cache:ordered=0:climb=1"]
-        .iter()
-        .map(|m| super::bench::MethodSpec::parse(&format!("surfel:update={m}:frames={frames}:detail={detail}")))
-        .collect()
+    surfel_specs(
+        &["naive", "lazy", "lazy-cache", "refit", "lazy:ordered=0", "lazy-cache:ordered=0:climb=1"],
+        &format!(":frames={frames}:detail={detail}"),
+    )
+}
+
+/// `surfel:update=MODE` bench specs, one per mode, each followed by `opts` (`:key=value…`).
+fn surfel_specs(modes: &[&str], opts: &str) -> Result<Vec<super::bench::MethodSpec>> {
+    modes.iter().map(|m| super::bench::MethodSpec::parse(&format!("surfel:update={m}{opts}"))).collect()
 }
 
 /// Adams et al.: every built-in sequence in the four update modes (same recorded motion;
@@ -297,10 +302,7 @@ fn deform_section(a: &DemoArgs, skipped: &mut Vec<String>) -> Result<(String, Ve
 fn paper_setting_section(a: &DemoArgs, dir: &Path) -> Result<(String, Vec<super::deform_bench::DeformRow>)> {
     const W: u32 = 512;
     const H: u32 = 384;
-    let specs: Vec<super::bench::MethodSpec> = ["naive", "lazy-cache"]
-        .iter()
-        .map(|m| super::bench::MethodSpec::parse(&format!("surfel:update={m}:frames=90")))
-        .collect::<Result<_>>()?;
+    let specs = surfel_specs(&["naive", "lazy-cache"], ":frames=90")?;
     let pdir = dir.join("paper");
     crate::film::io::create_out_dir(&pdir)?;
     let mut rows = Vec::new();
@@ -398,10 +400,7 @@ fn cost_section(a: &DemoArgs, dir: &Path, (w, h, frames, detail): (u32, u32, u32
 /// are traced.
 fn size_section(a: &DemoArgs, dir: &Path, detail: f32) -> Result<String> {
     let sizes: &[(u32, u32)] = if a.quick { &[(48, 36), (96, 72), (192, 144)] } else { &[(96, 72), (192, 144), (384, 288), (768, 576)] };
-    let specs: Vec<super::bench::MethodSpec> = ["naive", "lazy-cache", "auto"]
-        .iter()
-        .map(|m| super::bench::MethodSpec::parse(&format!("surfel:update={m}:frames=16:detail={detail}")))
-        .collect::<Result<_>>()?;
+    let specs = surfel_specs(&["naive", "lazy-cache", "auto"], &format!(":frames=16:detail={detail}"))?;
     let sdir = dir.join("sizes");
     crate::film::io::create_out_dir(&sdir)?;
     let mut rows = Vec::new();
