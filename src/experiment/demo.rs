@@ -294,15 +294,19 @@ fn deform_section(a: &DemoArgs, skipped: &mut Vec<String>) -> Result<(String, Ve
     Ok((h_out, rows))
 }
 
+/// Width, height and frames of Adams et al.'s setting (§5, 512×384; 90 frames), where the
+/// `lazy-cache` ≥ 2× target is judged ([`paper_setting_section`], [`target_rows`]).
+const PAPER_SETTING: (u32, u32, u32) = (512, 384, 90);
+
 /// The paper's setting of §5 (Table 1 sizes, 512×384), where the `lazy-cache` ≥ 2× target
 /// is judged: naive and lazy-cache over 90 frames at full detail, one repeat — the README's
 /// `lodtrace bench SEQ --width 512 --height 384 --methods
 /// surfel:update=naive:frames=90,surfel:update=lazy-cache:frames=90` without its repeats
 /// (about 1.5 minutes for the four sequences). Full demo only.
 fn paper_setting_section(a: &DemoArgs, dir: &Path) -> Result<(String, Vec<super::deform_bench::DeformRow>)> {
-    const W: u32 = 512;
-    const H: u32 = 384;
-    let specs = surfel_specs(&["naive", "lazy-cache"], ":frames=90")?;
+    const W: u32 = PAPER_SETTING.0;
+    const H: u32 = PAPER_SETTING.1;
+    let specs = surfel_specs(&["naive", "lazy-cache"], &format!(":frames={}", PAPER_SETTING.2))?;
     let pdir = dir.join("paper");
     crate::film::io::create_out_dir(&pdir)?;
     let mut rows = Vec::new();
@@ -589,7 +593,7 @@ fn target_rows(reports: &[&BenchReport], deform: &[super::deform_bench::DeformRo
         v
     });
     // Judged in the paper's setting where the run has it (the full demo), else on the short run.
-    let paper_size = |r: &super::deform_bench::DeformRow| (r.width, r.height, r.frames) == (512, 384, 90);
+    let paper_size = |r: &super::deform_bench::DeformRow| (r.width, r.height, r.frames) == PAPER_SETTING;
     let judged: Vec<&super::deform_bench::DeformRow> =
         if deform.iter().any(paper_size) { deform.iter().filter(|r| paper_size(r)).collect() } else { deform.iter().collect() };
     let (mut m, mut v) = (Vec::new(), Vec::new());
@@ -614,7 +618,7 @@ fn target_rows(reports: &[&BenchReport], deform: &[super::deform_bench::DeformRo
                 r.frames,
                 // The demo's short run: fewer surfels and frames make the rebuild cheaper against
                 // the rays than in the paper's setting, which the README's bench command runs.
-                if (r.width, r.height, r.frames) == (512, 384, 90) {
+                if paper_size(r) {
                     ""
                 } else {
                     "; a short run: the target is judged at 512×384 over 90 frames, the README's `lodtrace bench` command"
