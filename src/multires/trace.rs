@@ -740,8 +740,11 @@ pub fn boxes_x8(rc: &BoxReach, b: &Bounds, f: usize) -> (u32, [f32; 8]) {
         let (o, inv) = (sp(rc.org[k]), sp(rc.inv_dir[k]));
         let t0 = (ld(b.lo[k]) - m - o) * inv;
         let t1 = (ld(b.hi[k]) + m - o) * inv;
-        tn = tn.max(t0.min(t1));
-        tf = tf.min(t0.max(t1));
+        // `fast_` (one instruction, not three): t0 and t1 are NaN together or not at all
+        // (only a NaN origin or direction makes them NaN), and a NaN slab as the first
+        // operand yields the running bound, as the scalar reference's NaN-ignoring max does.
+        tn = t0.fast_min(t1).fast_max(tn);
+        tf = t0.fast_max(t1).fast_min(tf);
     }
     let ok = tn.simd_le(tf) & r.simd_ge(sp(0.0));
     (ok.to_bitmask(), tn.to_array())
@@ -875,7 +878,7 @@ pub fn node_lanes_x8(
     let t = dot(cone.dir);
     let zero = f32x8::splat(0.0);
     let tmin = f32x8::splat(cone.tmin);
-    let t_lo = (t - rv).max(tmin).fast_max(zero);
+    let t_lo = (t - rv).fast_max(tmin).fast_max(zero);
     let t_hi = (t + rv).fast_max(zero);
     let tc = t.fast_max(zero);
     let sig = |tt: f32x8| cone.sigma_x8(tt);
@@ -1025,8 +1028,8 @@ pub fn tri_bound_x8(
     let (x, y, t) = (dot(cone.u), dot(cone.v), dot(cone.dir));
     let zero = f32x8::splat(0.0);
     let tmin = f32x8::splat(cone.tmin);
-    let lo = (t - rv).max(tmin).fast_max(zero);
-    let hi = (t + rv).max(tmin).fast_max(zero);
+    let lo = (t - rv).fast_max(tmin).fast_max(zero);
+    let hi = (t + rv).fast_max(tmin).fast_max(zero);
     let (co, sn) = (boxe.cos, boxe.sin);
     // a₁ᵀΣa₁ = A·a + B·b + C·c with scalar weights of the box's axes, likewise a₂.
     let (w1a, w1b, w1c) = (f32x8::splat(co * co), f32x8::splat(2.0 * co * sn), f32x8::splat(sn * sn));
@@ -1039,7 +1042,7 @@ pub fn tri_bound_x8(
     let h2 = ha * w2a + hb * w2b + hc * w2c;
     let fl = f32x8::splat(floor);
     let e1 = l1.max(h1).fast_max(zero).sqrt().fast_max(fl);
-    let e2 = l2.max(h2).fast_max(zero).sqrt().max(f32x8::splat(clamp) * e1).fast_max(fl);
+    let e2 = l2.max(h2).fast_max(zero).sqrt().fast_max(f32x8::splat(clamp) * e1).fast_max(fl);
     let a = f32x8::splat(co) * x + f32x8::splat(sn) * y;
     let b = f32x8::splat(co) * y - f32x8::splat(sn) * x;
     let (rc, sl) = (f32x8::splat(cut), f32x8::splat(TRI_BOUND_SLACK));
@@ -1109,24 +1112,27 @@ pub fn tri_footprint_x8_lanes(lc: &Cone, tris: &TriSoa, k: usize, boxe: &Eigen2,
     let f = [d[2][0] - d[0][0], d[2][1] - d[0][1], d[2][2] - d[0][2]];
     let ng = [e[1] * f[2] - e[2] * f[1], e[2] * f[0] - e[0] * f[2], e[0] * f[1] - e[1] * f[0]];
     let den = dot(&ng, lc.dir);
-    let (tlo, thi) = (tv[0].min(tv[1]).min(tv[2]), tv[0].max(tv[1]).max(tv[2]));
+    // `fast_` min and max throughout (one instruction, not three): a NaN here comes from a
+    // NaN vertex or cone and reaches the lane's q, whose `finite` keeps the lane for the
+    // full test; e1 and e2 are never NaN (`fast_max(zero)` before the root).
+    let (tlo, thi) = (tv[0].fast_min(tv[1]).fast_min(tv[2]), tv[0].fast_max(tv[1]).fast_max(tv[2]));
     let ng_len = (ng[0] * ng[0] + ng[1] * ng[1] + ng[2] * ng[2]).sqrt();
     let plane = den.abs().simd_gt(sp(1e-12) * ng_len);
     let num = d[0][0] * ng[0] + d[0][1] * ng[1] + d[0][2] * ng[2];
     let t_plane = plane.bitselect(num / den, (tlo + thi) * sp(0.5));
-    let t_ref = t_plane.is_finite().bitselect(t_plane.max(tlo).min(thi), tlo);
-    let (sa, sb, sc) = lc.sigma_x8(t_ref.max(sp(lc.tmin)).fast_max(sp(0.0)));
+    let t_ref = t_plane.is_finite().bitselect(t_plane.fast_max(tlo).fast_min(thi), tlo);
+    let (sa, sb, sc) = lc.sigma_x8(t_ref.fast_max(sp(lc.tmin)).fast_max(sp(0.0)));
     let zero = sp(0.0);
     let e1 = (sa * sp(co * co) + sb * sp(2.0 * co * sn) + sc * sp(sn * sn)).fast_max(zero).sqrt().fast_max(sp(lf));
-    let e2 = (sa * sp(sn * sn) - sb * sp(2.0 * co * sn) + sc * sp(co * co)).fast_max(zero).sqrt().max(sp(clamp) * e1).fast_max(sp(lf));
+    let e2 = (sa * sp(sn * sn) - sb * sp(2.0 * co * sn) + sc * sp(co * co)).fast_max(zero).sqrt().fast_max(sp(clamp) * e1).fast_max(sp(lf));
     let (i1, i2) = (sp(1.0) / e1, sp(1.0) / e2);
     let q = |j: usize| (dot(&d[j], a1) * i1, dot(&d[j], a2) * i2);
     let (q0, q1, q2) = (q(0), q(1), q(2));
     let c = sp(cut * (1.0 + 1e-4));
-    let out_box = q0.0.min(q1.0).min(q2.0).simd_gt(c)
-        | q0.1.min(q1.1).min(q2.1).simd_gt(c)
-        | q0.0.max(q1.0).max(q2.0).simd_lt(-c)
-        | q0.1.max(q1.1).max(q2.1).simd_lt(-c);
+    let out_box = q0.0.fast_min(q1.0).fast_min(q2.0).simd_gt(c)
+        | q0.1.fast_min(q1.1).fast_min(q2.1).simd_gt(c)
+        | q0.0.fast_max(q1.0).fast_max(q2.0).simd_lt(-c)
+        | q0.1.fast_max(q1.1).fast_max(q2.1).simd_lt(-c);
     // Edge p → r with the origin on the far side from the third vertex, farther than c.
     let area = (q1.0 - q0.0) * (q2.1 - q0.1) - (q1.1 - q0.1) * (q2.0 - q0.0);
     let sign = area.simd_lt(zero).bitselect(sp(-1.0), sp(1.0));
@@ -1140,7 +1146,7 @@ pub fn tri_footprint_x8_lanes(lc: &Cone, tris: &TriSoa, k: usize, boxe: &Eigen2,
     out.qx = [q0.0.to_array(), q1.0.to_array(), q2.0.to_array()];
     out.qy = [q0.1.to_array(), q1.1.to_array(), q2.1.to_array()];
     out.tv = tv.map(|v| v.to_array());
-    out.size = e1.max(e2).to_array();
+    out.size = e1.fast_max(e2).to_array();
     !((out_box | out_edge) & finite).to_bitmask() as u8
 }
 
