@@ -878,6 +878,8 @@ pub fn node_lanes_x8(
     let t = dot(cone.dir);
     let zero = f32x8::splat(0.0);
     let tmin = f32x8::splat(cone.tmin);
+    // A NaN start depth becomes `tmin` in `fast_max`, as in the reference; the maxima of
+    // σ at the two depths below stay NaN-ignoring (one side alone can overflow to NaN).
     let t_lo = (t - rv).fast_max(tmin).fast_max(zero);
     let t_hi = (t + rv).fast_max(zero);
     let tc = t.fast_max(zero);
@@ -1028,6 +1030,7 @@ pub fn tri_bound_x8(
     let (x, y, t) = (dot(cone.u), dot(cone.v), dot(cone.dir));
     let zero = f32x8::splat(0.0);
     let tmin = f32x8::splat(cone.tmin);
+    // As in `node_lanes_x8`: `fast_max` gives a NaN depth `tmin`, as the reference does.
     let lo = (t - rv).fast_max(tmin).fast_max(zero);
     let hi = (t + rv).fast_max(tmin).fast_max(zero);
     let (co, sn) = (boxe.cos, boxe.sin);
