@@ -14,7 +14,7 @@ pub struct DemoArgs {
     /// in it are replaced).
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
-    /// Smaller images, fewer reference samples and frames: about 1 minute on 2 cores instead of about 4.5 (AMD EPYC; 1–4 and 11–13 minutes on a slower machine).
+    /// Smaller images, fewer reference samples and frames: about 1.5 minutes on 2 cores instead of about 7 (Intel Xeon, stop 90; 1–4 and 11–13 minutes on a slower machine).
     #[arg(long)]
     pub quick: bool,
     /// Worker threads (0 = all cores).
@@ -28,6 +28,11 @@ pub struct DemoArgs {
 
 struct Job {
     scene: &'static str,
+    /// The job's folder under the demo's output folder, and its section's heading: the
+    /// scene's name, or another for a second job on the same scene ([`CONE_DIR`]).
+    dir: &'static str,
+    /// What the section shows, above its table (empty: the table says it).
+    intro: &'static str,
     width: u32,
     height: u32,
     methods: String,
@@ -88,15 +93,58 @@ fn jobs(quick: bool) -> Vec<Job> {
     let lod_cb = format!("{},whitted:bvh:spp=4:threads=1,lod:bvh:spp=4:threads=1", lod.join(","));
     let lod = lod.join(",");
     let (lw, lh) = if quick { (256, 256) } else { (512, 512) };
+    let job = |scene: &'static str, (width, height): (u32, u32), methods: String, reference: Option<String>, sweep: Vec<String>| Job {
+        scene,
+        dir: scene,
+        intro: "",
+        width,
+        height,
+        methods,
+        reference,
+        sweep,
+        regions: vec![],
+    };
+    let (full, budget) = cone_full_specs(quick);
+    // Classic cone tracing against multires (§6) on `complex`: primary cones only, with the
+    // exact triangle mass and the default weight, and the whole frame (secondary cones) with
+    // the exact mass, where the classic tracer runs into its time budget. Twice: at the
+    // paper's frame (the quick demo's smaller one) and at 160×120, whose footprints are 4×
+    // wider, because how much the points save grows with the footprint.
+    let primary = CONE_PAIRS.iter().flat_map(|(_, m, c)| [*m, *c]).collect::<Vec<_>>().join(",");
+    let cone_job = |dir: &'static str, intro: &'static str, size: (u32, u32), methods: String| Job {
+        dir,
+        intro,
+        ..job("complex", size, methods, None, vec![])
+    };
     vec![
-        Job { scene: "spheres", width: swd, height: sh, methods: methods.clone(), reference: r(sref), sweep: sw.clone(), regions: vec![] },
-        Job { scene: "complex", width: cw, height: ch, methods, reference: r(cref), sweep: sw.clone(), regions: complex_regions(cw, ch) },
+        job("spheres", (swd, sh), methods.clone(), r(sref), sw.clone()),
+        Job { regions: complex_regions(cw, ch), ..job("complex", (cw, ch), methods, r(cref), sw.clone()) },
+        cone_job(CONE_DIR, CONE_INTRO, (cw, ch), format!("{primary},{full},{budget}")),
+        cone_job(CONE_DIR_SMALL, CONE_INTRO_SMALL, CONE_SMALL, primary),
         // Fig. 8: soft shadows, depth of field, blurry reflections at three roughnesses.
-        Job { scene: "effects", width: swd, height: sh, methods: fx, reference: r(sref), sweep: sw[..1].to_vec(), regions: vec![] },
-        Job { scene: "chessboard", width: lw, height: lh, methods: lod_cb, reference: None, sweep: vec![], regions: vec![] },
-        Job { scene: "cabinet", width: lw, height: lh, methods: lod.clone(), reference: None, sweep: vec![], regions: vec![] },
-        Job { scene: "reflector", width: lw, height: lh, methods: lod, reference: None, sweep: vec![], regions: vec![] },
+        job("effects", (swd, sh), fx, r(sref), sw[..1].to_vec()),
+        job("chessboard", (lw, lh), lod_cb, None, vec![]),
+        job("cabinet", (lw, lh), lod.clone(), None, vec![]),
+        job("reflector", (lw, lh), lod, None, vec![]),
     ]
+}
+
+/// The folders (and headings) of the classic cone jobs ([`jobs`]).
+const CONE_DIR: &str = "complex-classic-cone";
+const CONE_DIR_SMALL: &str = "complex-classic-cone-160x120";
+const CONE_SMALL: (u32, u32) = (160, 120);
+const CONE_INTRO: &str = "Classic cone tracing against multires (§6): <code>cone</code> is the same tracer with the point samples disabled, so every cone meets the triangles themselves. The paper measured the classic tracer 2.8× slower on its complex scene with primary cones only (first four rows: with the exact triangle mass, <code>tri=mass</code>, which weighs a thin leaf by its true coverage, and with the default weight), and with secondary cones its run did not finish (last two rows: the classic tracer stops at its time budget, <code>budget=</code> seconds, and leaves the rest of the image black). How much the points save grows with the footprint against the triangles: the next section repeats the primary rows at 160×120.";
+const CONE_INTRO_SMALL: &str = "The primary rows of the classic cone comparison above at 160×120: the same triangles under wider footprints (four times as wide as at 640×480).";
+
+/// The rows compared in the classic cone jobs, primary cones only: (triangle weight, the
+/// multires spec, the classic cone spec).
+const CONE_PAIRS: [(&str, &str, &str); 2] =
+    [("exact mass", "multires:primary=1:tri=mass", "cone:primary=1:tri=mass"), ("default weight", "multires:primary=1", "cone:primary=1")];
+
+/// The whole frame (secondary cones too) with the exact triangle mass: the multires spec, and
+/// the classic cone spec with its time budget (the paper's run "did not terminate").
+fn cone_full_specs(quick: bool) -> (String, String) {
+    ("multires:tri=mass".into(), format!("cone:tri=mass:budget={}", if quick { 10 } else { 30 }))
 }
 
 /// The `lodtrace bench` run of one demo job.
@@ -105,7 +153,7 @@ fn bench_args(a: &DemoArgs, job: &Job) -> BenchArgs {
         scenes: vec![job.scene.to_string()],
         methods: job.methods.clone(),
         reference: job.reference.clone(),
-        out: Some(a.out.join(job.scene)),
+        out: Some(a.out.join(job.dir)),
         width: job.width,
         height: job.height,
         threads: a.threads,
@@ -134,16 +182,16 @@ fn run_in(a: &DemoArgs) -> Result<()> {
     // `OUT/complex/bench.json` goes was met only at that job, after the jobs before it.
     let mut names = vec!["targets.md".to_string(), "index.html".to_string()];
     for job in jobs(a.quick) {
-        let dir = a.out.join(job.scene);
+        let dir = a.out.join(job.dir);
         if dir.exists() && !dir.is_dir() {
             return Err(Error::Usage(format!(
                 "{}: exists and is not a folder (the demo writes its {} outputs there)",
                 dir.display(),
-                job.scene
+                job.dir
             )));
         }
         let outputs = bench::output_names_unloaded(&bench_args(a, &job), &[job.scene.to_string()])?;
-        names.extend(outputs.into_iter().map(|n| format!("{}/{n}", job.scene)));
+        names.extend(outputs.into_iter().map(|n| format!("{}/{n}", job.dir)));
     }
     crate::film::io::check_out_files(&a.out, &names)?;
     let mut sections = Vec::new();
@@ -151,14 +199,18 @@ fn run_in(a: &DemoArgs) -> Result<()> {
     let mut skipped = Vec::new();
     for job in jobs(a.quick) {
         if let Err(e) = crate::scene::builtin::get(job.scene) {
-            crate::status!("demo: skipping '{}' ({e})", job.scene);
-            skipped.push(format!("{} ({e})", job.scene));
+            // Named once, however many of its jobs are skipped.
+            let what = format!("{} ({e})", job.scene);
+            if !skipped.contains(&what) {
+                crate::status!("demo: skipping '{}' ({e})", job.scene);
+                skipped.push(what);
+            }
             continue;
         }
         if !a.quiet {
             crate::status!(
                 "demo: {} at {}x{}: {} (reference {})",
-                job.scene,
+                job.dir,
                 job.width,
                 job.height,
                 job.methods,
@@ -170,8 +222,12 @@ fn run_in(a: &DemoArgs) -> Result<()> {
         sections.push((job, report));
     }
     let (deform, deform_rows) = deform_section(a, &mut skipped)?;
-    let reports: Vec<&BenchReport> = sections.iter().map(|(_, r)| r).collect();
-    let targets = target_rows(&reports, &deform_rows);
+    // The classic cone jobs' rows are judged apart: their multires rows are not the frames
+    // the other targets are about.
+    let classic = |j: &Job| j.dir == CONE_DIR || j.dir == CONE_DIR_SMALL;
+    let reports: Vec<&BenchReport> = sections.iter().filter(|(j, _)| !classic(j)).map(|(_, r)| r).collect();
+    let cone: Vec<&BenchReport> = sections.iter().filter(|(j, _)| classic(j)).map(|(_, r)| r).collect();
+    let targets = target_rows(&reports, &cone, a.quick, &deform_rows);
     let md = targets_markdown(&targets);
     let p = a.out.join("targets.md");
     crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, md).map_err(|e| Error::io(&p, e)))?;
@@ -473,7 +529,7 @@ fn status_of(v: &[Option<bool>]) -> &'static str {
 /// `complex`, Papaioannou et al.'s chessboard savings and pixel difference, Adams et al.'s
 /// speed-up, radius ratios, cache cut and MLS iterations. Only what the run measured: a
 /// skipped scene or sequence adds no row.
-fn target_rows(reports: &[&BenchReport], deform: &[super::deform_bench::DeformRow]) -> Vec<TargetRow> {
+fn target_rows(reports: &[&BenchReport], cone: &[&BenchReport], quick: bool, deform: &[super::deform_bench::DeformRow]) -> Vec<TargetRow> {
     const WS: &str = "Wand & Straßer";
     const PA: &str = "Papaioannou et al.";
     const AD: &str = "Adams et al.";
@@ -543,6 +599,9 @@ fn target_rows(reports: &[&BenchReport], deform: &[super::deform_bench::DeformRo
             measured: m.join("; "),
             status: status_of(&v),
         });
+    }
+    if let Some(row) = classic_cone_row(cone, quick) {
+        out.push(row);
     }
     // Per-ray LOD on the chessboard (Papaioannou et al. §4).
     let lod: Vec<(&bench::BenchRow, &bench::LodComparison)> =
@@ -675,6 +734,56 @@ fn target_rows(reports: &[&BenchReport], deform: &[super::deform_bench::DeformRo
     out
 }
 
+/// Classic cone tracing against multires (§6), from the classic cone jobs: primary cones
+/// (the paper: 2.8× slower), judged with the exact triangle mass, and the whole frame, which
+/// the classic tracer should not finish within its budget where multires does.
+fn classic_cone_row(cone: &[&BenchReport], quick: bool) -> Option<TargetRow> {
+    let (mut m, mut v) = (Vec::new(), Vec::new());
+    let (full, budget) = cone_full_specs(quick);
+    for rep in cone {
+        let find = |spec: &str| rep.rows.iter().find(|r| r.spec == spec);
+        let mut pairs = Vec::new();
+        for (weight, ms, cs) in CONE_PAIRS {
+            if let (Some(a), Some(b)) = (find(ms), find(cs)) {
+                let q = b.stats.render_seconds / a.stats.render_seconds.max(1e-12);
+                pairs.push(format!("{weight} {q:.2}×"));
+                if weight == CONE_PAIRS[0].0 {
+                    v.push(Some(q > 1.0));
+                }
+            }
+        }
+        if !pairs.is_empty() {
+            m.push(format!("primary cones at {}×{}: {}", rep.width, rep.height, pairs.join(", ")));
+        }
+        if let (Some(a), Some(b)) = (find(&full), find(&budget)) {
+            let pixels = (rep.width as usize * rep.height as usize).max(1);
+            let traced = b.stats.cone_profile.as_ref().map_or(pixels, |p| p.pixel_tests.pixels);
+            if b.stats.finished {
+                m.push(format!(
+                    "whole frame at {}×{} (exact mass): cone finished in {:.1} s, multires {:.1} s",
+                    rep.width, rep.height, b.stats.render_seconds, a.stats.render_seconds
+                ));
+            } else {
+                m.push(format!(
+                    "whole frame at {}×{} (exact mass): cone stopped at its {:.0} s budget with {:.0} % of the pixels traced, multires finished in {:.1} s",
+                    rep.width,
+                    rep.height,
+                    b.stats.render_seconds,
+                    100.0 * traced as f64 / pixels as f64,
+                    a.stats.render_seconds
+                ));
+            }
+            v.push(Some(!b.stats.finished && a.stats.finished));
+        }
+    }
+    (!m.is_empty()).then(|| TargetRow {
+        paper: "Wand & Straßer",
+        target: "classic cone tracing (points disabled) slower than multires: 2.8× with primary cones only; with secondary cones it does not finish (§6; judged with the exact triangle mass)".into(),
+        measured: m.join("; "),
+        status: status_of(&v),
+    })
+}
+
 /// The targets as the page's first table.
 fn targets_html(rows: &[TargetRow]) -> String {
     if rows.is_empty() {
@@ -756,7 +865,11 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
     h.push_str("<h1>lodtrace demo</h1><p>Every method on the built-in paper scenes, rendered one after the other in one process on this machine. Speed-up is the first method's render time divided by each method's. Errors are against the high-sample distributed reference (RMSE and PSNR on the linear, unclamped radiance; mean FLIP on the sRGB display images).</p>");
     h.push_str(top);
     for (job, r) in sections {
-        let _ = write!(h, "<h2>{} ({}×{})</h2><table><tr><th>method</th><th>spec</th><th>threads</th><th>build s</th><th>render s</th><th>Mrays/s</th><th>speed-up</th><th>RMSE</th><th>PSNR dB</th><th>mean FLIP</th></tr>", esc(job.scene), job.width, job.height);
+        let _ = write!(h, "<h2>{} ({}×{})</h2>", esc(job.dir), job.width, job.height);
+        if !job.intro.is_empty() {
+            let _ = write!(h, "<p>{}</p>", job.intro);
+        }
+        h.push_str("<table><tr><th>method</th><th>spec</th><th>threads</th><th>build s</th><th>render s</th><th>Mrays/s</th><th>speed-up</th><th>RMSE</th><th>PSNR dB</th><th>mean FLIP</th></tr>");
         for row in &r.rows {
             let f = |x: Option<f64>, p: usize| x.map(|v| format!("{v:.p$}")).unwrap_or_else(|| super::NA.into());
             let _ = write!(
@@ -775,7 +888,7 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
             );
         }
         h.push_str("</table>");
-        let dir = Path::new(job.scene);
+        let dir = Path::new(job.dir);
         if let Some(reference) = &job.reference {
             let _ = write!(
                 h,
@@ -1082,7 +1195,7 @@ mod tests {
             deform_row("heads", "surfel:update=lazy:ordered=0", "lazy", 60.0, 100.0, Some((1.2, 1.03))),
             deform_row("heads", "surfel:update=lazy-cache:ordered=0:climb=1", "lazy-cache", 60.0, 85.0, Some((1.2, 1.03))),
         ];
-        let t = target_rows(&[&sp, &cb], &d);
+        let t = target_rows(&[&sp, &cb], &[], false, &d);
         let find = |p: &str| t.iter().find(|r| r.target.starts_with(p)).unwrap_or_else(|| panic!("no '{p}' in {t:?}"));
         let ws = find("multires frame ≤ 4×");
         assert_eq!(ws.status, "met");
@@ -1091,7 +1204,7 @@ mod tests {
         // A frame smaller than the paper's is named (a quick demo's); the paper's is not.
         assert!(ws.measured.ends_with("(smaller frames than the paper's: spheres at 4×4, the paper's 512×512; the target is judged at the paper's frames, the README's `lodtrace bench` commands)"), "{}", ws.measured);
         let sp512 = BenchReport { width: 512, height: 512, ..sp.clone() };
-        let ws512 = target_rows(&[&sp512], &[]).into_iter().find(|r| r.target.starts_with("multires frame ≤ 4×")).unwrap();
+        let ws512 = target_rows(&[&sp512], &[], false, &[]).into_iter().find(|r| r.target.starts_with("multires frame ≤ 4×")).unwrap();
         assert!(
             ws512.measured.ends_with("(3.500 s vs 1.000 s); spheres multires:clamp2=1:lod=4: 1.50× (1.500 s vs 1.000 s), within the aim"),
             "{}",
@@ -1109,7 +1222,7 @@ mod tests {
         // In the paper's setting (the README's bench) the figure stands alone.
         let paper: Vec<_> =
             d.iter().cloned().map(|r| super::super::deform_bench::DeformRow { width: 512, height: 384, frames: 90, ..r }).collect();
-        let lc = target_rows(&[], &paper).into_iter().find(|r| r.target.starts_with("lazy-cache ≥ 2×")).unwrap();
+        let lc = target_rows(&[], &[], false, &paper).into_iter().find(|r| r.target.starts_with("lazy-cache ≥ 2×")).unwrap();
         assert_eq!(lc.measured, "bend 2.50× (512×384, 90 frames)");
         // The full demo's rows: the short run's and, after them, the paper's setting, where the
         // target is judged (here 1.90× there against 2.50× in the short run: not met).
@@ -1118,20 +1231,66 @@ mod tests {
             ms_per_frame: if r.update == "naive" { 95.0 } else { r.ms_per_frame * 1.25 },
             ..r
         }));
-        let lc = target_rows(&[], &both).into_iter().find(|r| r.target.starts_with("lazy-cache ≥ 2×")).unwrap();
+        let lc = target_rows(&[], &[], false, &both).into_iter().find(|r| r.target.starts_with("lazy-cache ≥ 2×")).unwrap();
         assert_eq!((lc.measured.as_str(), lc.status), ("bend 1.90× (512×384, 90 frames)", "not met"));
         assert_eq!(find("updated / tightest").measured, "mean 1.03–1.05, root 1.20–1.30");
         let cache = find("per-ray caching");
         // Judged on the mean, as the paper's 27 % (one sequence below 20 % does not fail it).
         assert_eq!((cache.measured.as_str(), cache.status), ("mean 23 % (bend 30 %, heads 15 %)", "met"));
         let low = [d[2].clone(), deform_row("bend", "surfel:update=lazy-cache:ordered=0:climb=1", "lazy-cache", 60.0, 85.0, None)];
-        let rows = target_rows(&[], &low);
+        let rows = target_rows(&[], &[], false, &low);
         assert_eq!(rows.iter().find(|r| r.target.starts_with("per-ray caching")).map(|r| r.status), Some("not met"));
         assert_eq!(find("MLS").status, "met");
         // Nothing measured, nothing claimed.
-        assert!(target_rows(&[], &[]).is_empty());
+        assert!(target_rows(&[], &[], false, &[]).is_empty());
         let md = targets_markdown(&t);
         assert!(md.lines().count() == t.len() + 2 && md.contains("| Wand & Straßer | multires frame"), "{md}");
+    }
+
+    /// The classic cone jobs give their own target row (primary cones judged with the exact
+    /// mass, the whole frame by whether the classic tracer ran out of its budget), and their
+    /// multires rows stay out of the frame-time row against the octree Whitted frame.
+    #[test]
+    fn classic_cone_rows_are_judged_apart() {
+        let (full, budget) = cone_full_specs(false);
+        let mut stopped = stats("cone", "octree", 30.0, &[]);
+        stopped.finished = false;
+        stopped.cone_profile = Some(crate::experiment::run::ConeProfileStats {
+            kinds: Default::default(),
+            pixel_tests: crate::experiment::run::PixelTests { pixels: 4, ..Default::default() },
+        });
+        let big = report(vec![
+            row("complex", CONE_PAIRS[0].1, stats("multires", "octree", 4.0, &[])),
+            row("complex", CONE_PAIRS[0].2, stats("cone", "octree", 3.6, &[])),
+            row("complex", CONE_PAIRS[1].1, stats("multires", "octree", 1.0, &[])),
+            row("complex", CONE_PAIRS[1].2, stats("cone", "octree", 0.9, &[])),
+            row("complex", &full, stats("multires", "octree", 10.0, &[])),
+            row("complex", &budget, stopped),
+        ]);
+        let small = BenchReport {
+            width: 160,
+            height: 120,
+            ..report(vec![
+                row("complex", CONE_PAIRS[0].1, stats("multires", "octree", 1.0, &[])),
+                row("complex", CONE_PAIRS[0].2, stats("cone", "octree", 4.4, &[])),
+            ])
+        };
+        let main = report(vec![row("complex", "whitted:octree", stats("whitted", "octree", 1.0, &[]))]);
+        let t = target_rows(&[&main], &[&big, &small], false, &[]);
+        let cc = t.iter().find(|r| r.target.starts_with("classic cone")).expect("classic cone row");
+        assert_eq!(
+            cc.measured,
+            "primary cones at 4×4: exact mass 0.90×, default weight 0.90×; whole frame at 4×4 (exact mass): cone stopped at its 30 s budget with 25 % of the pixels traced, multires finished in 10.0 s; primary cones at 160×120: exact mass 4.40×"
+        );
+        assert_eq!(cc.status, "partly", "slower at 160×120 and unfinished, not slower at 4×4");
+        // No multires row of these jobs is judged against the octree Whitted frame.
+        assert!(t.iter().all(|r| !r.target.starts_with("multires frame")), "{t:?}");
+        let mut finished = big.clone();
+        finished.rows[5].stats.finished = true;
+        let t = target_rows(&[], &[&finished], false, &[]);
+        let cc = t.iter().find(|r| r.target.starts_with("classic cone")).unwrap();
+        assert!(cc.measured.contains("cone finished in 30.0 s, multires 10.0 s"), "{}", cc.measured);
+        assert_eq!(cc.status, "not met");
     }
 
     /// The page says what each per-image scale means and gives the CPU time saved (the
@@ -1141,6 +1300,8 @@ mod tests {
     fn page_states_scales_cpu_time_and_faster_than_one_spp() {
         let job = |scene: &'static str, sweep: Vec<String>| Job {
             scene,
+            dir: scene,
+            intro: "",
             width: 4,
             height: 4,
             methods: String::new(),
