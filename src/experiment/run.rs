@@ -284,17 +284,9 @@ pub fn run(scene: &Scene, method: Method, accel_kind: AccelKind, opts: &RenderOp
     })
 }
 
-/// The cone tracers of Wand & Straßer: build the point hierarchies, then trace.
-fn run_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &MultiresArgs) -> Result<RunResult> {
-    let (bp, tp) = mr.params(method == Method::Multires)?;
-    opts.validate()?;
-    tp.validate()?;
-    if opts.spp != 1 {
-        return Err(Error::Usage("the cone tracers shoot one cone per pixel: use --spp 1".into()));
-    }
-    // The point hierarchies on the run's threads, as the render.
-    let (ms, build_threads) =
-        crate::core::thread_pool(opts.threads)?.install(|| MultiresScene::build(scene, &bp).map(|m| (m, rayon::current_num_threads())))?;
+/// The `--stats` `hierarchy` figures of the point hierarchies `ms`: totals over its trees (the
+/// paper's Table 1), and the instance-level points.
+pub(crate) fn hierarchy_stats(ms: &MultiresScene) -> HierarchyStats {
     let mut h = HierarchyStats {
         trees: ms.trees.len(),
         seconds: ms.build_seconds,
@@ -313,6 +305,21 @@ fn run_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &MultiresArgs)
         h.max_depth = h.max_depth.max(t.stats.max_depth);
         h.bytes += t.stats.bytes;
     }
+    h
+}
+
+/// The cone tracers of Wand & Straßer: build the point hierarchies, then trace.
+fn run_cone(scene: &Scene, method: Method, opts: &RenderOpts, mr: &MultiresArgs) -> Result<RunResult> {
+    let (bp, tp) = mr.params(method == Method::Multires)?;
+    opts.validate()?;
+    tp.validate()?;
+    if opts.spp != 1 {
+        return Err(Error::Usage("the cone tracers shoot one cone per pixel: use --spp 1".into()));
+    }
+    // The point hierarchies on the run's threads, as the render.
+    let (ms, build_threads) =
+        crate::core::thread_pool(opts.threads)?.install(|| MultiresScene::build(scene, &bp).map(|m| (m, rayon::current_num_threads())))?;
+    let h = hierarchy_stats(&ms);
     let cam = scene.camera.frame(opts.width, opts.height);
     let r = crate::multires::render::render(&ms, &tp, &cam, opts)?;
     Ok(RunResult {
