@@ -107,34 +107,43 @@ fn jobs(quick: bool) -> Vec<Job> {
     let (full, budget) = cone_full_specs(quick);
     // Classic cone tracing against multires (§6) on `complex`: primary cones only, with the
     // exact triangle mass and the default weight, and the whole frame (secondary cones) with
-    // the exact mass, where the classic tracer runs into its time budget. Twice: at the
-    // paper's frame (the quick demo's smaller one) and at 160×120, whose footprints are 4×
-    // wider, because how much the points save grows with the footprint.
+    // the exact mass, where the classic tracer runs into its time budget. At the paper's
+    // frame (the quick demo's smaller one), and the primary cones again at the smaller
+    // frames of [`CONE_SMALL`], whose footprints are wider against the same triangles:
+    // how much the points save grows with the footprint ([`cone_size_plot`]).
     let primary = CONE_PAIRS.iter().flat_map(|(_, m, c)| [*m, *c]).collect::<Vec<_>>().join(",");
     let cone_job = |dir: &'static str, intro: &'static str, size: (u32, u32), methods: String| Job {
         dir,
         intro,
         ..job("complex", size, methods, None, vec![])
     };
-    vec![
+    let mut v = vec![
         job("spheres", (swd, sh), methods.clone(), r(sref), sw.clone()),
         Job { regions: complex_regions(cw, ch), ..job("complex", (cw, ch), methods, r(cref), sw.clone()) },
         cone_job(CONE_DIR, CONE_INTRO, (cw, ch), format!("{primary},{full},{budget}")),
-        cone_job(CONE_DIR_SMALL, CONE_INTRO_SMALL, CONE_SMALL, primary),
+    ];
+    for &(dir, size) in CONE_SMALL.iter().filter(|(_, (w, _))| *w < cw) {
+        v.push(cone_job(dir, CONE_INTRO_SMALL, size, primary.clone()));
+    }
+    v.extend([
         // Fig. 8: soft shadows, depth of field, blurry reflections at three roughnesses.
         job("effects", (swd, sh), fx, r(sref), sw[..1].to_vec()),
         job("chessboard", (lw, lh), lod_cb, None, vec![]),
         job("cabinet", (lw, lh), lod.clone(), None, vec![]),
         job("reflector", (lw, lh), lod, None, vec![]),
-    ]
+    ]);
+    v
 }
 
 /// The folders (and headings) of the classic cone jobs ([`jobs`]).
 const CONE_DIR: &str = "complex-classic-cone";
-const CONE_DIR_SMALL: &str = "complex-classic-cone-160x120";
-const CONE_SMALL: (u32, u32) = (160, 120);
-const CONE_INTRO: &str = "Classic cone tracing against multires (§6): <code>cone</code> is the same tracer with the point samples disabled, so every cone meets the triangles themselves. The paper measured the classic tracer 2.8× slower on its complex scene with primary cones only (first four rows: with the exact triangle mass, <code>tri=mass</code>, which weighs a thin leaf by its true coverage, and with the default weight), and with secondary cones its run did not finish (last two rows: the classic tracer stops at its time budget, <code>budget=</code> seconds, and leaves the rest of the image black). How much the points save grows with the footprint against the triangles: the next section repeats the primary rows at 160×120.";
-const CONE_INTRO_SMALL: &str = "The primary rows of the classic cone comparison above at 160×120: the same triangles under wider footprints (four times as wide as at 640×480).";
+/// The primary rows again at smaller frames (those smaller than the main classic cone job's).
+const CONE_SMALL: [(&str, (u32, u32)); 2] = [("complex-classic-cone-320x240", (320, 240)), ("complex-classic-cone-160x120", (160, 120))];
+/// [`cone_size_plot`]'s file, in [`CONE_DIR`].
+const CONE_PLOT: &str = "classic-cone-vs-size.png";
+const CONE_INTRO: &str = "Classic cone tracing against multires (§6): <code>cone</code> is the same tracer with the point samples disabled, so every cone meets the triangles themselves. The paper measured the classic tracer 2.8× slower on its complex scene with primary cones only (first four rows: with the exact triangle mass, <code>tri=mass</code>, which weighs a thin leaf by its true coverage, and with the default weight), and with secondary cones its run did not finish (last two rows: the classic tracer stops at its time budget, <code>budget=</code> seconds, and leaves the rest of the image black). How much the points save grows with the footprint against the triangles: the next sections repeat the primary rows at smaller frames, and the plot below sets the classic tracer's time against the frame size.";
+const CONE_INTRO_SMALL: &str =
+    "The primary rows of the classic cone comparison above at a smaller frame: the same triangles under wider footprints.";
 
 /// The rows compared in the classic cone jobs, primary cones only: (triangle weight, the
 /// multires spec, the classic cone spec).
@@ -193,6 +202,7 @@ fn run_in(a: &DemoArgs) -> Result<()> {
         let outputs = bench::output_names_unloaded(&bench_args(a, &job), &[job.scene.to_string()])?;
         names.extend(outputs.into_iter().map(|n| format!("{}/{n}", job.dir)));
     }
+    names.push(format!("{CONE_DIR}/{CONE_PLOT}"));
     crate::film::io::check_out_files(&a.out, &names)?;
     let mut sections = Vec::new();
     // What could not run here (meshes missing): named on the page, not only on stderr.
@@ -225,7 +235,7 @@ fn run_in(a: &DemoArgs) -> Result<()> {
     let (deform, deform_rows) = deform_section(a, &mut skipped)?;
     // The classic cone jobs' rows are judged apart: their multires rows are not the frames
     // the other targets are about.
-    let classic = |j: &Job| j.dir == CONE_DIR || j.dir == CONE_DIR_SMALL;
+    let classic = |j: &Job| j.dir == CONE_DIR || CONE_SMALL.iter().any(|(d, _)| *d == j.dir);
     let reports: Vec<&BenchReport> = sections.iter().filter(|(j, _)| !classic(j)).map(|(_, r)| r).collect();
     let cone: Vec<&BenchReport> = sections.iter().filter(|(j, _)| classic(j)).map(|(_, r)| r).collect();
     let mut targets = target_rows(&reports, &cone, a.quick, &deform_rows);
@@ -242,7 +252,11 @@ fn run_in(a: &DemoArgs) -> Result<()> {
         let _ = write!(top, "<p><b>Not run here</b> (missing meshes: <code>tools/setup</code>): {}.</p>", esc(&skipped.join("; ")));
     }
     top.push_str(&targets_html(&targets));
-    let mut html = index_html(&sections, &top);
+    // The classic cone plot after the last classic cone section.
+    let plot = cone_size_plot(&a.out.join(CONE_DIR), &cone)?;
+    let last_cone = sections.iter().rev().find(|(j, _)| classic(j)).map(|(j, _)| j.dir);
+    let extra: Vec<(&str, String)> = last_cone.into_iter().filter(|_| plot).map(|d| (d, cone_plot_html())).collect();
+    let mut html = index_html(&sections, &top, &extra);
     html = html.replace("</body></html>", &format!("{}{deform}</body></html>", hierarchy_html(&hier)));
     let p = a.out.join("index.html");
     crate::film::io::write_atomic(&p, |tmp| std::fs::write(tmp, html).map_err(|e| Error::io(&p, e)))?;
@@ -869,6 +883,52 @@ fn classic_cone_row(cone: &[&BenchReport], quick: bool) -> Option<TargetRow> {
     })
 }
 
+/// The classic tracer's time over multires' for primary cones against the frame size, one
+/// curve per triangle weight ([`CONE_PAIRS`]), with the paper's 2.8× as a line: written to
+/// `dir/`[`CONE_PLOT`] when some frame has a pair; returns whether it was.
+fn cone_size_plot(dir: &Path, cone: &[&BenchReport]) -> Result<bool> {
+    let series = cone_size_series(cone);
+    if series.iter().all(|s| s.1.is_empty()) || !dir.is_dir() {
+        return Ok(false);
+    }
+    super::plot::line_chart_fmt(
+        &dir.join(CONE_PLOT),
+        "Classic cone tracing against multires, primary cones (complex)",
+        "pixels per frame",
+        "classic cone time / multires time (x)",
+        &series,
+        true,
+        &|n| if n >= 1e6 { format!("{} M", super::plot::fmt_axis(n / 1e6)) } else { format!("{} k", super::plot::fmt_axis(n / 1e3)) },
+        Some((2.8, "paper: 2.8x (primary cones, frame size not given)")),
+    )?;
+    Ok(true)
+}
+
+/// [`cone_size_plot`]'s curves: per weight, (pixels per frame, cone ÷ multires), by size.
+fn cone_size_series(cone: &[&BenchReport]) -> Vec<(String, Vec<(f64, f64)>)> {
+    CONE_PAIRS
+        .iter()
+        .map(|(weight, ms, cs)| {
+            let mut pts: Vec<(f64, f64)> = cone
+                .iter()
+                .filter_map(|rep| {
+                    let find = |spec: &str| rep.rows.iter().find(|r| r.spec == spec);
+                    let (a, b) = (find(ms)?, find(cs)?);
+                    Some((rep.width as f64 * rep.height as f64, b.stats.render_seconds / a.stats.render_seconds.max(1e-12)))
+                })
+                .collect();
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+            (weight.to_string(), pts)
+        })
+        .collect()
+}
+
+fn cone_plot_html() -> String {
+    format!(
+        "<p><img src=\"{CONE_DIR}/{CONE_PLOT}\" style=\"max-width:640px\"></p><p>The classic tracer's time over multires' for primary cones, by frame size: above 1 the points pay. They pay more as the frame shrinks and each footprint covers more triangles.</p>"
+    )
+}
+
 /// The targets as the page's first table.
 fn targets_html(rows: &[TargetRow]) -> String {
     if rows.is_empty() {
@@ -944,7 +1004,8 @@ fn esc(s: &str) -> String {
 }
 
 /// The page: its head, `top` (the targets table), then a section per bench job.
-fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
+/// `extra`: more of the page after the section of a job's folder (a plot across jobs).
+fn index_html(sections: &[(Job, BenchReport)], top: &str, extra: &[(&str, String)]) -> String {
     let mut h = String::new();
     h.push_str("<!doctype html><html><head><meta charset=\"utf-8\"><title>lodtrace demo</title><style>body{font-family:sans-serif;margin:2em;max-width:1400px}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}td:nth-child(2),th:nth-child(2){text-align:left}figure{display:inline-block;margin:4px}figcaption{font-size:80%;max-width:320px}img{max-width:320px;image-rendering:pixelated}</style></head><body>");
     h.push_str("<h1>lodtrace demo</h1><p>Every method on the built-in paper scenes, rendered one after the other in one process on this machine. Speed-up is the first method's render time divided by each method's. Errors are against the high-sample distributed reference (RMSE and PSNR on the linear, unclamped radiance; mean FLIP on the sRGB display images).</p>");
@@ -1151,6 +1212,9 @@ fn index_html(sections: &[(Job, BenchReport)], top: &str) -> String {
             }
         }
         let _ = write!(h, "<p><img src=\"{}\" style=\"max-width:640px\"></p>", dir.join("bench-time.png").display());
+        for (_, x) in extra.iter().filter(|(d, _)| *d == job.dir) {
+            h.push_str(x);
+        }
     }
     h.push_str("</body></html>\n");
     h
@@ -1378,6 +1442,31 @@ mod tests {
         assert_eq!(cc.status, "not met");
     }
 
+    /// The classic cone plot's curves: one per weight, the frames in order of size, each
+    /// point the classic tracer's time over multires'; a frame without a pair adds nothing.
+    #[test]
+    fn classic_cone_curves_follow_the_frame_size() {
+        let at = |w: u32, h: u32, mass: (f64, f64), default: Option<(f64, f64)>| {
+            let mut rows = vec![
+                row("complex", CONE_PAIRS[0].1, stats("multires", "octree", mass.0, &[])),
+                row("complex", CONE_PAIRS[0].2, stats("cone", "octree", mass.1, &[])),
+            ];
+            if let Some((m, c)) = default {
+                rows.push(row("complex", CONE_PAIRS[1].1, stats("multires", "octree", m, &[])));
+                rows.push(row("complex", CONE_PAIRS[1].2, stats("cone", "octree", c, &[])));
+            }
+            BenchReport { width: w, height: h, ..report(rows) }
+        };
+        let (big, small) = (at(640, 480, (4.0, 4.8), Some((1.0, 0.8))), at(160, 120, (1.0, 4.4), None));
+        let s = cone_size_series(&[&big, &small]);
+        assert_eq!(s[0].0, "exact mass");
+        assert_eq!(s[0].1.len(), 2);
+        assert_eq!(s[0].1[0].0, 19200.0);
+        assert!((s[0].1[0].1 - 4.4).abs() < 1e-9 && (s[0].1[1].1 - 1.2).abs() < 1e-9, "{s:?}");
+        assert_eq!(s[1].1, vec![(307200.0, 0.8)]);
+        assert!(cone_size_series(&[]).iter().all(|c| c.1.is_empty()));
+    }
+
     /// The hierarchy build's row and the Table 1 section: `complex` from scratch against
     /// the 60 s target, beside the paper's 2003 figures.
     #[test]
@@ -1441,6 +1530,7 @@ mod tests {
         let h = index_html(
             &[(job("chessboard", vec![]), report(vec![lod])), (job("spheres", vec!["distributed:octree".into()]), report(vec![w]))],
             "",
+            &[],
         );
         assert!(h.contains("<th>CPU time saved</th>") && h.contains("<td>17.2 %</td>"), "CPU time column");
         assert!(h.contains("difference to whitted:bvh:spp=4 (magnified: black = 32.9 %)"), "diff caption");
