@@ -2226,7 +2226,8 @@ fn stop_58_inputs_survive_and_odd_geometry_is_refused() {
         ply += &format!("{x} {y} {z} {x} {y} {z} 1e-30\n");
     }
     std::fs::write(p("tiny.ply"), ply).unwrap();
-    std::fs::write(p("latin1.obj"), b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n# caf\xe9\n").unwrap();
+    // In a statement (a comment's bytes are dropped unread since stop 91).
+    std::fs::write(p("latin1.obj"), b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\ng caf\xe9\n").unwrap();
     std::fs::write(p("mac.off"), "OFF\r3 1 0\r0 0 0\r1 0 0\r0 1 0\r3 0 1 2\r").unwrap();
     for (args, says) in [
         (vec!["animate", &p("link.off") as &str, "--frames", "1", "--out", &p("o")], "read it as an input"),
@@ -2314,6 +2315,13 @@ fn stop65_sweep_findings_are_refused() {
         ("plane", "lod:dist=-1", "--lod-distance -1 must be a positive distance"),
         ("bend", "surfel:detail=nan", "method spec 'surfel:detail=nan': detail=NaN out of range (0, 10]"),
         ("plane", "multires:c=x", "bad value 'x' for c: a number"),
+        // The build's other two parameters, by the options they set (stop 91).
+        ("plane", "multires:stay=0", "--stay-reps 0 out of range (1..=1000)"),
+        ("plane", "cone:tdepth=31", "--max-tree-depth 31 out of range (1..=30)"),
+        ("plane", "whitted:embree:stay=2", "stay is a key of multires and cone, and of the accel octree"),
+        // `packet` is the ray tracers' (stop 91: the cone tracers ignored it without a word).
+        ("plane", "multires:packet=1", "packet is a key of the ray tracers"),
+        ("plane", "cone:packet=8", "packet is a key of the ray tracers"),
     ] {
         let mut args = vec!["bench", scene, "--methods", spec];
         args.extend_from_slice(&small);
@@ -3092,6 +3100,19 @@ fn bench_outputs_and_font_are_checked_before_rendering() {
         assert_eq!(std::fs::read_dir(&out).unwrap().count(), 1, "{name}: the bench wrote files");
         std::fs::remove_dir(out.join(name)).unwrap();
     }
+    // Scene `a`'s reference image is scene `a-reference`'s Whitted image by name: refused
+    // before rendering (stop 91: the second replaced the first, exit 0).
+    let cube = "[meshes.a]\ngenerator = \"cube\"\n[[instances]]\ntarget = \"a\"\n";
+    let (sa, sb) = (d.join("a.toml"), d.join("a-reference.toml"));
+    std::fs::write(&sa, cube).unwrap();
+    std::fs::write(&sb, cube).unwrap();
+    let args: Vec<String> = ["bench", sa.to_str().unwrap(), sb.to_str().unwrap(), "--methods", "whitted:bvh", "--reference", "whitted:bvh"]
+        .into_iter()
+        .chain(["--width", "8", "--height", "6", "--out", fresh.to_str().unwrap()])
+        .map(String::from)
+        .collect();
+    refused_env(&args, &[], "scene 'a' and scene 'a-reference' would both write a-reference-whitted_bvh.png in the output folder");
+    assert!(!fresh.exists(), "the refused bench left its folder");
     let no_font = [("LODTRACE_FONT", "/nonexistent/font.ttf")];
     for (scene, methods) in [("plane", "whitted:bvh"), ("heads", "surfel:frames=1:detail=0.03")] {
         refused_env(&bench(scene, methods, &fresh)[..], &no_font, "no font found (tried /nonexistent/font.ttf)");

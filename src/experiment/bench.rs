@@ -5,7 +5,7 @@
 //!
 //! A method spec is `METHOD[:ACCEL][:key=value...]`, keys: `spp`, `threads`, `packet`,
 //! `fps` (distributed first-pass spp), `vt` (distributed variance threshold), `depth`; for
-//! the cone tracers (`multires`, `cone`): `k`, `c` (oversampling), `clamp`, `clamp2` (secondary cones), `lod`, `dtol`,
+//! the cone tracers (`multires`, `cone`): `k`, `c` (oversampling), `stay` (`--stay-reps`), `tdepth` (`--max-tree-depth`), `clamp`, `clamp2` (secondary cones), `lod`, `dtol`,
 //! `cs` (cone scale), `lens` (lens scale), `mip=0`, `primary=1`, `budget` (seconds), `eigen=per-box|exact`, `tri=paper|coverage|mass`, `term=paper|final`, `pw=area|voxel`, `spread=0`, `groups=0`, `agg=0` (surface shadow skip for aggregates too), `plane=0` (`--no-plane-skip`), `tight=1` (a triangle fragment's depth interval from its vertices, not its plane), `mask=1` (`--coverage-masks`);
 //! for `lod`: `f`, `a` (a_LOD), `thres`, `sel=0` (no selective tracing), `selon=model|value`
 //! (`--lod-selective-on`), `levels`, `dist`
@@ -224,6 +224,8 @@ impl MethodSpec {
                     }
                     "k" => spec.multires.k = int(v)?,
                     "c" => spec.multires.oversampling = num(v)? as f32,
+                    "stay" => spec.multires.stay_reps = int(v)?,
+                    "tdepth" => spec.multires.max_tree_depth = int(v)?,
                     "clamp" => spec.multires.anisotropy_clamp = num(v)? as f32,
                     "clamp2" => spec.multires.secondary_clamp = Some(num(v)? as f32),
                     "lod" => spec.multires.lod_scale = num(v)? as f32,
@@ -305,7 +307,7 @@ impl MethodSpec {
                     }
                     _ => {
                         return Err(bad(format!(
-                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, clamp, clamp2, lod, dtol, cs, lens, rough, light, mip, primary, budget, eigen, tri, stri, facing, split, term, pw, spread, groups, agg, plane, tight, mask, paper; lod: f, a, thres, sel, select, selon, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, bound, stretch, warm, cache_up, climb, gate, ordered, top, nearest)"
+                            "unknown key '{k}' (spp, threads, packet, fps, vt, depth; cone tracers: k, c, stay, tdepth, clamp, clamp2, lod, dtol, cs, lens, rough, light, mip, primary, budget, eigen, tri, stri, facing, split, term, pw, spread, groups, agg, plane, tight, mask, paper; lod: f, a, thres, sel, select, selon, levels, dist, force, net; surfel: update, frames, detail, shadows, exact, bound, stretch, warm, cache_up, climb, gate, ordered, top, nearest)"
                         )))
                     }
                 }
@@ -318,7 +320,9 @@ impl MethodSpec {
         let octree = matches!(method, Method::Whitted | Method::Distributed) && spec.accel == AccelKind::Octree;
         for key in &seen {
             let of = match *key {
-                "k" | "c" | "pw" if !(cone || octree) => "multires and cone, and of the accel octree",
+                "k" | "c" | "stay" | "tdepth" | "pw" if !(cone || octree) => "multires and cone, and of the accel octree",
+                // As `render --packet` (stop 91: `multires:packet=1` ran without a word).
+                "packet" if cone => "the ray tracers (whitted, distributed, lod) and surfel",
                 "clamp" | "clamp2" | "lod" | "dtol" | "cs" | "lens" | "rough" | "light" | "mip" | "primary" | "budget" | "spread"
                 | "groups" | "agg" | "plane" | "tight" | "mask" | "term" | "tri" | "eigen" | "stri" | "facing" | "split" | "paper"
                     if !cone =>
@@ -1031,6 +1035,30 @@ fn output_names(a: &BenchArgs, plan: &Plan, scenes: &[String]) -> Vec<String> {
     names
 }
 
+/// Two triangle scenes whose images would have the same file name: scene `a`'s reference
+/// `a-reference-whitted.png` is scene `a-reference`'s Whitted row (stop 91: the second
+/// replaced the first without a word). The file names come from [`output_names`], scene by
+/// scene; one scene's own repeats (a sweep point that is also a row) are not a clash.
+fn check_name_clash(a: &BenchArgs, plan: &Plan, scenes: &[String]) -> Result<()> {
+    if plan.surfel_sizes.is_some() {
+        return Ok(()); // built-in sequences only, named apart
+    }
+    let report: std::collections::HashSet<String> = output_names(a, plan, &[]).into_iter().collect();
+    let mut owner: std::collections::HashMap<String, String> = report.iter().map(|n| (n.clone(), "the report".to_string())).collect();
+    for s in scenes {
+        let mut mine = output_names(a, plan, std::slice::from_ref(s));
+        mine.retain(|n| !report.contains(n));
+        mine.sort();
+        mine.dedup();
+        for n in mine {
+            if let Some(o) = owner.insert(n.clone(), format!("scene '{s}'")) {
+                return Err(Error::Usage(format!("{o} and scene '{s}' would both write {n} in the output folder: rename a scene file")));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// [`output_names`] of a bench run whose scenes are not loaded yet, named `scenes` (the
 /// demo checks every job's outputs before its first job renders).
 pub(crate) fn output_names_unloaded(a: &BenchArgs, scenes: &[String]) -> Result<Vec<String>> {
@@ -1043,6 +1071,8 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
         // The plots need a font, and no output may be a folder: say so before the renders,
         // not after them (the font was loaded, and the outputs written, only at the end).
         super::plot::check_font()?;
+        let scenes: Vec<String> = plan.scenes.iter().map(|s| s.name.clone()).collect();
+        check_name_clash(a, &plan, &scenes)?;
         crate::film::io::create_out_dir(out)?;
         crate::film::io::check_writable_dir(out)?;
         if let (Some(sizes), true) = (&plan.surfel_sizes, a.sizes.is_some()) {
@@ -1050,7 +1080,6 @@ fn bench_in(a: &BenchArgs) -> Result<BenchReport> {
                 crate::film::io::create_out_dir(&out.join(format!("{w}x{h}")))?;
             }
         }
-        let scenes: Vec<String> = plan.scenes.iter().map(|s| s.name.clone()).collect();
         crate::film::io::check_out_files(out, &output_names(a, &plan, &scenes))?;
     }
     let Plan { specs, reference, sweeps, regions, sweep_max_spp, surfel_sizes, scenes } = plan;

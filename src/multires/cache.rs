@@ -7,8 +7,10 @@
 //!   normals, triangles), the materials the triangles use (colour and the seven shading
 //!   properties, by value, in first-use order; names do not matter), every field of
 //!   [`BuildParams`], [`FORMAT_VERSION`], the crate version and the text of the builder's
-//!   source files (`build.rs`, `quant.rs`, this file), so a changed builder never reads what
-//!   an older one wrote. Bump [`FORMAT_VERSION`] when the layout changes all the same.
+//!   source files (`build.rs`, `quant.rs`, this file, and the code they call: the tangent
+//!   frame `core::onb` that ∇n is stored in, the random numbers of `core::rng` that place
+//!   the samples, and `scene/mesh.rs`, whose triangle areas set the sample counts), so a
+//!   changed builder never reads what an older one wrote. Bump [`FORMAT_VERSION`] when the layout changes all the same.
 //! - Format: a compact little-endian binary image of the struct-of-arrays (no new dependency:
 //!   the arrays are plain numbers, a dozen lines of writer/reader, like the LOD chain cache).
 //!   Header: magic, format version, key, payload length and a checksum of the payload; then
@@ -35,7 +37,16 @@ use std::time::Instant;
 pub const FORMAT_VERSION: u32 = 7;
 const MAGIC: [u8; 8] = *b"LTPTREE\0";
 /// The source files whose code decides a tree's content, hashed into the key.
-const BUILDER_SOURCE: [&str; 3] = [include_str!("build.rs"), include_str!("quant.rs"), include_str!("cache.rs")];
+/// `core/mod.rs` holds [`crate::core::onb`], the frame ∇n is stored in and read back in
+/// (stop 91: a changed frame used to read stale trees in the wrong frame).
+const BUILDER_SOURCE: [&str; 6] = [
+    include_str!("build.rs"),
+    include_str!("quant.rs"),
+    include_str!("cache.rs"),
+    include_str!("../core/mod.rs"),
+    include_str!("../core/rng.rs"),
+    include_str!("../scene/mesh.rs"),
+];
 /// magic, version, key, payload length, checksum.
 const HEADER: usize = 8 + 4 + 8 + 8 + 8;
 
@@ -516,5 +527,15 @@ mod tests {
         assert_ne!(key(&moved, &mats, &p), k0);
         assert_ne!(key(&mesh, &mats, &BuildParams { seed: 1, ..p.clone() }), k0);
         assert_ne!(key(&mesh, &mats, &BuildParams { c: 50.0, ..p.clone() }), k0);
+    }
+
+    /// The code a stored tree depends on beyond the builder's own files is hashed into the
+    /// key too: the tangent frame ∇n is stored in (and read back in by the renderer), the
+    /// sampler that places the samples and the triangle areas that set their counts.
+    #[test]
+    fn key_covers_the_code_the_tree_depends_on() {
+        for f in ["pub fn onb(", "pub fn pcg_hash(", "pub struct Sampler", "pub fn tri_cross("] {
+            assert!(BUILDER_SOURCE.iter().any(|s| s.contains(f)), "{f} is not in the hashed sources");
+        }
     }
 }

@@ -100,9 +100,12 @@ fn sample_list(mesh: &Mesh, mat_of: impl Fn(usize) -> u32, seed: u32) -> SampleL
     let mut total = 0.0f64;
     for t in 0..mesh.tri_count() {
         let [a, b, c] = mesh.tri_verts(t);
-        let ar = 0.5 * (b - a).cross(c - a).length();
-        if ar.is_finite() && ar > 0.0 {
-            total += ar as f64;
+        // In f64, as the octree build takes them (`build::build`): the f32 cross product's
+        // length overflows for edges past ~4e9, and a mesh of such triangles got no
+        // instance-level points (review finding, stop 91).
+        let ar = 0.5 * mesh.tri_cross(t).length();
+        if ar.is_finite() && ar > 0.0 && a.is_finite() && b.is_finite() && c.is_finite() {
+            total += ar;
         }
         cdf.push(total);
     }
@@ -118,7 +121,7 @@ fn sample_list(mesh: &Mesh, mat_of: impl Fn(usize) -> u32, seed: u32) -> SampleL
         let (a, b, c) = (mesh.pos(i0), mesh.pos(i1), mesh.pos(i2));
         let (u, v) = r.next2();
         let (w0, w1, w2) = sample_triangle(u, v);
-        let ng = (b - a).cross(c - a).normalize_or_zero();
+        let ng = mesh.tri_cross(t).normalize_or_zero().as_vec3();
         let mut n = (mesh.normal(i0) * w0 + mesh.normal(i1) * w1 + mesh.normal(i2) * w2).normalize_or_zero();
         if n == Vec3::ZERO || !n.is_finite() {
             n = ng;
@@ -251,7 +254,7 @@ pub fn build(materials: &[Material], tree_meshes: &[(&Mesh, Vec<u32>)], leaves: 
                         cell,
                         g,
                         normal: quant::oct_encode(nav),
-                        cover: quant::encode_cover(a.area / (h * h)),
+                        cover: quant::encode_cover_dithered(a.area / (h * h), quant::unit_of_hash(pcg_hash(s as u32 ^ pcg_hash(cell)))),
                         nlen: quant::encode_unit(a.n.length() * inv),
                         rgb: [a.col.x, a.col.y, a.col.z].map(|v| quant::encode_color(v * inv, ranges.color_hi)),
                         mat: std::array::from_fn(|i| ranges.props[i].encode(a.props[i] * inv)),
@@ -311,13 +314,18 @@ mod tests {
     /// A floor of n×n instanced unit tiles, every other one scaled by 1.5 (and lifted out of
     /// the way): the points of each slot stand for the world area of the instances below it.
     fn tiles(n: i32) -> Scene {
+        tiles_of_side(n, 1.0)
+    }
+
+    /// [`tiles`] with tiles (and their spacing) of side `side`.
+    fn tiles_of_side(n: i32, side: f32) -> Scene {
         let mut s = Scene::empty("tiles");
-        let tile = s.add_mesh(builtin::checkerboard(4, 1.0, 0, 0));
+        let tile = s.add_mesh(builtin::checkerboard(4, side, 0, 0));
         for i in 0..n {
             for j in 0..n {
                 let sc = if (i + j) % 2 == 0 { 1.0 } else { 1.5 };
-                let xf = Affine3A::from_translation(Vec3::new(i as f32 * 2.0, ((i * 7 + j * 3) % 5) as f32 * 0.3, j as f32 * 2.0))
-                    * Affine3A::from_scale(Vec3::splat(sc));
+                let at = Vec3::new(i as f32 * 2.0, ((i * 7 + j * 3) % 5) as f32 * 0.3, j as f32 * 2.0) * side;
+                let xf = Affine3A::from_translation(at) * Affine3A::from_scale(Vec3::splat(sc));
                 s.instance(Target::Mesh(tile), xf, None);
             }
         }
@@ -379,5 +387,20 @@ mod tests {
         // Deterministic: the same points on a second build.
         let again = MultiresScene::build_in(&scene, &BuildParams::default(), None).unwrap();
         assert_eq!(again.groups.points, ms.groups.points);
+    }
+
+    /// Tiles whose cells are 5e9 units wide get their slots' points as unit tiles do: the
+    /// sample list takes the triangle areas in f64 (the f32 cross product's length
+    /// overflowed, every area came out infinite and the slots got no points; stop 91).
+    #[test]
+    fn huge_instances_get_slot_points() {
+        let slots_with_points = |side: f32| {
+            let scene = tiles_of_side(6, side);
+            let ms = MultiresScene::build_in(&scene, &BuildParams::default(), None).unwrap();
+            ms.groups.count.iter().filter(|&&c| c > 0).count()
+        };
+        let unit = slots_with_points(1.0);
+        assert!(unit > 0);
+        assert_eq!(slots_with_points(2e10), unit);
     }
 }

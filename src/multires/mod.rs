@@ -44,6 +44,14 @@ pub struct MultiresArgs {
     /// Oversampling factor c of the point prefiltering (paper: typically 100).
     #[arg(long, default_value_t = 100.0)]
     pub oversampling: f32,
+    /// A triangle with more than this many representative points in a node stays in that
+    /// node and is intersected as a triangle; the others go down to its children (paper §3.1:
+    /// "more than 3").
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub stay_reps: u32,
+    /// Depth limit of the point octree: the triangles that reach it stay in their node.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=30))]
+    pub max_tree_depth: u32,
     /// Surface area behind a point's weight: `area` (the samples' area in its voxel; the
     /// default, a deviation that reduces the paper's overestimated opacity of sparse
     /// geometry) or `voxel` (a whole voxel face, as the paper).
@@ -193,6 +201,8 @@ impl Default for MultiresArgs {
         MultiresArgs {
             k: b.k,
             oversampling: b.c,
+            stay_reps: b.stay_reps,
+            max_tree_depth: b.max_depth,
             point_weights: b.weights,
             anisotropy_clamp: t.clamp,
             secondary_clamp: t.secondary_clamp,
@@ -268,8 +278,8 @@ impl MultiresArgs {
     }
 
     /// The options set away from their defaults, by their command-line names: first those of
-    /// the octree build (`--k`, `--oversampling`, `--point-weights`, which `--accel octree`
-    /// uses too), then the cone tracers' own. `render` refuses them for a method that would
+    /// the octree build (`--k`, `--oversampling`, `--stay-reps`, `--max-tree-depth`,
+    /// `--point-weights`, which `--accel octree` uses too), then the cone tracers' own. `render` refuses them for a method that would
     /// ignore them.
     pub fn changed(&self) -> (Vec<&'static str>, Vec<&'static str>) {
         let d = Self::default();
@@ -279,7 +289,8 @@ impl MultiresArgs {
             ($v:ident: $($f:ident => $n:literal),* $(,)?) => { $( if self.$f != d.$f { $v.push($n) } )* };
         }
         // NaN differs from every default, so an invalid value is reported here too.
-        diff!(build: k => "--k", oversampling => "--oversampling", point_weights => "--point-weights");
+        diff!(build: k => "--k", oversampling => "--oversampling", stay_reps => "--stay-reps", max_tree_depth => "--max-tree-depth",
+            point_weights => "--point-weights");
         diff!(trace:
             anisotropy_clamp => "--anisotropy-clamp", secondary_clamp => "--secondary-clamp", lod_scale => "--lod-scale",
             depth_tolerance => "--depth-tolerance", eigen => "--eigen", tri_weight => "--tri-weight",
@@ -312,7 +323,14 @@ impl MultiresArgs {
             }
         }
         let r = self.resolved()?;
-        let b = BuildParams { k: r.k, c: r.oversampling, weights: r.point_weights, ..Default::default() };
+        let b = BuildParams {
+            k: r.k,
+            c: r.oversampling,
+            stay_reps: r.stay_reps,
+            max_depth: r.max_tree_depth,
+            weights: r.point_weights,
+            ..Default::default()
+        };
         let t = TraceParams {
             clamp: r.anisotropy_clamp,
             secondary_clamp: r.secondary_clamp,
@@ -377,5 +395,32 @@ mod tests {
         // An option --paper does not set combines with it.
         let ok = MultiresArgs { paper: true, lod_scale: 3.0, ..Default::default() }.params(true).unwrap();
         assert_eq!(ok.1.lod_scale, 3.0);
+    }
+
+    /// Every build parameter of §3 is an option with the paper's default (stop 91: the
+    /// "more than 3" representatives and the depth limit were fixed, and `validate` named
+    /// options that did not exist): the defaults are [`BuildParams::default`], set values
+    /// reach the build, and `changed` reports them as build options.
+    #[test]
+    fn build_parameters_are_options() {
+        let d = MultiresArgs::default();
+        assert_eq!(d.params(true).unwrap().0, BuildParams::default());
+        let a = MultiresArgs { stay_reps: 7, max_tree_depth: 9, ..Default::default() };
+        let b = a.params(true).unwrap().0;
+        assert_eq!((b.stay_reps, b.max_depth), (7, 9));
+        assert_eq!(a.changed().0, vec!["--stay-reps", "--max-tree-depth"]);
+        use clap::Parser;
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            m: MultiresArgs,
+        }
+        let p = Cli::try_parse_from(["x"]).unwrap();
+        assert_eq!((p.m.stay_reps, p.m.max_tree_depth), (3, 20));
+        let p = Cli::try_parse_from(["x", "--stay-reps", "5", "--max-tree-depth", "12"]).unwrap();
+        assert_eq!((p.m.stay_reps, p.m.max_tree_depth), (5, 12));
+        for bad in [["--stay-reps", "0"], ["--stay-reps", "1001"], ["--max-tree-depth", "0"], ["--max-tree-depth", "31"]] {
+            assert!(Cli::try_parse_from(["x", bad[0], bad[1]]).is_err(), "{bad:?}");
+        }
     }
 }

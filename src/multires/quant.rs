@@ -155,6 +155,29 @@ pub fn decode_cover(c: u8) -> f32 {
     c as f32 * (COVER_MAX / 255.0)
 }
 
+/// [`encode_cover`] without dropping small areas: an area below half a step (1/128 h²: a
+/// voxel the surface only grazes, or one small leaf in a coarse voxel) codes 1 with
+/// probability a/step and 0 otherwise, `u` ∈ \[0, 1) being a hash of the point, so the
+/// covers keep their expected sum. Rounding made every such point weightless: from
+/// `--oversampling` 129 on, a voxel holding one sample (1/c h²) coded 0, at c = 10⁴ any
+/// voxel with fewer than 79 (review finding, stop 91). At the default c = 100 one sample
+/// already codes 1, so the default trees do not change.
+#[inline]
+pub fn encode_cover_dithered(a: f32, u: f32) -> u8 {
+    let c = encode_cover(a);
+    if c == 0 && a > 0.0 && a.is_finite() {
+        (u * (COVER_MAX / 255.0) < a) as u8
+    } else {
+        c
+    }
+}
+
+/// A hash as a uniform number in \[0, 1) (its top 24 bits).
+#[inline]
+pub fn unit_of_hash(h: u32) -> f32 {
+    (h >> 8) as f32 * (1.0 / 16_777_216.0)
+}
+
 /// ∇n = (∂n/∂u, ∂n/∂v), each a 2-vector in the point's tangent frame (per unit length), as
 /// four halves of ∇n·`len`, `len` being the hierarchy's root side: a curvature relative to
 /// the model's size, about 1 for a sphere that fills it whatever its units. (Until stop 77 the
@@ -265,6 +288,25 @@ mod tests {
     /// The cover code ([`encode_cover`], rounding, step `COVER_MAX`/255 = 1/64 h²):
     /// within half a step on [0, `COVER_MAX`]; beyond it (foliage folds more area into a
     /// voxel) `COVER_MAX`, below 0 zero; non-finite input code 0.
+    /// [`encode_cover_dithered`]: the code of [`encode_cover`] from half a step up; below,
+    /// 0 or 1 with the area's mean over uniform `u`, and 0 for no area.
+    #[test]
+    fn dithered_cover_keeps_small_areas_on_average() {
+        let step = COVER_MAX / 255.0;
+        for a in [0.5 * step, step, 0.9, 2.0, COVER_MAX, 9.0, 0.0, -1.0, f32::NAN] {
+            for u in [0.0, 0.3, 0.999_999] {
+                assert_eq!(encode_cover_dithered(a, u), encode_cover(a), "{a} at {u}");
+            }
+        }
+        const N: u32 = 4096;
+        for a in [1.0 / 129.0, 1.0 / 1000.0, 1.0 / 10_000.0, 0.3 * step] {
+            let mean = (0..N).map(|i| decode_cover(encode_cover_dithered(a, (i as f32 + 0.5) / N as f32))).sum::<f32>() / N as f32;
+            assert!((mean - a).abs() <= 2.0 * step / N as f32, "area {a}: mean code {mean}");
+        }
+        assert!((0..1000u32).all(|i| (0.0..1.0).contains(&unit_of_hash(crate::core::rng::pcg_hash(i)))));
+        assert_eq!(unit_of_hash(u32::MAX), 1.0 - 1.0 / 16_777_216.0);
+    }
+
     #[test]
     fn cover_round_trip() {
         let step = COVER_MAX / 255.0;

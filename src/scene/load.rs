@@ -224,17 +224,24 @@ const MAX_OBJ_LINE: usize = 64 << 20;
 /// line), the first face line naming a relative index before the file's start, and the
 /// first face of fewer than 3 vertices (line, face number, vertices): tobj keeps `f 1 2` as
 /// a line and `f 1` as a point, and both were dropped from the mesh without a word.
+///
+/// Also (stop 91: tobj names no line for these) the vertex references, a `v` line whose w
+/// is 0 ("scaling (w) by zero") and a `usemtl` without a name ("material parse error").
 #[derive(Default)]
 struct FaceRefs {
     line_no: usize,
-    count: [i64; 2],
-    max: [(i64, usize); 2],
+    /// Of [`REF_KIND`]: vertices, texture coordinates, normals.
+    count: [i64; 3],
+    max: [(i64, usize); 3],
     before_start: Option<(usize, &'static str, i64)>,
     faces: usize,
     short_face: Option<(usize, usize, usize)>,
+    /// The first `v` line with w = 0 and the first `usemtl` without a name.
+    zero_w: Option<usize>,
+    bare_usemtl: Option<usize>,
 }
 
-const REF_KIND: [&str; 2] = ["texture coordinate", "normal"];
+const REF_KIND: [&str; 3] = ["vertex", "texture coordinate", "normal"];
 
 impl FaceRefs {
     fn scan(&mut self, kw: &[u8]) {
@@ -242,8 +249,17 @@ impl FaceRefs {
         let text = String::from_utf8_lossy(kw);
         let mut w = text.split_whitespace();
         match w.next() {
-            Some("vt") => self.count[0] += 1,
-            Some("vn") => self.count[1] += 1,
+            Some("v") => {
+                self.count[0] += 1;
+                // x y z w (x y z r g b is a vertex colour).
+                let nums: Vec<&str> = w.collect();
+                if nums.len() == 4 && nums[3].parse::<f32>() == Ok(0.0) && self.zero_w.is_none() {
+                    self.zero_w = Some(self.line_no);
+                }
+            }
+            Some("vt") => self.count[1] += 1,
+            Some("vn") => self.count[2] += 1,
+            Some("usemtl") if w.next().is_none() && self.bare_usemtl.is_none() => self.bare_usemtl = Some(self.line_no),
             Some("f") => {
                 let n = w.clone().count();
                 if n < 3 && self.short_face.is_none() {
@@ -251,7 +267,7 @@ impl FaceRefs {
                 }
                 self.faces += 1;
                 for v in w {
-                    for (k, part) in v.split('/').skip(1).take(2).enumerate() {
+                    for (k, part) in v.split('/').take(3).enumerate() {
                         let Ok(i) = part.parse::<i64>() else { continue };
                         if i < 0 && self.count[k] + i < 0 && self.before_start.is_none() {
                             self.before_start = Some((self.line_no, REF_KIND[k], i));
@@ -272,9 +288,20 @@ impl FaceRefs {
         if let Some((line, kind, i)) = self.before_start {
             found.push((line, format!("line {line}: a face names {kind} {i}, before the file's first")));
         }
-        if let Some(k) = (0..2).find(|&k| self.max[k].0 > self.count[k]) {
-            let (i, line) = self.max[k];
-            found.push((line, format!("line {line}: a face names {} {i}, but the file has {} of them", REF_KIND[k], self.count[k])));
+        // A face may name a vertex defined after it (tobj resolves indices at the end); so
+        // only the largest index against the file's count.
+        for (k, kind) in REF_KIND.iter().enumerate() {
+            let ((i, line), n) = (self.max[k], self.count[k]);
+            if i > n {
+                let of = if k == 0 { "vertices" } else { "of them" };
+                found.push((line, format!("line {line}: a face names {kind} {i}, but the file has {n} {of}")));
+            }
+        }
+        if let Some(line) = self.zero_w {
+            found.push((line, format!("line {line}: a vertex with w = 0 (a point at infinity)")));
+        }
+        if let Some(line) = self.bare_usemtl {
+            found.push((line, format!("line {line}: usemtl names no material")));
         }
         if let Some((line, f, n)) = self.short_face {
             // As the OFF loader's "face 0 has 2 vertices (3 to 1000)".
@@ -310,6 +337,19 @@ impl<R: std::io::BufRead> std::io::BufRead for SurfaceLines<R> {
                 return Err(std::io::Error::new(std::io::ErrorKind::InvalidData, "line too long"));
             }
             if read > 0 {
+                // A comment runs from `#` to the line's end, after a statement too (tobj
+                // only skips lines that start with one: `f 1 2 3 # a` was "face parse
+                // error" and `mtllib a.mtl # b` three library names; the sweep of stop 91).
+                if let Some(h) = self.line.iter().position(|&c| c == b'#') {
+                    let nl = self.line.last() == Some(&b'\n');
+                    self.line.truncate(h);
+                    while self.line.last().is_some_and(|c| *c == b' ' || *c == b'\t') {
+                        self.line.pop();
+                    }
+                    if nl {
+                        self.line.push(b'\n');
+                    }
+                }
                 let first = self.line.iter().position(|c| !c.is_ascii_whitespace());
                 let kw = first.map(|i| &self.line[i..]).unwrap_or(&[]);
                 let is = |k: u8| kw.first() == Some(&k) && kw.get(1).is_some_and(|c| c.is_ascii_whitespace());
@@ -425,6 +465,8 @@ fn mtl_colours_complete(text: &[u8]) -> std::result::Result<Vec<u8>, tobj::LoadE
     let text = String::from_utf8_lossy(text);
     let mut out = String::with_capacity(text.len() + 64);
     for line in text.lines() {
+        // Comments after a statement too, as in the OBJ file ([`SurfaceLines`]).
+        let line = line.split('#').next().unwrap_or("");
         let mut w = line.split_whitespace();
         match w.next() {
             Some(k @ ("Ka" | "Kd" | "Ks" | "Ke")) => {
@@ -783,6 +825,46 @@ mod tests {
         std::fs::write(&p, format!("mtllib a.mtl /dev/zero\n{geo}")).unwrap();
         let (m, mats) = load_obj(&p, 1, 0).unwrap();
         assert!(mats.is_empty() && m.mat == [0, 0], "{:?}", m.mat);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A comment after a statement is a comment, in the OBJ and in its MTL (stop 91: `f 1 2
+    /// 3 # a` was "face parse error", `v 0 0 0 # a` "color parse error", and `mtllib a.mtl
+    /// # mats` three library names, so the materials were dropped).
+    #[test]
+    fn comments_after_statements_are_comments() {
+        let dir = scratch("comments");
+        std::fs::write(dir.join("a b.mtl"), "newmtl red # the red one\nKd 1 0 0 # pure\n").unwrap();
+        let p = dir.join("c.obj");
+        let obj = "mtllib a b.mtl # mats\nv 0 0 0 # a\nv 1 0 0\t#b\nv 0 1 0#c\nusemtl red # x\nf 1 2 3 # face\nf 1 3 2#back\n# done\n";
+        std::fs::write(&p, obj).unwrap();
+        let (m, mats) = load_obj(&p, 1, 0).unwrap();
+        assert_eq!((m.tri_count(), m.mat.as_slice()), (2, &[1u32, 1][..]));
+        assert_eq!((mats.len(), mats[0].name.as_str(), mats[0].color), (1, "red", Vec3::X));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// What tobj refuses without a position is told with its line: a face naming a vertex
+    /// past the file's last or before its first, a vertex with w = 0, a `usemtl` with no
+    /// name (stop 91).
+    #[test]
+    fn obj_errors_name_their_line() {
+        let dir = scratch("errlines");
+        let p = dir.join("e.obj");
+        let head = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n";
+        for (body, says) in [
+            ("f 1 2 3\nf 1 2 5\n", "line 6: a face names vertex 5, but the file has 4 vertices"),
+            ("f 1 2 3\nf -1 -2 -5\n", "line 6: a face names vertex -5, before the file's first"),
+            ("v 1 0 0 0\nf 1 2 3\n", "line 5: a vertex with w = 0"),
+            ("f 1 2 3\nusemtl\nf 2 4 3\n", "line 6: usemtl names no material"),
+        ] {
+            std::fs::write(&p, format!("{head}{body}")).unwrap();
+            let e = load_obj(&p, 1, 0).unwrap_err().to_string();
+            assert!(e.contains(says), "{body:?}: {e}");
+        }
+        // Vertex colours (x y z r g b) with r = 0 are no w.
+        std::fs::write(&p, "v 0 0 0 0 0.5 1\nv 1 0 0 0 0 0\nv 0 1 0 0 1 1\nf 1 2 3\n").unwrap();
+        assert!(load_obj(&p, 1, 0).is_ok());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
