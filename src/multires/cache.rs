@@ -70,6 +70,7 @@ pub fn cached_in(dir: Option<&Path>, mesh: &Mesh, mats: &[&Material], params: &B
     if let Some(mut t) = crate::core::cache::read_cache_file(&path).and_then(|b| decode(&b, key, mesh.tri_count(), params)) {
         t.tris = super::build::TriSoa::of(mesh, &t.tri_index);
         t.boxes = super::build::NodeBoxes::of(&t);
+        t.stats.bytes = t.memory_bytes();
         t.stats.seconds = t0.elapsed().as_secs_f64();
         return Ok(t);
     }

@@ -232,9 +232,11 @@ impl Accel for OctreeAccel<'_> {
         self.trace(ray, true, c).is_some()
     }
     fn memory_bytes(&self) -> usize {
-        // The triangle octree only (the points are not used by this back-end).
-        self.ms.trees.iter().map(|t| t.nodes.len() * 45 + t.tri_index.len() * 4 + t.tris.verts.len() * 36).sum::<usize>()
-            + self.ms.tlas.r.len() * 20
+        // The triangle octree only (the points are not used by this back-end): per node
+        // what the traversal reads (sphere 16, first child 4, triangle start and count 8,
+        // box 24 bytes), the triangles' index and vertices, the instance tree's slots.
+        self.ms.trees.iter().map(|t| t.nodes.len() * 52 + t.tri_index.len() * 4 + t.tris.bytes()).sum::<usize>()
+            + self.ms.tlas.r.len() * crate::multires::trace::Tlas::SLOT_BYTES
     }
 }
 

@@ -381,6 +381,8 @@ pub(crate) const LEAF: u32 = 1 << 31;
 impl Tlas {
     /// The empty box (lo > hi): the start of a union, and the box of an empty slot, which
     /// fails every slab test.
+    /// Bytes per slot: sphere, box, child link.
+    pub const SLOT_BYTES: usize = 4 * 4 + 6 * 4 + 4;
     pub const EMPTY_BOX: (Vec3, Vec3) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
 
     /// From each leaf instance's world bounding sphere and box.
@@ -600,8 +602,8 @@ impl<'a> MultiresScene<'a> {
 
     pub fn memory_bytes(&self) -> usize {
         self.trees.iter().map(|t| t.memory_bytes() + t.tris.bytes()).sum::<usize>()
-            + self.leaves.len() * 160
-            + self.tlas.r.len() * 44
+            + self.leaves.len() * std::mem::size_of::<MLeaf>()
+            + self.tlas.r.len() * Tlas::SLOT_BYTES
             + self.groups.bytes()
     }
 
