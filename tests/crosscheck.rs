@@ -130,6 +130,33 @@ fn verify_catches_broken_intersectors() {
     assert_eq!(verify_with(&s, &reference, &good, 5_000, 3).unwrap().mismatches(), 0);
 }
 
+/// Cracks between neighbouring triangles are mismatches, not *grazing* (review, stop 91):
+/// a candidate that loses the hits within 1e-6 (in barycentrics) of an edge, an
+/// intersector with hairline cracks, passed `verify` with every such ray excused by the
+/// border rule. The crack check takes the rays aimed at interior edges of closed meshes,
+/// where a watertight test must hit one of the two faces. It finds Embree's own fast mode
+/// (not watertight; rendering uses the robust one) leaking on `ico` too, and nothing in the
+/// BVH or the octree.
+#[test]
+fn verify_catches_cracks() {
+    let s = scene("ico");
+    let reference = EmbreeAccel::build_with(&s, true).unwrap();
+    let cand = Faulty {
+        inner: BvhAccel::build(&s).unwrap(),
+        fault: |h| ([1.0 - h.u - h.v, h.u, h.v].into_iter().fold(f32::INFINITY, f32::min) >= 1e-6).then_some(h),
+    };
+    let rep = verify_with(&s, &reference, &cand, 20_000, 3).unwrap();
+    let text = format_report(&rep);
+    assert!(rep.crack_checks > 1_000 && rep.cracks > 100 && rep.reference_cracks == 0, "{text}");
+    assert!(rep.mismatches() >= rep.cracks, "{text}");
+    for kind in [AccelKind::Bvh, AccelKind::Octree] {
+        let rep = verify_scene(&s, kind, 20_000, 3).unwrap();
+        assert!(rep.crack_checks > 1_000 && rep.cracks == 0 && rep.mismatches() == 0, "{kind:?}: {}", format_report(&rep));
+    }
+    let fast = verify_scene(&s, AccelKind::Embree, 20_000, 3).unwrap();
+    assert!(fast.cracks > 0 && fast.reference_cracks == 0, "{}", format_report(&fast));
+}
+
 /// A candidate that drops a ray's `tnear` or `tfar` (or both) from closest-hit queries.
 struct Unbounded {
     inner: BvhAccel,
@@ -579,7 +606,9 @@ impl Accel for Loose<'_> {
 /// A triangle test that accepts hits outside the triangle is caught: its hits name points
 /// outside their triangles (barycentrics below 0), which `uncertain` excused as "grazing"
 /// (a barycentric below 1e-4) — with a slack of 0.5, about half of `cube`'s camera rays
-/// were wrong and verify reported 0 mismatches. The exact test passes on the same rays.
+/// were wrong and verify reported 0 mismatches. The exact test passes on the same rays but
+/// for a few cracks: plain Möller–Trumbore is not watertight, and since stop 91 the crack
+/// check says so (2 of the 275 rays at the cube's interior edges slip through).
 #[test]
 fn verify_catches_hits_outside_the_triangle() {
     let s = scene("cube");
@@ -587,7 +616,8 @@ fn verify_catches_hits_outside_the_triangle() {
     let leaves = s.leaf_instances().unwrap();
     let exact = Loose { s: &s, leaves: leaves.clone(), slack: 0.0 };
     let rep = verify_with(&s, &reference, &exact, 4_000, 3).unwrap();
-    assert_eq!(rep.mismatches(), 0, "{}", lodtrace::baseline::verify::format_report(&rep));
+    let text = lodtrace::baseline::verify::format_report(&rep);
+    assert!(rep.mismatches() == rep.cracks && rep.cracks <= 5, "{text}");
     for slack in [0.01, 0.1, 0.5] {
         let loose = Loose { s: &s, leaves: leaves.clone(), slack };
         let rep = verify_with(&s, &reference, &loose, 4_000, 3).unwrap();

@@ -34,6 +34,10 @@
 //! ignored a ray's `tnear` or `tfar` passed every other check, since those rays start at 0
 //! and run to infinity. Packets (`intersect8`)
 //! are checked against each back-end's own single-ray path on the camera rays.
+//!
+//! Cracks (stop 91, [`crack_slack`]): an edge-aimed ray at an interior edge of a mesh
+//! whose two faces both face the ray must hit (closest and any hit) at or before the aimed
+//! point in a watertight test; a miss there is a mismatch, whatever the border rule says.
 
 use super::accel::{self, Accel, AccelKind, Hit, Ray, K};
 use super::embree::EmbreeAccel;
@@ -225,6 +229,12 @@ pub struct VerifyReport {
     /// Packet lanes (intersect8) differing from the same back-end's intersect1.
     pub packet_lanes: u64,
     pub packet_mismatches: u64,
+    /// Edge-aimed rays the crack check applied to ([`crack_slack`]), and those the candidate
+    /// or the reference let through (closest hit or any hit: no hit at or before the aimed
+    /// point). Counted among their set's mismatches as well.
+    pub crack_checks: u64,
+    pub cracks: u64,
+    pub reference_cracks: u64,
     pub examples: Vec<MismatchExample>,
 }
 
@@ -242,11 +252,27 @@ impl VerifyReport {
 
 /// The verification rays, tagged with their set.
 pub fn make_rays(scene: &Scene, n: usize, seed: u32) -> Result<Vec<(RaySet, Ray)>> {
+    Ok(make_rays_aimed(scene, n, seed)?.into_iter().map(|(k, r, _)| (k, r)).collect())
+}
+
+/// An aimed ray's target on an edge: the leaf instance, the triangle and its edge (0: a–b,
+/// 1: b–c), and where along it (0 at the edge's first vertex, 1 at its second). The ray
+/// reaches the aimed point at t = 1.
+#[derive(Clone, Copy, Debug)]
+struct EdgeAim {
+    leaf: u32,
+    tri: u32,
+    edge: u8,
+    at: f32,
+}
+
+/// [`make_rays`] with the edge each edge-aimed ray was aimed at, for the crack check.
+fn make_rays_aimed(scene: &Scene, n: usize, seed: u32) -> Result<Vec<(RaySet, Ray, Option<EdgeAim>)>> {
     let mut out = Vec::with_capacity(n + 64 * 64 + 16);
     let fr = scene.camera.frame(64, 64);
     for j in 0..64 {
         for i in 0..64 {
-            out.push((RaySet::Camera, Ray::new(fr.eye, fr.pixel_center_dir(i, j))));
+            out.push((RaySet::Camera, Ray::new(fr.eye, fr.pixel_center_dir(i, j)), None));
         }
     }
     let leaves = scene.leaf_instances()?;
@@ -258,7 +284,8 @@ pub fn make_rays(scene: &Scene, n: usize, seed: u32) -> Result<Vec<(RaySet, Ray)
     let n_aimed = n / 2;
     for k in 0..n_aimed as u32 {
         let mut s = Sampler::new(seed, k, 1);
-        let l = &leaves[((s.next() * leaves.len() as f32) as usize).min(leaves.len() - 1)];
+        let li = ((s.next() * leaves.len() as f32) as usize).min(leaves.len() - 1);
+        let l = &leaves[li];
         let mesh = &scene.meshes[l.mesh as usize];
         let t = ((s.next() * mesh.tri_count() as f32) as usize).min(mesh.tri_count() - 1);
         let [a, b, c] = mesh.tri_verts(t);
@@ -267,12 +294,21 @@ pub fn make_rays(scene: &Scene, n: usize, seed: u32) -> Result<Vec<(RaySet, Ray)
             u = 1.0 - u;
             v = 1.0 - v;
         }
-        match k % 8 {
-            0 => v = 0.0,             // edge a–b
-            1 => u = 1.0 - v,         // edge b–c
-            2 => (u, v) = (0.0, 0.0), // vertex a
-            _ => {}
-        }
+        let target = match k % 8 {
+            0 => {
+                v = 0.0; // edge a–b
+                Some((0, u))
+            }
+            1 => {
+                u = 1.0 - v; // edge b–c
+                Some((1, v))
+            }
+            2 => {
+                (u, v) = (0.0, 0.0); // vertex a
+                None
+            }
+            _ => None,
+        };
         let p_local = a + u * (b - a) + v * (c - a);
         let p = l.xform.transform_point3(p_local);
         let d = uniform_sphere(s.next(), s.next());
@@ -286,14 +322,15 @@ pub fn make_rays(scene: &Scene, n: usize, seed: u32) -> Result<Vec<(RaySet, Ray)
         let edge = (w[1] - w[0]).length().max((w[2] - w[1]).length()).max((w[0] - w[2]).length());
         let dist = if (k / 8) % 2 == 0 || !(edge > 0.0) { diag * (0.05 + s.next()) } else { edge * (1.0 + 19.0 * s.next()) };
         let o = p + d * dist;
-        out.push((RaySet::Aimed, Ray::new(o, p - o)));
+        let aim = target.map(|(edge, at)| EdgeAim { leaf: li as u32, tri: t as u32, edge, at });
+        out.push((RaySet::Aimed, Ray::new(o, p - o), aim));
     }
     // Padded by a tenth of the diagonal on every axis, so flat scenes get a volume too.
     let ext = Vec3::splat(diag * 0.1);
     for k in 0..(n - n_aimed) as u32 {
         let mut s = Sampler::new(seed, k, 2);
         let o = lo - ext + (hi - lo + 2.0 * ext) * Vec3::new(s.next(), s.next(), s.next());
-        out.push((RaySet::Random, Ray::new(o, uniform_sphere(s.next(), s.next()))));
+        out.push((RaySet::Random, Ray::new(o, uniform_sphere(s.next(), s.next())), None));
     }
     let c = (lo + hi) * 0.5;
     let nan = f32::NAN;
@@ -309,9 +346,95 @@ pub fn make_rays(scene: &Scene, n: usize, seed: u32) -> Result<Vec<(RaySet, Ray)
         Ray::segment(fr.eye, fr.f, 0.0, nan),
         Ray::segment(fr.eye, fr.f, 0.0, 0.0),
     ] {
-        out.push((RaySet::Invalid, r));
+        out.push((RaySet::Invalid, r, None));
     }
     Ok(out)
+}
+
+/// A vertex position's bits: triangles meet at an edge when their vertices are the same
+/// floats, whatever their indices (an OBJ's vertices split by normals).
+type PosKey = [u32; 3];
+
+fn pos_key(p: Vec3) -> PosKey {
+    p.to_array().map(|x| (x + 0.0).to_bits()) // −0 and +0 alike
+}
+
+/// Per mesh, each directed edge (by vertex positions) and the triangles that hold it.
+type EdgeMap = std::collections::HashMap<(PosKey, PosKey), Vec<u32>>;
+
+fn edge_map(mesh: &crate::scene::Mesh) -> EdgeMap {
+    let mut m = EdgeMap::new();
+    for t in 0..mesh.tri_count() {
+        let v = mesh.tri_verts(t).map(pos_key);
+        for i in 0..3 {
+            m.entry((v[i], v[(i + 1) % 3])).or_default().push(t as u32);
+        }
+    }
+    m
+}
+
+/// Smallest |cos| between a ray and either face at an edge the crack check trusts: below
+/// it the two faces' projections onto the ray's plane are too thin for the guarantee to be
+/// tested at the precision budget.
+const CRACK_COS: f32 = 0.05;
+
+/// The crack check (stop 91). A ray aimed at a point of an edge that two triangles of one
+/// mesh share, consistently wound (the edge runs one way in the one and the other way in the
+/// other, and no third triangle holds it), with both faces turned the same way to the ray:
+/// the two project onto the ray's plane on either side of the edge, so a watertight
+/// intersector must hit one of them at the aimed point (t = 1), or something before it. The
+/// aimed point must lie farther from the triangles' other edges than the precision budget,
+/// so the guarantee holds for the ray as rounded. Returns the distance (in t) past 1 that a
+/// hit may lie, or None where the guarantee does not apply (a boundary or silhouette edge, a
+/// fold, a grazing face, a point too near a corner).
+///
+/// The border rule of [`HitGeom::uncertain`] excuses every miss there (the ray meets the edge
+/// itself): without this check, a non-watertight intersector (Embree's fast mode, or the BVH
+/// without its f64 fallback) passed with cracks counted as *grazing* (review, stop 91).
+fn crack_slack(scene: &Scene, leaves: &[crate::scene::LeafInstance], maps: &[Option<EdgeMap>], ray: &Ray, aim: &EdgeAim) -> Option<f32> {
+    let l = &leaves[aim.leaf as usize];
+    let mesh = &scene.meshes[l.mesh as usize];
+    let map = maps[l.mesh as usize].as_ref()?;
+    let tv = mesh.tri_verts(aim.tri as usize);
+    let (i0, i1) = if aim.edge == 0 { (0, 1) } else { (1, 2) };
+    let (a, b) = (pos_key(tv[i0]), pos_key(tv[i1]));
+    let (fwd, back) = (map.get(&(a, b))?, map.get(&(b, a))?);
+    if fwd.len() != 1 || back.len() != 1 {
+        return None;
+    }
+    let world = |t: u32| mesh.tri_verts(t as usize).map(|p| l.xform.transform_point3(p));
+    let (w1, w2) = (world(aim.tri), world(back[0]));
+    let d = ray.dir.normalize_or_zero();
+    let (n1, n2) = ((w1[1] - w1[0]).cross(w1[2] - w1[0]), (w2[1] - w2[0]).cross(w2[2] - w2[0]));
+    let (c1, c2) = (n1.normalize_or_zero().dot(d), n2.normalize_or_zero().dot(d));
+    if !(c1 * c2 > 0.0) || c1.abs().min(c2.abs()) < CRACK_COS {
+        return None;
+    }
+    let cos = c1.abs().min(c2.abs());
+    let p = ray.org + ray.dir;
+    let scale =
+        ray.org.abs().max_element().max(p.abs().max_element()).max(w1.iter().chain(&w2).map(|q| q.abs().max_element()).fold(0.0, f32::max));
+    let tol = WORLD_REL * scale.max(1e-3);
+    // The aimed point's distance from the other edges of either triangle, at least its
+    // distance from the edge's end times the sine of the triangle's angle there.
+    let (ea, eb) = (w1[i0], w1[i1]);
+    let len = (eb - ea).length();
+    let mut room = f32::INFINITY;
+    for w in [&w1, &w2] {
+        for (end, other, frac) in [(ea, eb, aim.at), (eb, ea, 1.0 - aim.at)] {
+            let apex = w.iter().copied().find(|&q| pos_key(q) != pos_key(end) && pos_key(q) != pos_key(other))?;
+            let (e, f) = ((other - end).normalize_or_zero(), (apex - end).normalize_or_zero());
+            room = room.min(frac * len * e.cross(f).length());
+        }
+    }
+    let slack = 10.0 * tol / cos;
+    (room > slack).then_some(slack / ray.dir.length())
+}
+
+/// Whether `h` (a closest hit, or an any-hit answer as Some) leaves a crack at an aim whose
+/// [`crack_slack`] is `slack`: no hit at or before the aimed point.
+fn cracked(h: Option<f32>, slack: f32) -> bool {
+    !h.is_some_and(|t| t <= 1.0 + slack)
 }
 
 fn uniform_sphere(u: f32, v: f32) -> Vec3 {
@@ -344,8 +467,19 @@ pub fn verify_scene(scene: &Scene, kind: AccelKind, n: usize, seed: u32) -> Resu
 
 /// As [`verify_scene`] with both back-ends already built.
 pub fn verify_with(scene: &Scene, reference: &dyn Accel, cand: &dyn Accel, n: usize, seed: u32) -> Result<VerifyReport> {
-    let rays = make_rays(scene, n, seed)?;
+    let rays = make_rays_aimed(scene, n, seed)?;
     let leaves = scene.leaf_instances()?;
+    // The edge maps of the meshes an edge-aimed ray targets.
+    let mut maps: Vec<Option<EdgeMap>> = vec![None; scene.meshes.len()];
+    let mut wanted = vec![false; scene.meshes.len()];
+    for a in rays.iter().filter_map(|r| r.2.as_ref()) {
+        wanted[leaves[a.leaf as usize].mesh as usize] = true;
+    }
+    maps.par_iter_mut().zip(&scene.meshes).zip(&wanted).for_each(|((m, mesh), &w)| {
+        if w {
+            *m = Some(edge_map(mesh));
+        }
+    });
     struct One {
         set: RaySet,
         v: Verdict,
@@ -356,16 +490,31 @@ pub fn verify_with(scene: &Scene, reference: &dyn Accel, cand: &dyn Accel, n: us
         seg_checks: u64,
         seg_bad: u64,
         ex: Option<MismatchExample>,
+        /// The crack check applied; the candidate's, the reference's crack.
+        crack_checked: bool,
+        crack: bool,
+        ref_crack: bool,
     }
     let results: Vec<One> = rays
         .par_iter()
-        .map(|&(set, ray)| {
+        .map(|&(set, ray, aim)| {
             let mut c = Counters::default();
             let r = reference.intersect1(&ray, &mut c);
             let h = cand.intersect1(&ray, &mut c);
             let mut v = compare_in(scene, &leaves, &ray, r, h);
             if set == RaySet::Invalid && (r.is_some() || h.is_some()) {
                 v = Verdict::Mismatch;
+            }
+            // Cracks: closest hit and any hit on the segment to just past the aimed point.
+            let slack = aim.and_then(|a| crack_slack(scene, &leaves, &maps, &ray, &a));
+            let (mut crack, mut ref_crack) = (false, false);
+            if let Some(sl) = slack {
+                let seg = Ray::segment(ray.org, ray.dir, ray.tnear, 1.0 + sl);
+                crack = cracked(h.map(|x| x.t), sl) || !cand.occluded1(&seg, &mut c);
+                ref_crack = cracked(r.map(|x| x.t), sl) || !reference.occluded1(&seg, &mut c);
+                if crack || ref_crack {
+                    v = Verdict::Mismatch;
+                }
             }
             let t_rel = match (r, h) {
                 (Some(a), Some(b)) if v == Verdict::Agree => ((a.t - b.t).abs() / a.t.max(b.t).max(1e-30)) as f64,
@@ -424,7 +573,20 @@ pub fn verify_with(scene: &Scene, reference: &dyn Accel, cand: &dyn Accel, n: us
                     h.and_then(|x| HitGeom::get(scene, &leaves, &ray, &x)).map(|g| g.cos),
                 ),
             });
-            One { set, v, hit: r.is_some(), t_rel, occ_checks, occ_bad, seg_checks, seg_bad, ex }
+            One {
+                set,
+                v,
+                hit: r.is_some(),
+                t_rel,
+                occ_checks,
+                occ_bad,
+                seg_checks,
+                seg_bad,
+                ex,
+                crack_checked: slack.is_some(),
+                crack,
+                ref_crack,
+            }
         })
         .collect();
 
@@ -440,6 +602,9 @@ pub fn verify_with(scene: &Scene, reference: &dyn Accel, cand: &dyn Accel, n: us
         segment_mismatches: 0,
         packet_lanes: 0,
         packet_mismatches: 0,
+        crack_checks: 0,
+        cracks: 0,
+        reference_cracks: 0,
         examples: Vec::new(),
     };
     for o in results {
@@ -453,6 +618,9 @@ pub fn verify_with(scene: &Scene, reference: &dyn Accel, cand: &dyn Accel, n: us
             Verdict::Mismatch => s.mismatches += 1,
         }
         s.max_t_rel = s.max_t_rel.max(o.t_rel);
+        rep.crack_checks += o.crack_checked as u64;
+        rep.cracks += o.crack as u64;
+        rep.reference_cracks += o.ref_crack as u64;
         rep.occlusion_checks += o.occ_checks;
         rep.occlusion_mismatches += o.occ_bad;
         rep.segment_checks += o.seg_checks;
@@ -466,7 +634,7 @@ pub fn verify_with(scene: &Scene, reference: &dyn Accel, cand: &dyn Accel, n: us
     rep.sets = sets;
 
     // Packets against each back-end's own single-ray path, on the camera rays.
-    let cam: Vec<Ray> = rays.iter().filter(|(s, _)| *s == RaySet::Camera).map(|&(_, r)| r).collect();
+    let cam: Vec<Ray> = rays.iter().filter(|(s, _, _)| *s == RaySet::Camera).map(|&(_, r, _)| r).collect();
     for be in [reference, cand] {
         let mut c = Counters::default();
         for chunk in cam.chunks(K) {
@@ -505,6 +673,10 @@ pub fn format_report(rep: &VerifyReport) -> String {
     s += &format!(
         "occlusion: {} checks, {} wrong; closest hits on segments: {} checks, {} wrong; packets: {} lanes, {} differ from single rays\n",
         rep.occlusion_checks, rep.occlusion_mismatches, rep.segment_checks, rep.segment_mismatches, rep.packet_lanes, rep.packet_mismatches
+    );
+    s += &format!(
+        "cracks (rays at interior edges, where a watertight test must hit): {} checks, {} let through by {}, {} by Embree (robust)\n",
+        rep.crack_checks, rep.cracks, rep.candidate, rep.reference_cracks
     );
     for e in &rep.examples {
         s += &format!(
