@@ -326,3 +326,27 @@ fn selective_tracing_from_level_zero_thins_the_primary_hits() {
     assert!(d1 > 0, "level 1 drops rays");
     assert!(d0 > d1, "level 0 drops no more rays than level 1: {d0} vs {d1}");
 }
+
+/// A dropped child is not traced: each ray selective tracing drops is a reflected or
+/// refracted ray fewer than with `--no-selective` (its subtree's rays fewer still). Stop 91:
+/// a mutant that counted the drop but traced both children passed every test.
+#[test]
+fn selectively_dropped_rays_are_not_traced() {
+    use lodtrace::core::stats::Counter;
+    let scene = builtin::get("chessboard").unwrap();
+    let o = opts(64, 48, 1);
+    let run = |no_selective: bool| {
+        let la = LodArgs { lod_force: Some(0.5), no_selective, ..Default::default() };
+        render(&scene, Method::Lod, AccelKind::Bvh, &o, &la).out.counters
+    };
+    let (on, off) = (run(false), run(true));
+    let secondary = |c: &lodtrace::core::stats::Counters| c.get(Counter::rays_reflect) + c.get(Counter::rays_refract);
+    let dropped = on.get(Counter::lod_rays_dropped);
+    assert!(dropped > 50 && off.get(Counter::lod_rays_dropped) == 0, "dropped {dropped}");
+    assert!(
+        secondary(&on) + dropped <= secondary(&off),
+        "{} secondary rays + {dropped} dropped > {} without selective tracing",
+        secondary(&on),
+        secondary(&off)
+    );
+}
