@@ -157,6 +157,32 @@ fn verify_catches_cracks() {
     assert!(fast.cracks > 0 && fast.reference_cracks == 0, "{}", format_report(&fast));
 }
 
+/// A candidate that loses every hit within 1e-4 (in barycentrics) of a triangle's border,
+/// on a square of two 100-unit triangles, is caught on the camera and random rays. The border
+/// rule excused any hit with a barycentric below 1e-4 as *grazing*: a band of 1e-4 of the
+/// triangle's height (0.01 units here, at any scale), where the float budget is a few 1e-3
+/// (review, stop 91). Now only the world-space budget decides.
+#[test]
+fn verify_checks_borders_at_the_float_budget() {
+    let d = std::env::temp_dir().join(format!("lodtrace-band-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    let obj = d.join("square.obj");
+    std::fs::write(&obj, "v -50 0 -50\nv 50 0 -50\nv 50 0 50\nv -50 0 50\nf 1 3 2\nf 1 4 3\n").unwrap();
+    let s = scene(obj.to_str().unwrap());
+    let _ = std::fs::remove_dir_all(&d);
+    let reference = EmbreeAccel::build_with(&s, true).unwrap();
+    let good = BvhAccel::build(&s).unwrap();
+    let rep = verify_with(&s, &reference, &good, 100_000, 3).unwrap();
+    assert_eq!(rep.mismatches(), 0, "{}", format_report(&rep));
+    let cand = Faulty {
+        inner: BvhAccel::build(&s).unwrap(),
+        fault: |h| ([1.0 - h.u - h.v, h.u, h.v].into_iter().fold(f32::INFINITY, f32::min) >= 1e-4).then_some(h),
+    };
+    let rep = verify_with(&s, &reference, &cand, 400_000, 3).unwrap();
+    let bad = |k: RaySet| rep.sets.iter().find(|(s, _)| *s == k).unwrap().1.mismatches;
+    assert!(bad(RaySet::Camera) + bad(RaySet::Random) > 10, "{}", format_report(&rep));
+}
+
 /// A candidate that drops a ray's `tnear` or `tfar` (or both) from closest-hit queries.
 struct Unbounded {
     inner: BvhAccel,
