@@ -181,6 +181,11 @@ fn verify_checks_borders_at_the_float_budget() {
     let rep = verify_with(&s, &reference, &cand, 400_000, 3).unwrap();
     let bad = |k: RaySet| rep.sets.iter().find(|(s, _)| *s == k).unwrap().1.mismatches;
     assert!(bad(RaySet::Camera) + bad(RaySet::Random) > 10, "{}", format_report(&rep));
+    // The report splits the grazing rays by reason: a candidate that only drops hits makes
+    // every one of them a miss on its side.
+    let aimed = rep.sets.iter().find(|(s, _)| *s == RaySet::Aimed).unwrap().1.clone();
+    assert!(aimed.grazing > 100 && aimed.grazing_one_missed == aimed.grazing, "{}", format_report(&rep));
+    assert!(format_report(&rep).contains(&format!("grazing: aimed {} (", aimed.grazing)));
 }
 
 /// A candidate that drops a ray's `tnear` or `tfar` (or both) from closest-hit queries.

@@ -70,8 +70,13 @@ pub enum Verdict {
     Agree,
     /// Different triangles at the same distance.
     Tie,
-    /// Disagreement explained by finite precision at a triangle border or a grazing angle.
-    Grazing,
+    /// Disagreement explained by finite precision at a triangle border or a grazing angle
+    /// (`angle`: the deciding hit at |cos| < [`GRAZING_COS`]); `miss`: one side missed (else
+    /// the hits lie at different distances).
+    Grazing {
+        angle: bool,
+        miss: bool,
+    },
     Mismatch,
 }
 
@@ -161,8 +166,9 @@ fn compare_in(scene: &Scene, leaves: &[crate::scene::LeafInstance], ray: &Ray, r
     match (r, c) {
         (None, None) => Verdict::Agree,
         (Some(h), None) | (None, Some(h)) => {
-            if geom(&h).uncertain(&h) {
-                Verdict::Grazing
+            let g = geom(&h);
+            if g.uncertain(&h) {
+                Verdict::Grazing { angle: g.cos < GRAZING_COS, miss: true }
             } else {
                 Verdict::Mismatch
             }
@@ -174,7 +180,8 @@ fn compare_in(scene: &Scene, leaves: &[crate::scene::LeafInstance], ray: &Ray, r
             let close = dt <= T_REL * a.t.max(b.t) + 1e-6 || dt * ray.dir.length() <= 10.0 * geom(&a).tol;
             if !close {
                 let near = if a.t < b.t { &a } else { &b };
-                return if geom(near).uncertain(near) { Verdict::Grazing } else { Verdict::Mismatch };
+                let g = geom(near);
+                return if g.uncertain(near) { Verdict::Grazing { angle: g.cos < GRAZING_COS, miss: false } } else { Verdict::Mismatch };
             }
             if (a.inst, a.prim) == (b.inst, b.prim) {
                 let g = geom(&a);
@@ -198,6 +205,11 @@ pub struct SetReport {
     pub agree: u64,
     pub ties: u64,
     pub grazing: u64,
+    /// Of the grazing rays: those decided at |cos| < 0.01 (the rest within the float budget
+    /// of a triangle's border), and those where one side missed (the rest hit at different
+    /// distances). A jump in either on a back-end that passed before is worth a look.
+    pub grazing_at_angle: u64,
+    pub grazing_one_missed: u64,
     pub mismatches: u64,
     /// Largest relative distance difference among agreeing hits.
     pub max_t_rel: f64,
@@ -615,7 +627,11 @@ pub fn verify_with(scene: &Scene, reference: &dyn Accel, cand: &dyn Accel, n: us
         match o.v {
             Verdict::Agree => s.agree += 1,
             Verdict::Tie => s.ties += 1,
-            Verdict::Grazing => s.grazing += 1,
+            Verdict::Grazing { angle, miss } => {
+                s.grazing += 1;
+                s.grazing_at_angle += angle as u64;
+                s.grazing_one_missed += miss as u64;
+            }
             Verdict::Mismatch => s.mismatches += 1,
         }
         s.max_t_rel = s.max_t_rel.max(o.t_rel);
@@ -670,6 +686,25 @@ pub fn format_report(rep: &VerifyReport) -> String {
             "{:<8} {:>9} {:>9} {:>9} {:>7} {:>8} {:>10} {:>11.2e}\n",
             name, r.rays, r.hits, r.agree, r.ties, r.grazing, r.mismatches, r.max_t_rel
         );
+    }
+    let g: Vec<String> = rep
+        .sets
+        .iter()
+        .filter(|(_, r)| r.grazing > 0)
+        .map(|(k, r)| {
+            let name = serde_json::to_value(k).ok().and_then(|v| v.as_str().map(String::from)).unwrap_or_default();
+            format!(
+                "{name} {} ({} at |cos| < {GRAZING_COS}, {} at a border; {} one side missed, {} at different distances)",
+                r.grazing,
+                r.grazing_at_angle,
+                r.grazing - r.grazing_at_angle,
+                r.grazing_one_missed,
+                r.grazing - r.grazing_one_missed
+            )
+        })
+        .collect();
+    if !g.is_empty() {
+        s += &format!("grazing: {}\n", g.join("; "));
     }
     s += &format!(
         "occlusion: {} checks, {} wrong; closest hits on segments: {} checks, {} wrong; packets: {} lanes, {} differ from single rays\n",
