@@ -251,9 +251,15 @@ impl FaceRefs {
         match w.next() {
             Some("v") => {
                 self.count[0] += 1;
-                // x y z w (x y z r g b is a vertex colour).
-                let nums: Vec<&str> = w.collect();
-                if nums.len() == 4 && nums[3].parse::<f32>() == Ok(0.0) && self.zero_w.is_none() {
+                // x y z w (x y z r g b is a vertex colour). No allocation: a line per vertex.
+                let (mut n, mut fourth) = (0, None);
+                for x in w {
+                    n += 1;
+                    if n == 4 {
+                        fourth = Some(x);
+                    }
+                }
+                if n == 4 && fourth.is_some_and(|x| x.parse::<f32>() == Ok(0.0)) && self.zero_w.is_none() {
                     self.zero_w = Some(self.line_no);
                 }
             }
